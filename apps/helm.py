@@ -1,0 +1,12 @@
+"""The helm app: a thin process shell around `common.cores.HelmCore`."""
+
+from nearsub.apps.shell import main_for
+from nearsub.common.cores import HelmCore
+
+
+def main(argv=None) -> int:
+    return main_for(HelmCore, "nearsub helm app", argv)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,110 @@
+"""The logger app (pLogger): records every message of the community into one MCAP file.
+
+It stores the bytes exactly as received, timestamped by simulated time. A payload that fails
+validation is kept on a `<key>#invalid` channel and an error event is recorded, so nothing is
+lost and the typed channels stay clean. It finishes the file on every way out: the mission end,
+SIGINT/SIGTERM, or the launcher disappearing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+from nearsub import __version__
+from nearsub.apps.shell import EXIT_LAUNCHER_GONE, terminate_on_sigterm
+from nearsub.common import keys
+from nearsub.common.bus import Bus, Endpoints, Mailbox
+from nearsub.common.logfile import LogWriter
+from nearsub.common.messages import Event, MessageError, MissionEnd, decode, encode, model_for_key
+from nearsub.common.mission import RunConfig
+
+DRAIN_SECONDS = 0.3  # after the mission end, keep what is still in flight (status, app_left)
+
+
+class Recorder:
+    def __init__(self, writer: LogWriter, community: str):
+        self.writer = writer
+        self.community = community
+        self.sim_time = 0.0
+        self.end: MissionEnd | None = None
+
+    def record(self, key: str, payload: bytes) -> None:
+        model = model_for_key(key)
+        if model is None:
+            self.writer.write(key, payload, self.sim_time)
+            return
+        try:
+            message = decode(payload, model, key)
+        except MessageError as exc:
+            self.writer.write(key, payload, self.sim_time, valid=False)
+            error = Event(
+                step=0, t=self.sim_time, source="logger", kind="error", detail=f"logger received an invalid message: {exc}"
+            )
+            self.writer.write(keys.events(self.community, "logger"), encode(error), self.sim_time)
+            return
+        self.sim_time = max(self.sim_time, message.t)
+        self.writer.write(key, payload, message.t)
+        if isinstance(message, MissionEnd) and self.end is None:
+            self.end = message
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description="nearsub logger")
+    parser.add_argument("--run", required=True)
+    parser.add_argument("--instance", default="logger")
+    parser.add_argument("--output", required=True, help="MCAP file to write")
+    parser.add_argument("--mission-file", help="mission file to attach")
+    args = parser.parse_args(argv)
+    terminate_on_sigterm()
+    run = RunConfig.load(args.run)
+    community = run.mission.name
+    writer = LogWriter(args.output)
+    writer.metadata("mission", {"name": community, "resolved": run.mission.model_dump_json()})
+    writer.metadata("run", {"nearsub_version": __version__, "started_unix": f"{time.time():.3f}"})
+    if args.mission_file and Path(args.mission_file).is_file():
+        writer.attach(Path(args.mission_file).name, Path(args.mission_file).read_bytes(), "application/toml")
+    recorder = Recorder(writer, community)
+    parent = os.getppid()
+    code = 0
+    try:
+        with Bus(Endpoints("client", tuple(run.connect))) as bus:
+            mailbox = Mailbox()
+            bus.subscribe(keys.everything(community), mailbox)
+            bus.watch_liveliness(keys.alive(community, "launcher", "*"), mailbox)
+            bus.token(keys.alive(community, "logger", args.instance))
+            drain_until = None
+            while True:
+                timeout = 1.0 if drain_until is None else max(0.0, drain_until - time.monotonic())
+                mail = mailbox.get(timeout=timeout)
+                if mail is None:
+                    if drain_until is not None:
+                        break
+                    if os.getppid() != parent:
+                        code = EXIT_LAUNCHER_GONE
+                        break
+                    continue
+                if mail.kind == "gone":
+                    code = EXIT_LAUNCHER_GONE if drain_until is None else 0
+                    break
+                if mail.kind != "sample":
+                    continue
+                recorder.record(mail.key, mail.payload)
+                if recorder.end is not None and drain_until is None:
+                    drain_until = time.monotonic() + DRAIN_SECONDS
+    except KeyboardInterrupt:
+        code = 130
+    finally:
+        end = recorder.end
+        if end is not None:
+            writer.metadata("outcome", {"outcome": end.outcome, "reason": end.reason, "steps": str(end.step), "t": f"{end.t:g}"})
+        writer.finish()
+        print(f"[logger] wrote {writer.count} messages to {writer.path}", file=sys.stderr)
+    return code
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,12 @@
+"""The pid app: a thin process shell around `common.cores.PidCore`."""
+
+from nearsub.apps.shell import main_for
+from nearsub.common.cores import PidCore
+
+
+def main(argv=None) -> int:
+    return main_for(PidCore, "nearsub pid app", argv)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,12 @@
+"""The sim app: a thin process shell around `common.cores.SimCore`."""
+
+from nearsub.apps.shell import main_for
+from nearsub.common.cores import SimCore
+
+
+def main(argv=None) -> int:
+    return main_for(SimCore, "nearsub sim app", argv)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

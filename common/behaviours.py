@@ -1,0 +1,166 @@
+"""Helm behaviours as pure functions of the state and their parameters.
+
+`waypoints` follows thesis section 5.7 with MOOS-IvP BHV_Waypoint semantics (moos-notes.md
+section 5): the vehicle steers at a lead point `lead` metres ahead of its perpendicular foot on
+the track-line from the previous waypoint; the lead point never passes the next waypoint. A
+waypoint counts as reached when the vehicle is within `capture_radius`, or it has started to
+move away after coming within `slip_radius` (slip), or, with `capture_line`, it has crossed the
+line through the waypoint perpendicular to the track (capture line).
+
+The geometry helpers work element-wise on arrays so that batch sweeps reuse them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+
+class Leg(BaseModel):
+    """One BHV_Waypoint block: a list of points visited in order at one speed."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    name: str = "leg"
+    points: list[tuple[float, float]] = Field(min_length=1)
+    speed: float = Field(gt=0, description="desired speed through the water [m/s]")
+    lead: float | None = Field(default=None, gt=0, description="d_lead [m]; None steers at the waypoint")
+    lead_damper: float | None = Field(default=None, gt=0)
+    capture_radius: float = Field(default=3.0, gt=0)
+    slip_radius: float | None = Field(default=None, gt=0)
+    capture_line: bool = False
+    lead_to_start: bool = False
+
+
+def track_geometry(prev_xy: np.ndarray, next_xy: np.ndarray, pos_xy: np.ndarray):
+    """Unit track direction, track length, along-track position of the vehicle's perpendicular
+    foot, and signed cross-track offset (left of the track positive)."""
+    track = next_xy - prev_xy
+    length = np.hypot(track[..., 0], track[..., 1])
+    safe = np.where(length > 0, length, 1.0)
+    ux, uy = track[..., 0] / safe, track[..., 1] / safe
+    rel = pos_xy - prev_xy
+    along = rel[..., 0] * ux + rel[..., 1] * uy
+    cross = ux * rel[..., 1] - uy * rel[..., 0]
+    return np.stack([ux, uy], axis=-1), length, along, cross
+
+
+def lead_point(prev_xy, next_xy, pos_xy, lead, lead_damper=None):
+    """The point the vehicle steers at (thesis figure 5-4): `lead` ahead of the perpendicular foot,
+    clamped at the next waypoint. Near the track (within lead_damper) MOOS lengthens the lead by
+    1 + 2 (1 - d / lead_damper) to damp the approach."""
+    direction, length, along, cross = track_geometry(prev_xy, next_xy, pos_xy)
+    effective = np.asarray(lead, dtype=float)
+    if lead_damper is not None:
+        d = np.abs(cross)
+        effective = np.where(d < lead_damper, effective * (1.0 + 2.0 * (1.0 - d / lead_damper)), effective)
+    s = np.minimum(along + effective, length)
+    point = prev_xy + direction * s[..., None]
+    return np.where((length > 0)[..., None], point, next_xy)
+
+
+def crossed_capture_line(prev_xy, next_xy, pos_xy):
+    """True once the vehicle is past the line through the waypoint perpendicular to the track
+    (the angle at the waypoint between the previous waypoint and the vehicle is >= 90 deg)."""
+    a = prev_xy - next_xy
+    b = pos_xy - next_xy
+    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] <= 0.0
+
+
+@dataclass(frozen=True)
+class WaypointProgress:
+    """Where the behaviour is; JSON-able so a swapped-in helm can resume it."""
+
+    leg: int = 0
+    index: int = 0
+    previous: tuple[float, float] | None = None
+    closest: float = math.inf
+    reached: int = 0
+    complete: bool = False
+
+    def to_dict(self) -> dict:
+        return {
+            "leg": self.leg,
+            "index": self.index,
+            "previous": list(self.previous) if self.previous is not None else None,
+            "closest": None if math.isinf(self.closest) else self.closest,
+            "reached": self.reached,
+            "complete": self.complete,
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict) -> WaypointProgress:
+        prev = data.get("previous")
+        closest = data.get("closest")
+        return cls(
+            leg=int(data["leg"]),
+            index=int(data["index"]),
+            previous=tuple(prev) if prev is not None else None,
+            closest=math.inf if closest is None else float(closest),
+            reached=int(data["reached"]),
+            complete=bool(data["complete"]),
+        )
+
+
+@dataclass(frozen=True)
+class HelmDecision:
+    u_d: float
+    psi_d: float
+    progress: WaypointProgress
+    target: tuple[float, float] | None
+    captured: tuple[tuple[int, int, tuple[float, float]], ...] = ()
+
+
+def initial_progress(legs: list[Leg], start_xy: tuple[float, float]) -> WaypointProgress:
+    """Start on the first point; with lead_to_start the first track-line begins at the start."""
+    previous = start_xy if legs[0].lead_to_start else None
+    return WaypointProgress(previous=previous)
+
+
+def _arrived(leg: Leg, progress: WaypointProgress, target: np.ndarray, pos: np.ndarray, dist: float) -> bool:
+    if dist < leg.capture_radius:
+        return True
+    if leg.slip_radius is not None and dist > progress.closest and progress.closest <= leg.slip_radius:
+        return True
+    if leg.capture_line and progress.previous is not None:
+        return bool(crossed_capture_line(np.asarray(progress.previous), target, pos))
+    return False
+
+
+def waypoints(legs: list[Leg], progress: WaypointProgress, x: float, y: float, psi: float) -> HelmDecision:
+    """The standard waypoints behaviour: advance past reached waypoints, then steer at the lead
+    point of the current track-line at the leg's speed."""
+    pos = np.array([x, y])
+    captured = []
+    while not progress.complete:
+        leg = legs[progress.leg]
+        target = np.asarray(leg.points[progress.index], dtype=float)
+        dist = float(np.hypot(*(target - pos)))
+        if not _arrived(leg, progress, target, pos, dist):
+            progress = replace(progress, closest=min(progress.closest, dist))
+            break
+        captured.append((progress.leg, progress.index, (float(target[0]), float(target[1]))))
+        index, leg_index = progress.index + 1, progress.leg
+        if index == len(leg.points):
+            index, leg_index = 0, leg_index + 1
+        progress = replace(
+            progress,
+            leg=min(leg_index, len(legs) - 1),
+            index=index if leg_index < len(legs) else progress.index,
+            previous=(float(target[0]), float(target[1])),
+            closest=math.inf,
+            reached=progress.reached + 1,
+            complete=leg_index >= len(legs),
+        )
+    if progress.complete:
+        return HelmDecision(0.0, psi, progress, None, tuple(captured))
+    leg = legs[progress.leg]
+    target = np.asarray(leg.points[progress.index], dtype=float)
+    aim = target
+    if leg.lead is not None and progress.previous is not None:
+        aim = lead_point(np.asarray(progress.previous), target, pos, leg.lead, leg.lead_damper)
+    psi_d = float(np.arctan2(aim[1] - y, aim[0] - x))
+    return HelmDecision(leg.speed, psi_d, progress, (float(target[0]), float(target[1])), tuple(captured))

@@ -1,0 +1,206 @@
+"""The only module that talks to Zenoh (eclipse-zenoh 1.10; zenoh-notes.md).
+
+Rules it enforces for every app:
+- sessions open in `with` blocks, listen on explicit loopback endpoints, multicast scouting off;
+- lock-step and log traffic uses `CongestionControl.BLOCK` publishers (the default DROP loses
+  messages under load, zenoh-notes.md section 1.6);
+- nothing blocks or calls Zenoh inside a callback. Callbacks only append the received sample to
+  the app's `Mailbox`, a FIFO that the app's main loop drains. Zenoh's own FifoChannel has no
+  receive timeout and cannot merge several subscriptions into one ordered stream, which the
+  lock-step loop needs (it must wake up on a tick, an input, a control request or a deadline),
+  so the Mailbox is a plain `queue.SimpleQueue` fed by non-blocking, direct callbacks.
+"""
+
+from __future__ import annotations
+
+import json
+import queue
+import socket
+from collections.abc import Iterable
+from dataclasses import dataclass
+from typing import Any
+
+import zenoh
+
+ENCODING = "application/msgpack"
+
+
+def free_tcp_port(host: str = "127.0.0.1") -> int:
+    """A TCP port that is free right now on `host` (for the launcher's router)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.bind((host, 0))
+        return sock.getsockname()[1]
+
+
+def make_config(
+    mode: str,
+    connect: Iterable[str] = (),
+    listen: Iterable[str] = (),
+    multicast_scouting: bool = False,
+    admin_space: bool = False,
+) -> zenoh.Config:
+    conf = zenoh.Config()
+    conf.insert_json5("mode", json.dumps(mode))
+    conf.insert_json5("scouting/multicast/enabled", json.dumps(multicast_scouting))
+    conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
+    conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
+    if mode != "router":
+        # Wait for the router instead of failing at once, so start order does not matter.
+        conf.insert_json5("connect/timeout_ms", json.dumps(10000))
+        conf.insert_json5("connect/exit_on_failure", json.dumps(True))
+    if admin_space:
+        conf.insert_json5("adminspace", json.dumps({"enabled": True, "permissions": {"read": True, "write": False}}))
+    return conf
+
+
+@dataclass(frozen=True)
+class Endpoints:
+    """How an app reaches the others: as a client of a router, or as a listening peer."""
+
+    mode: str = "client"
+    connect: tuple[str, ...] = ()
+    listen: tuple[str, ...] = ()
+    multicast_scouting: bool = False
+
+    def config(self) -> zenoh.Config:
+        listen = self.listen if self.mode == "peer" else ()
+        return make_config(self.mode, self.connect, listen, self.multicast_scouting)
+
+
+@dataclass
+class Mail:
+    """One item in a mailbox. kind: "sample", "query", "alive" or "gone"."""
+
+    kind: str
+    key: str
+    payload: bytes = b""
+    query: Any = None
+
+    def reply(self, payload: bytes) -> None:
+        """Answer a query with `payload` and finalise it."""
+        with self.query as q:
+            q.reply(q.key_expr, payload)
+
+    def reply_error(self, text: str) -> None:
+        with self.query as q:
+            q.reply_err(text.encode())
+
+
+class Mailbox:
+    """FIFO of everything an app receives, drained by its main loop."""
+
+    def __init__(self) -> None:
+        self._queue: queue.SimpleQueue[Mail] = queue.SimpleQueue()
+
+    def get(self, timeout: float | None = None) -> Mail | None:
+        try:
+            return self._queue.get(timeout=timeout)
+        except queue.Empty:
+            return None
+
+    def put(self, mail: Mail) -> None:
+        self._queue.put(mail)
+
+    def on_sample(self, sample: zenoh.Sample) -> None:
+        self._queue.put(Mail("sample", str(sample.key_expr), sample.payload.to_bytes()))
+
+    def on_query(self, query: zenoh.Query) -> None:
+        payload = query.payload.to_bytes() if query.payload is not None else b""
+        self._queue.put(Mail("query", str(query.key_expr), payload, query))
+
+    def on_liveliness(self, sample: zenoh.Sample) -> None:
+        kind = "alive" if sample.kind == zenoh.SampleKind.PUT else "gone"
+        self._queue.put(Mail(kind, str(sample.key_expr)))
+
+
+def _direct(callback) -> zenoh.handlers.Callback:
+    # indirect=False runs the callback on Zenoh's receive thread: no extra Python thread hop.
+    # The callback only appends to a SimpleQueue, which never blocks.
+    return zenoh.handlers.Callback(callback, indirect=False)
+
+
+class Publisher:
+    def __init__(self, publisher: zenoh.Publisher):
+        self._publisher = publisher
+
+    def put(self, payload: bytes) -> None:
+        self._publisher.put(payload)
+
+
+class Bus:
+    """A Zenoh session with the few operations nearsub needs. Use as a context manager."""
+
+    def __init__(self, endpoints: Endpoints | zenoh.Config):
+        self._config = endpoints.config() if isinstance(endpoints, Endpoints) else endpoints
+        self._session: zenoh.Session | None = None
+        self._keep: list[Any] = []
+
+    def __enter__(self) -> Bus:
+        self._session = zenoh.open(self._config)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        if self._session is not None:
+            for entity in reversed(self._keep):
+                try:
+                    entity.undeclare()
+                except Exception:  # already gone with the session; nothing to undo
+                    pass
+            self._keep.clear()
+            self._session.close()
+            self._session = None
+
+    @property
+    def session(self) -> zenoh.Session:
+        return self._session
+
+    def publisher(self, key: str, lossless: bool = True) -> Publisher:
+        congestion = zenoh.CongestionControl.BLOCK if lossless else zenoh.CongestionControl.DROP
+        pub = self._session.declare_publisher(key, encoding=ENCODING, congestion_control=congestion, express=True)
+        self._keep.append(pub)
+        return Publisher(pub)
+
+    def put(self, key: str, payload: bytes) -> None:
+        """One-off lossless publication (tools, rare events)."""
+        self._session.put(key, payload, encoding=ENCODING, congestion_control=zenoh.CongestionControl.BLOCK)
+
+    def subscribe(self, key: str, mailbox: Mailbox) -> None:
+        self._keep.append(self._session.declare_subscriber(key, _direct(mailbox.on_sample)))
+
+    def queryable(self, key: str, mailbox: Mailbox) -> None:
+        self._keep.append(self._session.declare_queryable(key, _direct(mailbox.on_query)))
+
+    def token(self, key: str) -> None:
+        self._keep.append(self._session.liveliness().declare_token(key))
+
+    def watch_liveliness(self, key: str, mailbox: Mailbox, history: bool = True) -> None:
+        sub = self._session.liveliness().declare_subscriber(key, _direct(mailbox.on_liveliness), history=history)
+        self._keep.append(sub)
+
+    def alive(self, key: str, timeout: float = 1.0) -> list[str]:
+        """Keys of the liveliness tokens alive now under `key`."""
+        replies = self._session.liveliness().get(key, timeout=timeout)
+        return sorted(str(r.ok.key_expr) for r in replies if r.ok is not None)
+
+    def request(self, key: str, payload: bytes = b"", timeout: float = 5.0) -> list[tuple[bool, bytes]]:
+        """Query `key`; each reply is (ok, payload). No replier gives an empty list."""
+        replies = self._session.get(key, payload=payload, timeout=timeout)
+        out = []
+        for reply in replies:
+            if reply.ok is not None:
+                out.append((True, reply.ok.payload.to_bytes()))
+            else:
+                out.append((False, reply.err.payload.to_bytes()))
+        return out
+
+    def admin_keys(self, what: str, timeout: float = 1.0) -> list[str]:
+        """Declared entities known to routers (`what` = publisher, subscriber or queryable)."""
+        keys = set()
+        for reply in self._session.get(f"@/*/router/{what}/**", timeout=timeout):
+            if reply.ok is not None:
+                key = str(reply.ok.key_expr)
+                keys.add(key.split(f"/router/{what}/", 1)[-1])
+        return sorted(keys)

@@ -1,0 +1,66 @@
+"""Key expressions (SPEC section 3): nearsub/<community>/<vehicle>/<topic> for vehicle data and
+nearsub/<community>/<service>/... for the clock, events, status and services."""
+
+ROOT = "nearsub"
+
+
+def community_root(community: str) -> str:
+    return f"{ROOT}/{community}"
+
+
+def vehicle_topic(community: str, vehicle: str, leaf: str) -> str:
+    return f"{ROOT}/{community}/{vehicle}/{leaf}"
+
+
+def tick(community: str) -> str:
+    return f"{ROOT}/{community}/clock/tick"
+
+
+def ack(community: str, app: str) -> str:
+    return f"{ROOT}/{community}/clock/ack/{app}"
+
+
+def acks(community: str) -> str:
+    return f"{ROOT}/{community}/clock/ack/*"
+
+
+def mission_end(community: str) -> str:
+    return f"{ROOT}/{community}/clock/end"
+
+
+def clock_control(community: str) -> str:
+    return f"{ROOT}/{community}/clock/control"
+
+
+def events(community: str, source: str) -> str:
+    return f"{ROOT}/{community}/events/{source}"
+
+
+def all_events(community: str) -> str:
+    return f"{ROOT}/{community}/events/**"
+
+
+def status(community: str, instance: str) -> str:
+    return f"{ROOT}/{community}/status/{instance}"
+
+
+def alive(community: str, role: str, instance: str) -> str:
+    """Liveliness token of one app instance; the role (helm, sim, ...) survives a swap."""
+    return f"{ROOT}/{community}/alive/{role}/{instance}"
+
+
+def all_alive(community: str) -> str:
+    return f"{ROOT}/{community}/alive/**"
+
+
+def app_control(community: str, instance: str) -> str:
+    """Queryable of one app instance: handover and retire requests during a swap."""
+    return f"{ROOT}/{community}/control/{instance}"
+
+
+def launcher_control(community: str) -> str:
+    return f"{ROOT}/{community}/launcher/control"
+
+
+def everything(community: str) -> str:
+    return f"{ROOT}/{community}/**"

@@ -1,0 +1,214 @@
+"""Wire messages: pydantic models, msgpack codec and the topic -> model registry.
+
+Every message carries the schema version, the step index it describes and the simulated time
+(SPEC section 3). The thesis vectors travel as named fields: state [u, v, r, x, y, psi],
+desired [u_d, psi_d], input [X_prop, delta_r]. Angles are radians on the wire.
+
+`decode` validates on receive: a malformed payload raises `MessageError` whose text names the
+topic, the field and the offending value, so receivers can log it and carry on.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Literal
+
+import msgpack
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+SCHEMA_VERSION = 1
+
+
+class MessageError(ValueError):
+    """A payload that is not valid msgpack or does not match its topic's schema."""
+
+
+class Message(BaseModel):
+    """Common header. `step` is the lock-step index the content is valid at; `t` = step * dt."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    schema_version: int = SCHEMA_VERSION
+    step: int = Field(ge=0)
+    t: float
+    source: str = ""
+
+    @field_validator("schema_version")
+    @classmethod
+    def _known_version(cls, value: int) -> int:
+        if value != SCHEMA_VERSION:
+            raise ValueError(f"unsupported schema_version {value} (this build speaks {SCHEMA_VERSION})")
+        return value
+
+
+def _finite(value: float) -> float:
+    if not math.isfinite(value):
+        raise ValueError(f"must be finite, got {value!r}")
+    return value
+
+
+class FiniteMessage(Message):
+    """A message whose float fields must all be finite (NaN or inf never enters the physics)."""
+
+    @field_validator("*", mode="after")
+    @classmethod
+    def _all_finite(cls, value: Any) -> Any:
+        if isinstance(value, float):
+            return _finite(value)
+        return value
+
+
+class State(FiniteMessage):
+    """Vehicle state x = [u, v, r, x, y, psi]: velocities relative to the water, position in the
+    submarine frame (SPEC section 2)."""
+
+    u: float
+    v: float
+    r: float
+    x: float
+    y: float
+    psi: float
+
+
+class Desired(FiniteMessage):
+    """Desired state x_d = [u_d, psi_d] from the helm."""
+
+    u_d: float
+    psi_d: float
+
+
+class Input(FiniteMessage):
+    """Actuator input u = [X_prop, delta_r] from the PID (newtons, radians). The bounds only
+    reject absurd values (a rudder beyond +/-180 deg); the sim saturates at the vehicle's limits."""
+
+    X_prop: float = Field(ge=-1e7, le=1e7)
+    delta_r: float = Field(ge=-math.pi, le=math.pi)
+
+
+class HelmProgress(Message):
+    """What the helm is doing: behaviour, leg and waypoint index, and compensation terms."""
+
+    behaviour: str
+    leg: int
+    waypoint_index: int
+    waypoints_reached: int
+    psi_d: float
+    delta_psi: float = 0.0
+    complete: bool = False
+
+
+class Tick(Message):
+    """The clock's go-ahead for step `step`."""
+
+
+class Ack(Message):
+    """An app has finished step `step`. `end` asks the clock to end the mission after this step
+    with that outcome (e.g. "completed" from the helm, "collision" from the sim)."""
+
+    end: str | None = None
+    reason: str = ""
+
+
+class MissionEnd(Message):
+    """Published once by the clock: the mission is over; apps leave their loops."""
+
+    outcome: str
+    reason: str = ""
+
+
+EventKind = Literal[
+    "waypoint",
+    "collision",
+    "close_call",
+    "large_stray",
+    "saturation",
+    "app_joined",
+    "app_left",
+    "swap",
+    "error",
+    "info",
+]
+
+
+class Event(Message):
+    """Something people watch for: waypoints, collisions, app joins, swaps, errors."""
+
+    kind: EventKind
+    detail: str = ""
+    data: dict[str, Any] = Field(default_factory=dict)
+
+
+class AppStatus(Message):
+    """An app's lifecycle state, published on start-up and on the way out."""
+
+    app: str
+    instance: str
+    state: Literal["starting", "running", "stopping"]
+
+
+def encode(message: Message) -> bytes:
+    """Serialise a message to msgpack."""
+    return msgpack.packb(message.model_dump(mode="python"), use_bin_type=True)
+
+
+def describe_validation_error(error: ValidationError, where: str) -> str:
+    """One line naming each bad field and its value."""
+    parts = []
+    for item in error.errors():
+        field = ".".join(str(p) for p in item["loc"]) or "<message>"
+        value = item.get("input")
+        parts.append(f"field '{field}' = {value!r}: {item['msg']}")
+    return f"{where}: " + "; ".join(parts)
+
+
+def decode(data: bytes, model: type[Message], where: str = "message") -> Message:
+    """Parse and validate msgpack bytes as `model`; raise MessageError naming the problem."""
+    try:
+        raw = msgpack.unpackb(data, raw=False, strict_map_key=True)
+    except Exception as exc:  # msgpack raises several unrelated exception types
+        raise MessageError(f"{where}: not valid msgpack ({exc})") from None
+    if not isinstance(raw, dict):
+        raise MessageError(f"{where}: expected a map of fields, got {type(raw).__name__}")
+    try:
+        return model.model_validate(raw)
+    except ValidationError as exc:
+        raise MessageError(describe_validation_error(exc, where)) from None
+
+
+# Topic leaf name -> model. Vehicle topics live at nearsub/<community>/<vehicle>/<leaf>.
+VEHICLE_TOPICS: dict[str, type[Message]] = {
+    "state": State,
+    "desired": Desired,
+    "input": Input,
+    "helm": HelmProgress,
+}
+
+
+def model_for_key(key: str) -> type[Message] | None:
+    """The message model of a concrete key expression, or None if the key is not ours."""
+    parts = key.split("/")
+    if len(parts) < 3 or parts[0] != "nearsub":
+        return None
+    rest = parts[2:]
+    if rest[0] == "clock" and len(rest) >= 2:
+        return {"tick": Tick, "ack": Ack, "end": MissionEnd}.get(rest[1])
+    if rest[0] == "events":
+        return Event
+    if rest[0] == "status":
+        return AppStatus
+    if len(rest) == 2:
+        return VEHICLE_TOPICS.get(rest[1])
+    return None
+
+
+ALL_MODELS: tuple[type[Message], ...] = (
+    State,
+    Desired,
+    Input,
+    HelmProgress,
+    Tick,
+    Ack,
+    MissionEnd,
+    Event,
+    AppStatus,
+)

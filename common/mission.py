@@ -1,0 +1,211 @@
+"""Mission files: TOML validated by pydantic, with `--set key=value` overrides.
+
+A broken mission file gives one `MissionError` line naming the file, the field and the value.
+Headings in mission files are SPEC section 2's psi in degrees (from +x towards +y); MOOS compass
+headings convert as psi = 90 deg - heading.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import tomllib
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from .behaviours import Leg
+from .messages import describe_validation_error
+from .vehicles import LIBRARY, Vehicle, get_vehicle
+
+COMMUNITY_PATTERN = re.compile(r"^[A-Za-z0-9_\-]+$")
+
+
+class MissionError(ValueError):
+    """A mission file that cannot be used; the message names the file, field and value."""
+
+
+class Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class Network(Strict):
+    """Where the apps meet. By default the launcher starts its own router on a free loopback
+    port and every app connects to it as a client. `connect` points the apps at an existing
+    router instead (for example on another host); `mode = "peer"` makes the apps peers that
+    listen on `listen` and connect to `connect` (Zenoh peers do not relay for each other, so
+    every peer must listen, see zenoh-notes.md section 1.1)."""
+
+    mode: Literal["client", "peer"] = "client"
+    connect: list[str] = Field(default_factory=list)
+    listen: list[str] = Field(default_factory=lambda: ["tcp/127.0.0.1:0"])
+    multicast_scouting: bool = False
+
+
+class Start(Strict):
+    x: float = 0.0
+    y: float = 0.0
+    psi_deg: float = 0.0
+    speed: float = 0.0
+
+
+class Environment(Strict):
+    u_sub: float = Field(default=0.0, description="submarine speed through the water [m/s]")
+    rho: float = Field(default=1025.0, gt=0, description="sea water density [kg/m^3] (SPEC section 2)")
+
+
+class AppSettings(Strict):
+    period: int = Field(default=1, ge=1, description="runs every `period` base steps")
+    restart: Literal["never", "on-failure"] = "never"
+
+
+class HelmSettings(AppSettings):
+    period: int = Field(default=5, ge=1)
+    behaviour: Literal["waypoints"] = "waypoints"
+    legs: list[Leg] = Field(min_length=1)
+
+
+class PidSettings(AppSettings):
+    form: Literal["positional", "incremental"] = "positional"
+
+
+class SimSettings(AppSettings):
+    integrator: Literal["euler", "rk4"] = "euler"
+    divergence_speed: float = Field(default=50.0, gt=0, description="|u| beyond this ends the mission [m/s]")
+
+
+class LoggerSettings(Strict):
+    enabled: bool = True
+
+
+class Apps(Strict):
+    helm: HelmSettings
+    pid: PidSettings = Field(default_factory=PidSettings)
+    sim: SimSettings = Field(default_factory=SimSettings)
+    logger: LoggerSettings = Field(default_factory=LoggerSettings)
+
+
+class Mission(Strict):
+    name: str = Field(description="community name: the key-expression prefix nearsub/<name>/...")
+    description: str = ""
+    vehicle: str | Vehicle = "remus100"
+    dt: float = Field(default=0.05, gt=0, le=1.0, description="base step [s]")
+    time_limit: float = Field(default=600.0, gt=0, description="simulated seconds")
+    warp: float = Field(default=0.0, ge=0, description="0 = as fast as possible, 1 = real time")
+    step_timeout: float = Field(default=10.0, gt=0, description="wall seconds an app may take per step")
+    startup_timeout: float = Field(default=30.0, gt=0)
+    seed: int = 0
+    start: Start = Field(default_factory=Start)
+    environment: Environment = Field(default_factory=Environment)
+    network: Network = Field(default_factory=Network)
+    apps: Apps
+
+    @field_validator("name")
+    @classmethod
+    def _community_name(cls, value: str) -> str:
+        if not COMMUNITY_PATTERN.match(value):
+            raise ValueError("must contain only letters, digits, '_' and '-' (it is a key-expression chunk)")
+        return value
+
+    @field_validator("vehicle")
+    @classmethod
+    def _known_vehicle(cls, value: str | Vehicle) -> str | Vehicle:
+        if isinstance(value, str):
+            try:
+                get_vehicle(value)
+            except KeyError as exc:
+                raise ValueError(str(exc.args[0])) from None
+        return value
+
+    @model_validator(mode="after")
+    def _finite_numbers(self) -> Mission:
+        if not math.isfinite(self.dt * self.time_limit):
+            raise ValueError("dt and time_limit must be finite")
+        return self
+
+    @property
+    def vehicle_model(self) -> Vehicle:
+        return self.vehicle if isinstance(self.vehicle, Vehicle) else get_vehicle(self.vehicle)
+
+    @property
+    def vehicle_name(self) -> str:
+        """The vehicle chunk of the key expressions."""
+        return self.vehicle_model.name
+
+    @property
+    def max_steps(self) -> int:
+        return int(round(self.time_limit / self.dt))
+
+    def periods(self) -> dict[str, int]:
+        return {"helm": self.apps.helm.period, "pid": self.apps.pid.period, "sim": self.apps.sim.period}
+
+
+def parse_override(text: str) -> tuple[list[str], Any]:
+    """'a.b=value' -> (['a', 'b'], value); the value is read as TOML, else kept as a string."""
+    if "=" not in text:
+        raise MissionError(f"--set {text!r}: expected key=value")
+    key, raw = text.split("=", 1)
+    key = key.strip()
+    if not key:
+        raise MissionError(f"--set {text!r}: empty key")
+    try:
+        value = tomllib.loads(f"v = {raw}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = raw
+    return key.split("."), value
+
+
+def apply_overrides(data: dict, overrides: list[str]) -> dict:
+    for text in overrides:
+        path, value = parse_override(text)
+        node = data
+        for part in path[:-1]:
+            child = node.get(part)
+            if not isinstance(child, dict):
+                child = {}
+                node[part] = child
+            node = child
+        node[path[-1]] = value
+    return data
+
+
+def load_mission(path: str | Path, overrides: list[str] = ()) -> Mission:
+    """Read, override and validate a mission file."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise MissionError(f"{path}: cannot read mission file ({exc.strerror})") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise MissionError(f"{path}: not valid TOML ({exc})") from None
+    apply_overrides(data, list(overrides))
+    return mission_from_dict(data, str(path))
+
+
+def mission_from_dict(data: dict, where: str = "mission") -> Mission:
+    try:
+        return Mission.model_validate(data)
+    except ValidationError as exc:
+        raise MissionError(describe_validation_error(exc, where)) from None
+
+
+def vehicle_names() -> list[str]:
+    return sorted(LIBRARY)
+
+
+class RunConfig(Strict):
+    """What the launcher hands every app it starts: the resolved mission and where to connect."""
+
+    mission: Mission
+    connect: list[str]
+    log_dir: str = ""
+
+    @classmethod
+    def load(cls, path: str | Path) -> RunConfig:
+        return cls.model_validate_json(Path(path).read_text())
+
+    def save(self, path: str | Path) -> None:
+        Path(path).write_text(self.model_dump_json(indent=2))

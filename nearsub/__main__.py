@@ -1,0 +1,3 @@
+from nearsub.tools.cli import main
+
+raise SystemExit(main())

@@ -1,0 +1,66 @@
+"""Where running missions can be found: one small JSON file per community in a runtime folder.
+
+The launcher writes `<community>.json` (router endpoint, launcher pid, log path) when it starts and
+removes it when it stops; `tap` and `swap` read it so that users can name a community instead of
+an endpoint. Set NEARSUB_RUNTIME_DIR to move the folder (the tests do, to stay isolated).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+
+
+def runtime_dir() -> Path:
+    default = Path(tempfile.gettempdir()) / f"nearsub-{os.getuid()}"
+    path = Path(os.environ.get("NEARSUB_RUNTIME_DIR", default))
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def register(community: str, endpoint: list[str], log: str) -> Path:
+    path = runtime_dir() / f"{community}.json"
+    path.write_text(json.dumps({"community": community, "connect": endpoint, "pid": os.getpid(), "log": log}))
+    return path
+
+
+def running() -> dict[str, dict]:
+    """Communities whose launcher is still alive (stale entries are removed)."""
+    found = {}
+    for path in runtime_dir().glob("*.json"):
+        try:
+            entry = json.loads(path.read_text())
+        except (OSError, ValueError):
+            continue
+        if _pid_alive(int(entry.get("pid", -1))):
+            found[entry["community"]] = entry
+        else:
+            path.unlink(missing_ok=True)
+    return found
+
+
+def lookup(community: str | None) -> dict:
+    """The entry of `community`, or of the only running mission when `community` is None."""
+    missions = running()
+    if community is not None:
+        if community not in missions:
+            names = ", ".join(sorted(missions)) or "none"
+            raise LookupError(f"no running mission named {community!r} (running: {names})")
+        return missions[community]
+    if len(missions) == 1:
+        return next(iter(missions.values()))
+    if not missions:
+        raise LookupError("no mission is running (start one with `nearsub launch`, or pass --connect)")
+    raise LookupError(f"several missions are running ({', '.join(sorted(missions))}); name one")

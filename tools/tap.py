@@ -1,0 +1,157 @@
+"""`nearsub tap`: watch a running mission (uXMS / `ros2 topic`): list, echo, hz, pub."""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from collections import defaultdict, deque
+
+import msgpack
+
+from nearsub.common import keys
+from nearsub.common.bus import Mailbox
+from nearsub.common.messages import MessageError, decode, encode, model_for_key
+
+from .connect import open_bus
+
+
+def _project(value: dict, field: str | None):
+    if not field:
+        return value
+    for part in field.split("."):
+        if isinstance(value, dict) and part in value:
+            value = value[part]
+        elif isinstance(value, list) and part.isdigit() and int(part) < len(value):
+            value = value[int(part)]
+        else:
+            raise KeyError(f"field {field!r} not found (at {part!r})")
+    return value
+
+
+def _decode_any(key: str, payload: bytes) -> tuple[dict | None, str | None]:
+    model = model_for_key(key)
+    try:
+        if model is not None:
+            return decode(payload, model, key).model_dump(mode="json"), None
+        return msgpack.unpackb(payload), None
+    except (MessageError, ValueError, msgpack.ExtraData) as exc:
+        return None, str(exc)
+
+
+def tap_list(args) -> int:
+    bus, community = open_bus(args)
+    with bus:
+        prefix = keys.community_root(community) if community else "nearsub"
+        apps = bus.alive(f"{prefix}/alive/**" if community else "nearsub/*/alive/**")
+        publishers = [k for k in bus.admin_keys("publisher") if k.startswith(prefix)]
+        subscribers = [k for k in bus.admin_keys("subscriber") if k.startswith(prefix)]
+    if args.json or not sys.stdout.isatty():
+        print(json.dumps({"apps": apps, "publishers": publishers, "subscribers": subscribers}))
+        return 0
+    print("apps:")
+    for key in apps:
+        print(f"  {key.split('/alive/', 1)[-1]}")
+    print("topics (published):")
+    for key in publishers:
+        print(f"  {key}")
+    print("subscriptions:")
+    for key in subscribers:
+        print(f"  {key}")
+    return 0
+
+
+def tap_echo(args) -> int:
+    as_json = args.json or not sys.stdout.isatty()
+    bus, _ = open_bus(args, args.key)
+    printed = 0
+    deadline = time.monotonic() + args.timeout if args.timeout else None
+    with bus:
+        mailbox = Mailbox()
+        bus.subscribe(args.key, mailbox)
+        while args.count is None or printed < args.count:
+            remaining = None if deadline is None else deadline - time.monotonic()
+            if remaining is not None and remaining <= 0:
+                break
+            mail = mailbox.get(timeout=0.5 if remaining is None else min(0.5, remaining))
+            if mail is None:
+                continue
+            value, error = _decode_any(mail.key, mail.payload)
+            if error:
+                line = {"key": mail.key, "error": error}
+            else:
+                try:
+                    line = {"key": mail.key, "t": value.get("t") if isinstance(value, dict) else None,
+                            "value": _project(value, args.field)}
+                except KeyError as exc:
+                    print(f"nearsub tap echo: {exc.args[0]} in {mail.key}", file=sys.stderr)
+                    return 2
+            if as_json:
+                print(json.dumps(line), flush=True)
+            else:
+                print(f"{line['key']}  t={line.get('t')}  {line.get('value', line.get('error'))}", flush=True)
+            printed += 1
+    return 0 if printed or args.count is None else 1
+
+
+def tap_hz(args) -> int:
+    """Message rates per key, in simulated time (the message's t), like `ros2 topic hz`."""
+    bus, _ = open_bus(args, args.key)
+    times: dict[str, deque] = defaultdict(lambda: deque(maxlen=args.window))
+    deadline = time.monotonic() + args.duration
+    next_report = time.monotonic() + 1.0
+    with bus:
+        mailbox = Mailbox()
+        bus.subscribe(args.key, mailbox)
+        while time.monotonic() < deadline:
+            mail = mailbox.get(timeout=0.1)
+            if mail is not None:
+                value, error = _decode_any(mail.key, mail.payload)
+                if not error and isinstance(value, dict) and "t" in value:
+                    times[mail.key].append(float(value["t"]))
+            if time.monotonic() >= next_report or time.monotonic() >= deadline:
+                next_report = time.monotonic() + 1.0
+                _print_rates(times, args.json or not sys.stdout.isatty())
+    return 0 if times else 1
+
+
+def _print_rates(times, as_json: bool) -> None:
+    for key, stamps in sorted(times.items()):
+        span = stamps[-1] - stamps[0] if len(stamps) > 1 else 0.0
+        rate = (len(stamps) - 1) / span if span > 0 else 0.0
+        if as_json:
+            print(json.dumps({"key": key, "hz": rate, "samples": len(stamps), "sim_span": span}), flush=True)
+        else:
+            print(f"{key}: {rate:.2f} Hz (simulated time) over {len(stamps)} samples", flush=True)
+
+
+def tap_pub(args) -> int:
+    """Publish one message by hand (uPokeDB). It is validated against the topic's schema unless
+    --no-validate; --raw-hex sends arbitrary bytes (for fault injection)."""
+    if args.raw_hex is not None:
+        payload = bytes.fromhex(args.raw_hex)
+    else:
+        try:
+            fields = json.loads(args.value)
+        except json.JSONDecodeError as exc:
+            print(f"nearsub tap pub: value is not JSON ({exc})", file=sys.stderr)
+            return 2
+        if args.no_validate:
+            payload = msgpack.packb(fields)
+        else:
+            model = model_for_key(args.key)
+            if model is None:
+                print(f"nearsub tap pub: no message schema for key {args.key!r}", file=sys.stderr)
+                return 2
+            fields = {"step": 0, "t": 0.0, "source": "tap", **fields}
+            try:
+                payload = encode(decode(msgpack.packb(fields), model, args.key))
+            except MessageError as exc:
+                print(f"nearsub tap pub: {exc}", file=sys.stderr)
+                return 2
+    bus, _ = open_bus(args, args.key)
+    with bus:
+        time.sleep(0.2)  # let the router learn of this client before publishing
+        bus.put(args.key, payload)
+        time.sleep(0.1)
+    return 0
