@@ -1,0 +1,251 @@
+"""Tests of the GP core against scikit-learn and against its own numerical contracts."""
+
+import warnings
+
+import numpy as np
+import pytest
+from nearsub.common import gp as gpmod
+from nearsub.common.gp import GaussianProcess, MultiOutputGP
+from sklearn.gaussian_process import GaussianProcessRegressor
+from sklearn.gaussian_process.kernels import RBF, WhiteKernel
+from sklearn.gaussian_process.kernels import ConstantKernel as C
+
+BOUNDS = np.array([[-2.0, 3.0], [10.0, 50.0], [0.0, 0.1]])
+
+
+def _data(seed, n=25, bounds=BOUNDS, noise=0.0):
+    rng = np.random.default_rng(seed)
+    lo, hi = bounds[:, 0], bounds[:, 1]
+    X = lo + (hi - lo) * rng.uniform(size=(n, len(bounds)))
+    U = (X - lo) / (hi - lo)
+    w = rng.normal(size=len(bounds))
+    y = 5.0 + 3.0 * np.sin(3.0 * U @ w) + U[:, 0] ** 2 + noise * rng.normal(size=n)
+    return X, y
+
+
+def _theta(d, seed):
+    rng = np.random.default_rng(100 + seed)
+    return np.log(np.r_[rng.uniform(0.2, 1.5, d), rng.uniform(0.5, 2.0), 1e-4])
+
+
+def _sklearn_fixed(gp, X, y):
+    """scikit-learn model with the same hyperparameters: raw inputs, so l_orig = l_unit * width.
+
+    Our noise variance is in standardised units, which is exactly sklearn's `alpha` with
+    normalize_y=True (population std); `alpha` keeps the noise out of the predicted std.
+    """
+    kernel = C(gp.signal_variance, "fixed") * RBF(gp.length_scales, "fixed")
+    return GaussianProcessRegressor(
+        kernel, alpha=gp.noise_variance, optimizer=None, normalize_y=True
+    ).fit(X, y)
+
+
+@pytest.mark.parametrize("seed", range(3))
+@pytest.mark.parametrize("bounds", [BOUNDS, None])
+def test_predictions_match_sklearn(seed, bounds):
+    X, y = _data(seed)
+    gp = GaussianProcess(bounds=bounds).fit(X, y, theta=_theta(3, seed))
+    sk = _sklearn_fixed(gp, X, y)
+    Xt, _ = _data(seed + 50, n=200)
+    mean, std = gp.predict(Xt, return_std=True)
+    mean_sk, std_sk = sk.predict(Xt, return_std=True)
+    np.testing.assert_allclose(mean, mean_sk, rtol=1e-8)
+    np.testing.assert_allclose(std, std_sk, rtol=1e-8)
+    m1, s1 = gp.predict(Xt[:1], return_std=True)  # single-row path
+    np.testing.assert_allclose(m1, mean_sk[:1], rtol=1e-8)
+    np.testing.assert_allclose(s1, std_sk[:1], rtol=1e-8)
+
+
+def test_multi_output_matches_per_output_sklearn():
+    X, y = _data(0)
+    Y = np.column_stack([y, np.cos(X[:, 0]) * X[:, 1], X[:, 2] * 1e3])
+    thetas = np.stack([_theta(3, j) for j in range(3)])
+    model = MultiOutputGP(bounds=BOUNDS).fit(X, Y, theta=thetas)
+    Xt, _ = _data(9, n=50)
+    mean, std = model.predict(Xt, return_std=True)
+    assert mean.shape == std.shape == (50, 3)
+    for j, gp in enumerate(model.gps):
+        mean_sk, std_sk = _sklearn_fixed(gp, X, Y[:, j]).predict(Xt, return_std=True)
+        np.testing.assert_allclose(mean[:, j], mean_sk, rtol=1e-8)
+        np.testing.assert_allclose(std[:, j], std_sk, rtol=1e-8)
+    m_pt, s_pt = model.predict_point(Xt[3])
+    np.testing.assert_allclose(m_pt, mean[3], rtol=1e-10)
+    np.testing.assert_allclose(s_pt, std[3], rtol=1e-10)
+    m1, s1 = model.predict(Xt[3:4], return_std=True)
+    assert np.array_equal(m1[0], m_pt) and np.array_equal(s1[0], s_pt)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_fitted_lml_at_least_sklearn(seed):
+    """Same parametrisation (unit cube, standardised y, log params), same number of starts."""
+    d = 3
+    X, y = _data(seed, n=30, bounds=np.array([[0.0, 1.0]] * d), noise=0.01)
+    gp = GaussianProcess(bounds=[[0.0, 1.0]] * d, n_restarts=5, seed=seed).fit(X, y)
+    kernel = C(1.0, (1e-2, 1e2)) * RBF(np.full(d, 0.5), (1e-2, 1e2)) + WhiteKernel(
+        1e-6, (1e-10, 1e-1)
+    )
+    sk = GaussianProcessRegressor(
+        kernel, alpha=0.0, normalize_y=True, n_restarts_optimizer=4, random_state=seed
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # sklearn's ConvergenceWarnings at bounds
+        sk.fit(X, y)
+    # sklearn's theta is [log s2, log l.., log sn2]; ours is [log l.., log s2, log sn2]
+    t = sk.kernel_.theta
+    ours_at_sk = gp.log_marginal_likelihood(np.r_[t[1 : d + 1], t[0], t[-1]], eval_gradient=False)
+    ref = sk.log_marginal_likelihood_value_
+    assert ours_at_sk == pytest.approx(ref, rel=1e-9, abs=1e-9)
+    assert gp.log_marginal_likelihood_value_ >= ref - 1e-6 * abs(ref)
+
+
+def test_gradient_matches_finite_differences():
+    X, y = _data(4, n=20, noise=0.05)
+    gp = GaussianProcess(bounds=BOUNDS).fit(X, y)
+    rng = np.random.default_rng(0)
+    for _ in range(3):
+        theta = np.log(np.r_[rng.uniform(0.1, 2.0, 3), rng.uniform(0.5, 3.0), 1e-3])
+        _, grad = gp.log_marginal_likelihood(theta)
+        h = 1e-6
+        fd = np.array(
+            [
+                (
+                    gp.log_marginal_likelihood(theta + h * e, eval_gradient=False)
+                    - gp.log_marginal_likelihood(theta - h * e, eval_gradient=False)
+                )
+                / (2 * h)
+                for e in np.eye(len(theta))
+            ]
+        )
+        np.testing.assert_allclose(grad, fd, rtol=1e-5, atol=1e-6)
+
+
+def test_unfactorisable_kernel_gives_minus_inf_not_exception():
+    X, y = _data(1)
+    gp = GaussianProcess(bounds=BOUNDS).fit(X, y)
+    lml, grad = gp.log_marginal_likelihood(np.full(5, np.nan))
+    assert lml == -np.inf and grad is None
+    f, g = gpmod._neg_lml(np.full(5, np.nan), gp._D2, gp._ys)
+    assert f == np.inf and np.array_equal(g, np.zeros(5))
+
+
+def test_ill_conditioned_duplicates_fit_and_predict_finite():
+    X, y = _data(2, n=15)
+    X = np.vstack([X, X, X[:3]])  # exact duplicates ...
+    y = np.r_[y, y + 1e-3, y[:3] - 1e-3]  # ... with conflicting outputs
+    gp = GaussianProcess(bounds=BOUNDS, noise_bounds=(1e-14, 1e-12), n_restarts=3).fit(X, y)
+    assert np.isfinite(gp.log_marginal_likelihood_value_)
+    mean, std = gp.predict(np.vstack([X, _data(3, n=20)[0]]), return_std=True)
+    assert np.all(np.isfinite(mean)) and np.all(np.isfinite(std)) and np.all(std >= 0)
+    # zero noise with duplicates is singular: conditioning must fall back on the jitter ladder
+    theta = np.r_[np.log([0.5, 0.5, 0.5, 1.0]), -np.inf]
+    gp0 = GaussianProcess(bounds=BOUNDS).fit(X, y, theta=theta)
+    assert gp0.jitter_ > 0
+    assert np.all(np.isfinite(gp0.predict(X, return_std=True)))
+
+
+def test_variance_is_clipped_at_zero():
+    """At training points of a noiseless GP, s2 - k K^-1 k is ~1e-20, so it rounds to +/- 1e-16.
+
+    Without the clip, sqrt would give NaN with a RuntimeWarning (turned into an error here).
+    """
+    X, y = _data(5, n=40)
+    gp = GaussianProcess(bounds=BOUNDS).fit(X, y, theta=np.r_[np.log([0.5] * 3 + [1.0]), -46])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for _, std in (gp.predict(X, return_std=True), gp.predict(X[:1], return_std=True)):
+            assert np.all(std >= 0) and np.all(np.isfinite(std))
+        _, std = gp.predict(X, return_std=True)
+    assert np.any(std == 0)  # the clip was exercised
+
+
+def test_std_is_computed_only_when_asked(monkeypatch):
+    X, y = _data(6)
+    gp = GaussianProcess(bounds=BOUNDS).fit(X, y, theta=_theta(3, 6))
+    model = MultiOutputGP(bounds=BOUNDS).fit(X, np.column_stack([y, y**2]))
+
+    def boom(*args):
+        raise AssertionError("variance computed although return_std=False")
+
+    monkeypatch.setattr(gpmod._Predictor, "_point_std", boom)
+    monkeypatch.setattr(gpmod._Predictor, "_batch_std", boom)
+    for m in (gp, model):
+        m.predict(X[:1])
+        m.predict(X)
+        with pytest.raises(AssertionError):
+            m.predict(X[:1], return_std=True)
+        with pytest.raises(AssertionError):
+            m.predict(X, return_std=True)
+
+
+def test_interpolates_training_data():
+    X, y = _data(7, n=30)
+    gp = GaussianProcess(bounds=BOUNDS, noise_bounds=(1e-10, 1e-8)).fit(X, y)
+    mean, std = gp.predict(X, return_std=True)
+    np.testing.assert_allclose(mean, y, atol=1e-4 * np.ptp(y))
+    assert np.all(std < 1e-3 * np.std(y))
+
+
+def test_hyperparameter_attributes_and_warm_start():
+    X, y = _data(8, n=30, noise=0.01)
+    gp = GaussianProcess(bounds=BOUNDS, n_restarts=3).fit(X, y)
+    d = X.shape[1]
+    np.testing.assert_allclose(gp.length_scales, gp.length_scales_unit * np.ptp(BOUNDS, axis=1))
+    assert gp.signal_variance == pytest.approx(np.exp(gp.theta_[d]))
+    assert gp.noise_variance == pytest.approx(np.exp(gp.theta_[d + 1]))
+    assert gp.log_marginal_likelihood_value_ == pytest.approx(
+        gp.log_marginal_likelihood(eval_gradient=False)
+    )
+    # one start, from the previous optimum: a stationary point, so the fit stays there
+    lml = gp.log_marginal_likelihood_value_
+    gp.n_restarts = 1
+    gp.fit(X, y, warm_start=True)
+    assert gp.log_marginal_likelihood_value_ >= lml - 1e-9 * abs(lml)
+    # refit after one more point
+    Xn, yn = _data(9, n=1)
+    gp.fit(np.vstack([X, Xn]), np.r_[y, yn], warm_start=True)
+    assert np.isfinite(gp.log_marginal_likelihood_value_)
+
+
+def test_fit_is_deterministic_for_a_seed():
+    X, y = _data(10, n=20, noise=0.01)
+    a = GaussianProcess(bounds=BOUNDS, seed=3).fit(X, y)
+    b = GaussianProcess(bounds=BOUNDS, seed=3).fit(X, y)
+    assert np.array_equal(a.theta_, b.theta_)
+
+
+def test_state_round_trip_is_bit_identical():
+    X, y = _data(11, n=30)
+    Y = np.column_stack([y, np.sin(X[:, 1]), X[:, 0] * X[:, 2]])
+    model = MultiOutputGP(bounds=BOUNDS, n_restarts=2).fit(X, Y)
+    Xt, _ = _data(12, n=100)
+    mean, std = model.predict(Xt, return_std=True)
+    loaded = MultiOutputGP.from_state(model.get_state())
+    m2, s2 = loaded.predict(Xt, return_std=True)
+    assert np.array_equal(mean, m2) and np.array_equal(std, s2)
+    for a, b in zip(model.predict_point(Xt[0]), loaded.predict_point(Xt[0]), strict=True):
+        assert np.array_equal(a, b)
+    gp = GaussianProcess().fit(X, y)  # data-derived scaling
+    gp2 = GaussianProcess.from_state(gp.get_state())
+    assert np.array_equal(gp.predict(Xt, return_std=True), gp2.predict(Xt, return_std=True))
+    assert gp2.log_marginal_likelihood(eval_gradient=False) == pytest.approx(
+        gp.log_marginal_likelihood_value_
+    )
+
+
+def test_input_validation():
+    X, y = _data(0)
+    with pytest.raises(RuntimeError):
+        GaussianProcess().predict(X)
+    with pytest.raises(ValueError):
+        GaussianProcess(bounds=[[1.0, 0.0]])
+    with pytest.raises(ValueError):
+        GaussianProcess(noise_bounds=(0.0, 1e-3))
+    with pytest.raises(ValueError):
+        GaussianProcess().fit(X, y[:-1])
+    with pytest.raises(ValueError):
+        GaussianProcess(bounds=BOUNDS[:2]).fit(X, y)
+    gp = GaussianProcess(bounds=BOUNDS).fit(X, y, theta=_theta(3, 0))
+    with pytest.raises(ValueError):
+        gp.predict(X[:, :2])
+    with pytest.raises(ValueError):
+        MultiOutputGP().fit(X, y)
