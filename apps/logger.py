@@ -9,15 +9,14 @@ SIGINT/SIGTERM, or the launcher disappearing.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 from pathlib import Path
 
 from nearsub import __version__
-from nearsub.apps.shell import EXIT_LAUNCHER_GONE, terminate_on_sigterm
+from nearsub.apps.shell import prepare_process
 from nearsub.common import keys
-from nearsub.common.bus import Bus, Endpoints, Mailbox
+from nearsub.common.bus import Bus, Endpoints, signal_self
 from nearsub.common.logfile import LogWriter
 from nearsub.common.messages import Event, MessageError, MissionEnd, decode, encode, model_for_key
 from nearsub.common.mission import RunConfig
@@ -59,7 +58,7 @@ def main(argv=None) -> int:
     parser.add_argument("--output", required=True, help="MCAP file to write")
     parser.add_argument("--mission-file", help="mission file to attach")
     args = parser.parse_args(argv)
-    terminate_on_sigterm()
+    prepare_process()
     run = RunConfig.load(args.run)
     community = run.mission.name
     writer = LogWriter(args.output)
@@ -68,35 +67,26 @@ def main(argv=None) -> int:
     if args.mission_file and Path(args.mission_file).is_file():
         writer.attach(Path(args.mission_file).name, Path(args.mission_file).read_bytes(), "application/toml")
     recorder = Recorder(writer, community)
-    parent = os.getppid()
     code = 0
     try:
         with Bus(Endpoints("client", tuple(run.connect))) as bus:
-            mailbox = Mailbox()
-            bus.subscribe(keys.everything(community), mailbox)
-            bus.watch_liveliness(keys.alive(community, "launcher", "*"), mailbox)
+            stream = bus.stream(keys.everything(community))
+            bus.on_liveliness_lost(keys.alive(community, "launcher", "*"), signal_self())
             bus.token(keys.alive(community, "logger", args.instance))
-            drain_until = None
-            while True:
-                timeout = 1.0 if drain_until is None else max(0.0, drain_until - time.monotonic())
-                mail = mailbox.get(timeout=timeout)
-                if mail is None:
-                    if drain_until is not None:
-                        break
-                    if os.getppid() != parent:
-                        code = EXIT_LAUNCHER_GONE
-                        break
-                    continue
-                if mail.kind == "gone":
-                    code = EXIT_LAUNCHER_GONE if drain_until is None else 0
-                    break
-                if mail.kind != "sample":
-                    continue
-                recorder.record(mail.key, mail.payload)
-                if recorder.end is not None and drain_until is None:
-                    drain_until = time.monotonic() + DRAIN_SECONDS
+            while recorder.end is None:
+                recorder.record(*stream.recv())
+            # Keep what is still in flight after the end (status, app_left), then close.
+            drain_until = time.monotonic() + DRAIN_SECONDS
+            while time.monotonic() < drain_until:
+                item = stream.try_recv()
+                if item is None:
+                    time.sleep(0.01)
+                else:
+                    recorder.record(*item)
     except KeyboardInterrupt:
         code = 130
+    except SystemExit as exc:  # SIGTERM from the launcher or the lost-launcher watch
+        code = exc.code if isinstance(exc.code, int) else 1
     finally:
         end = recorder.end
         if end is not None:

@@ -1,32 +1,40 @@
 """The process shell of every lock-stepped app (helm, pid, sim): one lifecycle for all.
 
-It subscribes to the clock's ticks, the app's input topics and its control queryable, all into one
-mailbox; declares a liveliness token; then loops: on a tick it waits until the inputs the schedule
-expects have arrived, hands them to the core (new mail), runs the core (iterate), publishes the
-outputs and events, and acknowledges the step. Malformed messages are reported as error events
-and dropped; the app keeps running.
+Start-up: open the session, subscribe one FIFO stream to the community (nearsub/<c>/**), declare
+publishers, optionally take over from a running instance, publish "running", declare the
+liveliness token. Then the loop drains the stream in arrival order:
+- a tick for a step the app runs at marks that step pending;
+- an input is validated and offered to the inbox (malformed or out-of-protocol messages are
+  reported as error events and dropped; the app keeps running);
+- once the pending step has every input the schedule expects, the core gets its new mail and
+  iterates; the outputs, events and the acknowledgement are published, in that order;
+- control requests (handover, retire) are answered between steps;
+- the mission end leaves the loop.
 
-A swapped-in app (`--takeover OLD`) first asks the old instance for a handover: the core's
-progress and the inputs it holds for the step where the clock paused. It then continues from
-there, so no step is skipped or repeated.
+A swapped-in app (`--takeover OLD`) asks the old instance for a handover: the core's progress and
+the inputs it holds for the step where the clock paused. It continues from there, so no step is
+skipped or repeated.
 """
 
 from __future__ import annotations
 
 import argparse
-import os
+import ctypes
 import signal
 import sys
+import uuid
 
 import msgpack
 
 from nearsub.common import keys
-from nearsub.common.bus import Bus, Endpoints, Mailbox
+from nearsub.common.bus import Bus, DeadlineExceeded, Endpoints, deadline, signal_self
 from nearsub.common.lifecycle import Core, Inbox, Schedule
 from nearsub.common.messages import (
     VEHICLE_TOPICS,
     Ack,
     AppStatus,
+    Control,
+    ControlReply,
     Event,
     Message,
     MessageError,
@@ -36,16 +44,21 @@ from nearsub.common.messages import (
 )
 from nearsub.common.mission import MissionError, RunConfig, apply_overrides, mission_from_dict
 
-EXIT_LAUNCHER_GONE = 3
+HANDOVER_TIMEOUT = 30.0
 
 
-def terminate_on_sigterm() -> None:
-    """Turn SIGTERM into SystemExit so `with` blocks close the Zenoh session and files."""
+def prepare_process() -> None:
+    """Exit cleanly on SIGTERM (so `with` blocks close the session and files), and ask Linux to
+    send SIGTERM when the launcher dies, so no app outlives it."""
 
     def handler(signum, frame):
         raise SystemExit(128 + signum)
 
     signal.signal(signal.SIGTERM, handler)
+    try:
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass  # not Linux: the launcher's liveliness token still stops the app
 
 
 def app_arguments(description: str) -> argparse.ArgumentParser:
@@ -74,34 +87,30 @@ class AppShell:
         self.run = run
         self.instance = instance
         mission = run.mission
-        self.community = mission.name
+        c = self.community = mission.name
         self.vehicle = mission.vehicle_name
         self.dt = mission.dt
         self.schedule = Schedule(mission.periods())
         self.inbox = Inbox(core.inputs, self.schedule)
-        self.topic_of_key = {keys.vehicle_topic(self.community, self.vehicle, leaf): leaf for leaf in core.inputs}
+        self.input_of_key = {keys.vehicle_topic(c, self.vehicle, leaf): leaf for leaf in core.inputs}
+        self.tick_key = keys.tick(c)
+        self.end_key = keys.mission_end(c)
+        self.control_key = keys.control(c, instance)
+        self.reply_key = keys.reply(c, instance)
         self.pending: int | None = None
         self.started = False
         self.step = 0
-        self.deferred_handover = None
-        self.parent = os.getppid()
+        self.handover_request: Control | None = None
+        self.backlog: list[tuple[str, bytes]] = []
 
-    # -- wiring -------------------------------------------------------------------------------
+    # -- start-up -----------------------------------------------------------------------------
     def serve(self, takeover: str | None = None, resume_step: int | None = None) -> int:
-        endpoints = Endpoints("client", tuple(self.run.connect))
-        with Bus(endpoints) as bus:
+        with Bus(Endpoints("client", tuple(self.run.connect))) as bus:
             self.bus = bus
-            self.mailbox = Mailbox()
             c = self.community
-            bus.subscribe(keys.tick(c), self.mailbox)
-            bus.subscribe(keys.mission_end(c), self.mailbox)
-            for key in self.topic_of_key:
-                bus.subscribe(key, self.mailbox)
-            bus.queryable(keys.app_control(c, self.instance), self.mailbox)
-            bus.watch_liveliness(keys.alive(c, "launcher", "*"), self.mailbox)
-            self.outputs = {
-                leaf: bus.publisher(keys.vehicle_topic(c, self.vehicle, leaf)) for leaf in self.core.outputs
-            }
+            self.stream = bus.stream(keys.everything(c))
+            bus.on_liveliness_lost(keys.alive(c, "launcher", "*"), signal_self())
+            self.outputs = {leaf: bus.publisher(keys.vehicle_topic(c, self.vehicle, leaf)) for leaf in self.core.outputs}
             self.ack_pub = bus.publisher(keys.ack(c, self.core.role))
             self.event_pub = bus.publisher(keys.events(c, self.instance))
             self.status_pub = bus.publisher(keys.status(c, self.instance))
@@ -115,12 +124,31 @@ class AppShell:
                 self.publish_status("stopping")
 
     def take_over(self, old_instance: str, resume_step: int) -> None:
-        request = msgpack.packb({"cmd": "handover", "step": resume_step})
-        replies = self.bus.request(keys.app_control(self.community, old_instance), request, timeout=30.0)
-        if not replies or not replies[0][0]:
-            detail = replies[0][1].decode(errors="replace") if replies else "no reply"
-            raise SystemExit(f"{self.instance}: handover from {old_instance} failed: {detail}")
-        handover = msgpack.unpackb(replies[0][1])
+        request = Control(
+            step=resume_step,
+            t=resume_step * self.dt,
+            source=self.instance,
+            cmd="handover",
+            args={"step": resume_step},
+            request_id=uuid.uuid4().hex,
+            reply_to=self.instance,
+        )
+        self.bus.put_when_matched(keys.control(self.community, old_instance), encode(request))
+        try:
+            with deadline(HANDOVER_TIMEOUT):
+                while True:
+                    key, payload = self.stream.recv()
+                    if key != self.reply_key:
+                        self.backlog.append((key, payload))
+                        continue
+                    reply = decode(payload, ControlReply, key)
+                    if reply.request_id == request.request_id:
+                        break
+        except DeadlineExceeded:
+            raise SystemExit(f"{self.instance}: no handover from {old_instance} within {HANDOVER_TIMEOUT:g} s") from None
+        if not reply.ok:
+            raise SystemExit(f"{self.instance}: handover from {old_instance} failed: {reply.error}")
+        handover = msgpack.unpackb(bytes.fromhex(reply.data["handover"]))
         self.core.restore(handover["progress"])
         for leaf, raw in handover["held"].items():
             self.inbox.held[leaf] = decode(raw, VEHICLE_TOPICS[leaf], f"handover {leaf}")
@@ -131,29 +159,21 @@ class AppShell:
     # -- the loop -----------------------------------------------------------------------------
     def loop(self) -> int:
         while True:
-            mail = self.mailbox.get(timeout=1.0)
-            if mail is None:
-                if os.getppid() != self.parent:
-                    print(f"[{self.instance}] launcher process is gone; exiting", file=sys.stderr)
-                    return EXIT_LAUNCHER_GONE
-                continue
-            if mail.kind == "gone":
-                print(f"[{self.instance}] launcher left ({mail.key}); exiting", file=sys.stderr)
-                return EXIT_LAUNCHER_GONE
-            if mail.kind == "alive":
-                continue
-            if mail.kind == "query":
-                if self.on_control(mail):
-                    return 0
-                continue
-            if mail.key in self.topic_of_key:
-                self.on_input(self.topic_of_key[mail.key], mail.payload)
-            elif mail.key == keys.tick(self.community):
-                tick = self.decode_or_report(mail.payload, Tick, mail.key)
+            key, payload = self.backlog.pop(0) if self.backlog else self.stream.recv()
+            if key in self.input_of_key:
+                self.on_input(self.input_of_key[key], payload)
+            elif key == self.tick_key:
+                tick = self.decode_or_report(payload, Tick, key)
                 if tick is not None and self.schedule.runs(self.core.role, tick.step):
                     self.on_tick(tick.step)
-            elif mail.key == keys.mission_end(self.community):
+            elif key == self.control_key:
+                request = self.decode_or_report(payload, Control, key)
+                if request is not None and self.on_control(request):
+                    return 0
+            elif key == self.end_key:
                 return 0
+            else:
+                continue
             self.try_iterate()
             self.try_handover()
 
@@ -169,7 +189,8 @@ class AppShell:
         self.step = step
 
     def on_input(self, leaf: str, payload: bytes) -> None:
-        message = self.decode_or_report(payload, VEHICLE_TOPICS[leaf], keys.vehicle_topic(self.community, self.vehicle, leaf))
+        key = keys.vehicle_topic(self.community, self.vehicle, leaf)
+        message = self.decode_or_report(payload, VEHICLE_TOPICS[leaf], key)
         if message is not None:
             error = self.inbox.offer(leaf, message)
             if error:
@@ -190,33 +211,35 @@ class AppShell:
         self.pending = None
 
     # -- control: handover and retire (swap) -------------------------------------------------
-    def on_control(self, mail) -> bool:
-        """Handle a control query; True means leave the loop."""
-        try:
-            request = msgpack.unpackb(mail.payload)
-            command = request["cmd"]
-        except Exception:
-            mail.reply_error(f"{self.instance}: control request is not a msgpack map with 'cmd'")
+    def on_control(self, request: Control) -> bool:
+        """Handle a control request; True means leave the loop."""
+        if request.cmd == "handover":
+            self.handover_request = request
             return False
-        if command == "handover":
-            self.deferred_handover = (mail, int(request["step"]))
-            return False
-        if command == "retire":
-            mail.reply(msgpack.packb({"ok": True, "instance": self.instance}))
+        if request.cmd == "retire":
+            self.reply(request, True, {"instance": self.instance})
             return True
-        mail.reply_error(f"{self.instance}: unknown control command {command!r}")
+        self.reply(request, False, error=f"{self.instance}: unknown control command {request.cmd!r}")
         return False
 
     def try_handover(self) -> None:
-        if self.deferred_handover is None:
+        request = self.handover_request
+        if request is None:
             return
-        mail, step = self.deferred_handover
+        step = int(request.args["step"])
         if self.inbox.waiting_for(step) or self.pending is not None:
             return
         held = {leaf: encode(message) for leaf, message in self.inbox.held.items()}
-        reply = {"progress": self.core.progress(), "held": held, "delivered": self.inbox.delivered}
-        mail.reply(msgpack.packb(reply))
-        self.deferred_handover = None
+        handover = msgpack.packb({"progress": self.core.progress(), "held": held, "delivered": self.inbox.delivered})
+        self.reply(request, True, {"handover": handover.hex()})
+        self.handover_request = None
+
+    def reply(self, request: Control, ok: bool, data: dict | None = None, error: str = "") -> None:
+        answer = ControlReply(
+            step=self.step, t=self.step * self.dt, source=self.instance, request_id=request.request_id,
+            ok=ok, data=data or {}, error=error,
+        )
+        self.bus.put_when_matched(keys.reply(self.community, request.reply_to), encode(answer))
 
     # -- reporting ----------------------------------------------------------------------------
     def decode_or_report(self, payload: bytes, model: type[Message], key: str) -> Message | None:
@@ -233,7 +256,8 @@ class AppShell:
 
     def publish_status(self, state: str) -> None:
         status = AppStatus(
-            step=self.step, t=self.step * self.dt, source=self.core.role, app=self.core.role, instance=self.instance, state=state
+            step=self.step, t=self.step * self.dt, source=self.core.role, app=self.core.role,
+            instance=self.instance, state=state,
         )
         self.status_pub.put(encode(status))
 
@@ -241,7 +265,7 @@ class AppShell:
 def main_for(core_factory, description: str, argv=None) -> int:
     """Entry point shared by the helm, pid and sim processes."""
     args = app_arguments(description).parse_args(argv)
-    terminate_on_sigterm()
+    prepare_process()
     try:
         run = load_run(args)
     except MissionError as exc:

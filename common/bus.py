@@ -4,19 +4,30 @@ Rules it enforces for every app:
 - sessions open in `with` blocks, listen on explicit loopback endpoints, multicast scouting off;
 - lock-step and log traffic uses `CongestionControl.BLOCK` publishers (the default DROP loses
   messages under load, zenoh-notes.md section 1.6);
-- nothing blocks or calls Zenoh inside a callback. Callbacks only append the received sample to
-  the app's `Mailbox`, a FIFO that the app's main loop drains. Zenoh's own FifoChannel has no
-  receive timeout and cannot merge several subscriptions into one ordered stream, which the
-  lock-step loop needs (it must wake up on a tick, an input, a control request or a deadline),
-  so the Mailbox is a plain `queue.SimpleQueue` fed by non-blocking, direct callbacks.
+- apps receive through Zenoh FIFO channels drained by their own main loop (`Stream`); nothing
+  blocks or calls Zenoh inside a callback.
+
+Why one wide `Stream` per app rather than a subscriber per topic: a Python callback per sample
+costs about 27 us of CPU (the receive thread must take the GIL), a FifoChannel about 1.5 us
+(measured on this 2-core machine), and a FifoChannel cannot be waited on together with another.
+So each lock-stepped app drains a single FIFO subscription that covers every key it needs
+(nearsub/<community>/**), in arrival order, and filters by key. Deadlines use SIGALRM
+(`deadline`), which interrupts a blocked `recv` at once.
+
+The launcher and the tools, which see little traffic, use a `Mailbox`: direct callbacks that
+append to a `queue.SimpleQueue`, which allows timeouts and mixes samples, queries and liveliness.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import queue
+import signal
 import socket
-from collections.abc import Iterable
+import time
+from collections.abc import Callable, Iterable
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
@@ -119,6 +130,55 @@ def _direct(callback) -> zenoh.handlers.Callback:
     return zenoh.handlers.Callback(callback, indirect=False)
 
 
+class DeadlineExceeded(Exception):
+    """Raised in the main thread when a `deadline` expires (e.g. inside a blocked recv)."""
+
+
+def _raise_deadline(signum, frame):
+    raise DeadlineExceeded()
+
+
+@contextmanager
+def deadline(seconds: float):
+    """Raise DeadlineExceeded if the block takes longer than `seconds` of wall time (main thread
+    only; uses SIGALRM, so blocked Zenoh receives are interrupted)."""
+    previous = signal.signal(signal.SIGALRM, _raise_deadline)
+    signal.setitimer(signal.ITIMER_REAL, max(seconds, 1e-6))
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+
+
+class Stream:
+    """One FIFO subscription drained by the app's main loop: yields (key, payload)."""
+
+    def __init__(self, handler):
+        self._handler = handler
+
+    def recv(self) -> tuple[str, bytes]:
+        sample = self._handler.recv()
+        return str(sample.key_expr), sample.payload.to_bytes()
+
+    def try_recv(self) -> tuple[str, bytes] | None:
+        sample = self._handler.try_recv()
+        if sample is None:
+            return None
+        return str(sample.key_expr), sample.payload.to_bytes()
+
+
+def signal_self(signum: int = signal.SIGTERM) -> Callable[[Any], None]:
+    """A liveliness callback that asks this process to shut down (non-blocking, no Zenoh call);
+    the signal interrupts a blocked `Stream.recv` in the main thread."""
+
+    def on_sample(sample) -> None:
+        if sample.kind == zenoh.SampleKind.DELETE:
+            os.kill(os.getpid(), signum)
+
+    return on_sample
+
+
 class Publisher:
     def __init__(self, publisher: zenoh.Publisher):
         self._publisher = publisher
@@ -166,6 +226,34 @@ class Bus:
     def put(self, key: str, payload: bytes) -> None:
         """One-off lossless publication (tools, rare events)."""
         self._session.put(key, payload, encoding=ENCODING, congestion_control=zenoh.CongestionControl.BLOCK)
+
+    def put_when_matched(self, key: str, payload: bytes, wait: float = 2.0) -> bool:
+        """Publish once some subscriber matches `key` (a fresh session may not yet know the
+        subscribers; data put before that is not delivered, zenoh-notes.md P8). Returns whether a
+        match was seen; publishes anyway after `wait` seconds."""
+        pub = self._session.declare_publisher(key, encoding=ENCODING, congestion_control=zenoh.CongestionControl.BLOCK)
+        try:
+            end = time.monotonic() + wait
+            while not pub.matching_status and time.monotonic() < end:
+                time.sleep(0.005)
+            matched = pub.matching_status
+            pub.put(payload)
+            return matched
+        finally:
+            pub.undeclare()
+
+    def stream(self, key: str, capacity: int = 8192, lossy: bool = False) -> Stream:
+        """A FIFO subscription. Lossless (back-pressure) by default; `lossy` keeps only the newest
+        `capacity` samples, for displays that must never slow the mission down."""
+        handler = zenoh.handlers.RingChannel(capacity) if lossy else zenoh.handlers.FifoChannel(capacity)
+        sub = self._session.declare_subscriber(key, handler)
+        self._keep.append(sub)
+        return Stream(sub.handler)
+
+    def on_liveliness_lost(self, key: str, callback: Callable[[Any], None]) -> None:
+        """Call `callback(sample)` (from Zenoh's thread) on liveliness changes under `key`."""
+        sub = self._session.liveliness().declare_subscriber(key, _direct(callback), history=False)
+        self._keep.append(sub)
 
     def subscribe(self, key: str, mailbox: Mailbox) -> None:
         self._keep.append(self._session.declare_subscriber(key, _direct(mailbox.on_sample)))

@@ -28,10 +28,6 @@ def mission_end(community: str) -> str:
     return f"{ROOT}/{community}/clock/end"
 
 
-def clock_control(community: str) -> str:
-    return f"{ROOT}/{community}/clock/control"
-
-
 def events(community: str, source: str) -> str:
     return f"{ROOT}/{community}/events/{source}"
 
@@ -53,9 +49,13 @@ def all_alive(community: str) -> str:
     return f"{ROOT}/{community}/alive/**"
 
 
-def app_control(community: str, instance: str) -> str:
-    """Queryable of one app instance: handover and retire requests during a swap."""
-    return f"{ROOT}/{community}/control/{instance}"
+def control(community: str, target: str) -> str:
+    """Requests to one app instance ("clock" for the clock): pause, handover, retire, ..."""
+    return f"{ROOT}/{community}/control/{target}"
+
+
+def reply(community: str, requester: str) -> str:
+    return f"{ROOT}/{community}/reply/{requester}"
 
 
 def launcher_control(community: str) -> str:

@@ -138,6 +138,23 @@ class Event(Message):
     data: dict[str, Any] = Field(default_factory=dict)
 
 
+class Control(Message):
+    """A request to one app instance (or the clock): pause, resume, status, handover, retire.
+    Control travels as ordinary messages so it is ordered with the data and logged."""
+
+    cmd: str
+    args: dict[str, Any] = Field(default_factory=dict)
+    request_id: str
+    reply_to: str
+
+
+class ControlReply(Message):
+    request_id: str
+    ok: bool
+    data: dict[str, Any] = Field(default_factory=dict)
+    error: str = ""
+
+
 class AppStatus(Message):
     """An app's lifecycle state, published on start-up and on the way out."""
 
@@ -194,6 +211,10 @@ def model_for_key(key: str) -> type[Message] | None:
         return {"tick": Tick, "ack": Ack, "end": MissionEnd}.get(rest[1])
     if rest[0] == "events":
         return Event
+    if rest[0] == "control":
+        return Control
+    if rest[0] == "reply":
+        return ControlReply
     if rest[0] == "status":
         return AppStatus
     if len(rest) == 2:
@@ -210,5 +231,7 @@ ALL_MODELS: tuple[type[Message], ...] = (
     Ack,
     MissionEnd,
     Event,
+    Control,
+    ControlReply,
     AppStatus,
 )

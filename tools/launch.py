@@ -18,6 +18,7 @@ import signal
 import subprocess
 import sys
 import time
+import uuid
 from collections import Counter
 from dataclasses import dataclass, field
 from datetime import datetime
@@ -28,7 +29,16 @@ import msgpack
 from nearsub.common import keys
 from nearsub.common.bus import Bus, Endpoints, Mailbox, free_tcp_port
 from nearsub.common.lifecycle import ORDER
-from nearsub.common.messages import Event, MessageError, MissionEnd, decode, encode, model_for_key
+from nearsub.common.messages import (
+    Control,
+    ControlReply,
+    Event,
+    MessageError,
+    MissionEnd,
+    decode,
+    encode,
+    model_for_key,
+)
 from nearsub.common.mission import Mission, MissionError, RunConfig, apply_overrides, load_mission, mission_from_dict
 
 from . import registry
@@ -66,6 +76,7 @@ class Summary:
     steps: int = 0
     sim_time: float = 0.0
     wall_time: float = 0.0
+    run_wall_time: float = 0.0
     waypoints_reached: int = 0
     events: Counter = field(default_factory=Counter)
     log: str = ""
@@ -74,7 +85,8 @@ class Summary:
 
     @property
     def steps_per_second(self) -> float:
-        return self.steps / self.wall_time if self.wall_time > 0 else 0.0
+        """Lock-stepped steps per wall second from the first tick to the mission end."""
+        return self.steps / self.run_wall_time if self.run_wall_time > 0 else 0.0
 
     def as_dict(self) -> dict:
         return {
@@ -84,6 +96,7 @@ class Summary:
             "steps": self.steps,
             "sim_time": self.sim_time,
             "wall_time": round(self.wall_time, 3),
+            "run_wall_time": round(self.run_wall_time, 3),
             "steps_per_second": round(self.steps_per_second, 1),
             "waypoints_reached": self.waypoints_reached,
             "events": dict(self.events),
@@ -96,8 +109,8 @@ class Summary:
         events = ", ".join(f"{k} {v}" for k, v in sorted(self.events.items())) or "none"
         lines = [
             f"mission {self.community}: {self.outcome}" + (f" ({self.reason})" if self.reason else ""),
-            f"  steps {self.steps}, simulated {self.sim_time:.2f} s, wall {self.wall_time:.2f} s, "
-            f"{self.steps_per_second:.0f} steps/s",
+            f"  steps {self.steps}, simulated {self.sim_time:.2f} s, wall {self.wall_time:.2f} s "
+            f"({self.run_wall_time:.2f} s running, {self.steps_per_second:.0f} steps/s)",
             f"  waypoints reached {self.waypoints_reached}; events: {events}",
         ]
         if self.swaps:
@@ -121,6 +134,7 @@ class Launcher:
         self.instance_counter = Counter()
         self.router: subprocess.Popen | None = None
         self.stopping = False
+        self.clock_started = time.monotonic()
 
     # -- processes ----------------------------------------------------------------------------
     def spawn(self, module: str, instance: str, role: str, extra: list[str] = ()) -> Child:
@@ -193,6 +207,8 @@ class Launcher:
                 bus.subscribe(keys.all_events(c), self.mailbox)
                 bus.subscribe(keys.mission_end(c), self.mailbox)
                 bus.queryable(keys.launcher_control(c), self.mailbox)
+                self.replies = Mailbox()
+                bus.subscribe(keys.reply(c, "launcher"), self.replies)
                 bus.watch_liveliness(keys.all_alive(c), self.mailbox, history=False)
                 self.event_pub = bus.publisher(keys.events(c, "launcher"))
                 self.end_pub = bus.publisher(keys.mission_end(c))
@@ -257,6 +273,7 @@ class Launcher:
             wanted.append((role, instance))
         self.wait_alive(bus, wanted, timeout)
         self.spawn("clock", "clock", "clock")
+        self.clock_started = time.monotonic()
 
     def supervise(self) -> None:
         while True:
@@ -292,6 +309,7 @@ class Launcher:
         except MessageError:
             return False  # the receiving app reports it; the launcher only watches
         if isinstance(message, MissionEnd):
+            self.summary.run_wall_time = time.monotonic() - self.clock_started
             self.summary.outcome = message.outcome
             self.summary.reason = message.reason
             self.summary.steps = message.step
@@ -310,10 +328,27 @@ class Launcher:
             if mail.kind == "sample":
                 self.handle(mail)
 
+    def call(self, target: str, cmd: str, timeout: float, **args) -> ControlReply | None:
+        """Send a control request to an app instance (or "clock") and wait for its reply."""
+        request = Control(step=0, t=0.0, source="launcher", cmd=cmd, args=args, request_id=uuid.uuid4().hex, reply_to="launcher")
+        self.bus.put_when_matched(keys.control(self.community, target), encode(request))
+        end = time.monotonic() + timeout
+        while (remaining := end - time.monotonic()) > 0:
+            mail = self.replies.get(timeout=remaining)
+            if mail is None:
+                break
+            try:
+                reply = decode(mail.payload, ControlReply, mail.key)
+            except MessageError:
+                continue
+            if reply.request_id == request.request_id:
+                return reply
+        return None
+
     def current_step(self) -> str:
-        replies = self.bus.request(keys.clock_control(self.community), msgpack.packb({"cmd": "status"}), timeout=1.0)
-        if replies and replies[0][0]:
-            return str(msgpack.unpackb(replies[0][1])["step"])
+        reply = self.call("clock", "status", timeout=1.0)
+        if reply is not None and reply.ok:
+            return str(reply.data["step"])
         return "unknown (the clock did not answer)"
 
     def publish_event(self, kind: str, detail: str, step: int = 0, data: dict | None = None) -> None:
@@ -365,10 +400,10 @@ class Launcher:
             mission_from_dict(apply_overrides(self.mission.model_dump(mode="json"), prefixed), "swap")
         except MissionError as exc:
             raise LaunchError(str(exc)) from None
-        paused = self.bus.request(keys.clock_control(self.community), msgpack.packb({"cmd": "pause"}), timeout=self.mission.step_timeout + 5)
-        if not paused or not paused[0][0]:
+        paused = self.call("clock", "pause", timeout=self.mission.step_timeout + 5)
+        if paused is None or not paused.ok:
             raise LaunchError("the clock did not pause")
-        step = int(msgpack.unpackb(paused[0][1])["step"])
+        step = int(paused.data["step"])
         instance = self.next_instance(role)
         extra = ["--takeover", old.instance, "--resume-step", str(step)]
         for override in prefixed:
@@ -379,15 +414,15 @@ class Launcher:
         except LaunchError:
             self._stop([new.process], grace=0.0)
             new.retiring = True
-            self.bus.request(keys.clock_control(self.community), msgpack.packb({"cmd": "resume"}))
+            self.call("clock", "resume", timeout=5.0)
             raise
         old.retiring = True
-        self.bus.request(keys.app_control(self.community, old.instance), msgpack.packb({"cmd": "retire"}), timeout=5.0)
+        self.call(old.instance, "retire", timeout=5.0)
         self._stop([old.process], grace=5.0)
         detail = f"{old.instance} -> {instance} at step {step}" + (f" with {', '.join(prefixed)}" if prefixed else "")
         self.publish_event("swap", detail, step, {"old": old.instance, "new": instance, "step": step, "set": prefixed})
         self.summary.swaps.append({"old": old.instance, "new": instance, "step": step})
-        self.bus.request(keys.clock_control(self.community), msgpack.packb({"cmd": "resume"}))
+        self.call("clock", "resume", timeout=5.0)
         return {"ok": True, "old": old.instance, "new": instance, "step": step}
 
 

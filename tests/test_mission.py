@@ -1,0 +1,63 @@
+import pytest
+
+from conftest import ALPHA, nearsub
+from nearsub.common.mission import MissionError, load_mission
+
+
+def write(tmp_path, text):
+    path = tmp_path / "m.toml"
+    path.write_text(text)
+    return path
+
+
+def test_alpha_loads_with_the_moos_parameters():
+    mission = load_mission(ALPHA)
+    survey, home = mission.apps.helm.legs
+    assert survey.points[0] == (60.0, -40.0) and len(survey.points) == 5
+    assert (survey.speed, survey.lead, survey.capture_radius, survey.slip_radius) == (1.2, 8.0, 5.0, 15.0)
+    assert home.points == [(0.0, -20.0)] and home.speed == 2.0 and home.capture_radius == 2.0
+    assert mission.start.psi_deg == -90.0  # compass 180 -> psi = 90 - 180
+
+
+def test_overrides_are_typed():
+    mission = load_mission(ALPHA, ["dt=0.1", "vehicle=sdv", "apps.helm.period=2", "name=other"])
+    assert mission.dt == 0.1 and mission.vehicle_name == "sdv" and mission.apps.helm.period == 2
+    assert mission.name == "other"
+
+
+@pytest.mark.parametrize(
+    "edit, field, value",
+    [
+        (lambda t: t.replace("dt = 0.05", 'dt = "fast"'), "dt", "fast"),
+        (lambda t: t + "\nwarp_drive = 3\n", "warp_drive", "3"),
+        (lambda t: t.replace('name = "alpha"\n', ""), "name", ""),
+        (lambda t: t.replace("speed = 1.2", "speed = -1.2"), "speed", "-1.2"),
+    ],
+)
+def test_broken_mission_names_file_field_and_value(tmp_path, edit, field, value):
+    path = write(tmp_path, edit(ALPHA.read_text()))
+    with pytest.raises(MissionError) as info:
+        load_mission(path)
+    text = str(info.value)
+    assert str(path) in text and field in text and value in text
+    assert "\n" not in text
+
+
+def test_unknown_vehicle_is_named(tmp_path):
+    with pytest.raises(MissionError, match="submarine9"):
+        load_mission(ALPHA, ["vehicle=submarine9"])
+
+
+def test_launch_exits_2_with_one_line_for_a_broken_mission(tmp_path, runtime_dir):
+    path = write(tmp_path, ALPHA.read_text().replace("dt = 0.05", 'dt = "fast"'))
+    result = nearsub("launch", str(path), "--log", str(tmp_path / "logs"))
+    assert result.returncode == 2
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and str(path) in lines[0] and "'dt'" in lines[0] and "fast" in lines[0]
+    assert not (tmp_path / "logs").exists() or not any((tmp_path / "logs").iterdir())
+
+
+def test_invalid_toml_is_reported(tmp_path):
+    path = write(tmp_path, "name = \n")
+    with pytest.raises(MissionError, match="not valid TOML"):
+        load_mission(path)
