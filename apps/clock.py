@@ -41,6 +41,7 @@ class Clock:
         self.paused = False
         self.pause_requests: list[Control] = []
         self.ended = False
+        self.pause_at_step_done = False
 
     def wait_for_apps(self) -> str | None:
         """Block until helm, pid and sim have liveliness tokens; an error text on timeout."""
@@ -59,8 +60,11 @@ class Clock:
         self.end_pub.put(encode(MissionEnd(step=step, t=step * self.mission.dt, source="clock", outcome=outcome, reason=reason)))
         self.ended = True
 
-    def reply(self, request: Control, ok: bool = True, **data) -> None:
-        answer = ControlReply(step=self.step, t=self.step * self.mission.dt, source="clock", request_id=request.request_id, ok=ok, data=data)
+    def reply(self, request: Control, ok: bool = True, error: str = "", **data) -> None:
+        answer = ControlReply(
+            step=self.step, t=self.step * self.mission.dt, source="clock", request_id=request.request_id,
+            ok=ok, data=data, error=error,
+        )
         self.bus.put_when_matched(keys.reply(self.community, request.reply_to), encode(answer))
 
     def handle(self, key: str, payload: bytes, barrier: StepBarrier | None) -> None:
@@ -87,20 +91,28 @@ class Clock:
         if request.cmd == "status":
             self.reply(request, step=self.step, paused=self.paused)
         elif request.cmd == "pause":
-            self.pause_requests.append(request)
+            at = request.args.get("at")
+            if at is not None and int(at) < self.step:
+                self.reply(request, ok=False, error=f"step {at} has passed (the clock is at step {self.step})")
+            else:
+                self.pause_requests.append(request)
         elif request.cmd == "resume":
             self.paused = False
             self.pacer.rebase(time.monotonic(), self.step)
             self.reply(request, step=self.step)
         else:
-            self.reply(request, ok=False)
+            self.reply(request, ok=False, error=f"clock: unknown command {request.cmd!r}")
 
     def serve_pause_requests(self) -> None:
-        """Answer pause requests; only called between steps, so the reply names the next step."""
-        for request in self.pause_requests:
+        """Answer the pause requests due at this step; only called between steps, so the reply
+        names the next step to run. The mission's pause_at_step pauses without a request."""
+        if self.mission.pause_at_step == self.step and not self.pause_at_step_done:
+            self.paused = self.pause_at_step_done = True
+        due = [r for r in self.pause_requests if int(r.args.get("at", self.step)) <= self.step]
+        for request in due:
             self.paused = True
             self.reply(request, step=self.step)
-        self.pause_requests.clear()
+            self.pause_requests.remove(request)
 
     def between_steps(self) -> None:
         """Serve control and wait while paused or until the warp's release time."""

@@ -96,6 +96,9 @@ class Mission(Strict):
     step_timeout: float = Field(default=10.0, gt=0, description="wall seconds an app may take per step")
     startup_timeout: float = Field(default=30.0, gt=0)
     seed: int = 0
+    pause_at_step: int | None = Field(
+        default=None, ge=0, description="the clock pauses before this step until resumed (swap, inspection)"
+    )
     start: Start = Field(default_factory=Start)
     environment: Environment = Field(default_factory=Environment)
     network: Network = Field(default_factory=Network)

@@ -18,7 +18,6 @@ import signal
 import subprocess
 import sys
 import time
-import uuid
 from collections import Counter
 from dataclasses import dataclass, field
 from datetime import datetime
@@ -30,8 +29,6 @@ from nearsub.common import keys
 from nearsub.common.bus import Bus, Endpoints, Mailbox, free_tcp_port
 from nearsub.common.lifecycle import ORDER
 from nearsub.common.messages import (
-    Control,
-    ControlReply,
     Event,
     MessageError,
     MissionEnd,
@@ -42,6 +39,7 @@ from nearsub.common.messages import (
 from nearsub.common.mission import Mission, MissionError, RunConfig, apply_overrides, load_mission, mission_from_dict
 
 from . import registry
+from .connect import Caller
 
 LADDER = (signal.SIGINT, signal.SIGTERM, signal.SIGKILL)
 LADDER_WAIT = 5.0
@@ -183,6 +181,7 @@ class Launcher:
                 for p in alive:
                     try:
                         os.killpg(p.pid, signum)
+                        os.killpg(p.pid, signal.SIGCONT)  # a stopped (SIGSTOP) app must see it too
                     except ProcessLookupError:
                         pass
                 deadline = time.monotonic() + LADDER_WAIT
@@ -199,7 +198,6 @@ class Launcher:
             connect = self.start_router()
             RunConfig(mission=self.mission, connect=connect, log_dir=str(self.run_dir)).save(self.run_file)
             log_path = self.run_dir / f"{self.community}.mcap"
-            registry.register(self.community, connect, str(log_path))
             with Bus(Endpoints("client", tuple(connect))) as bus:
                 self.bus = bus
                 self.mailbox = Mailbox()
@@ -207,14 +205,14 @@ class Launcher:
                 bus.subscribe(keys.all_events(c), self.mailbox)
                 bus.subscribe(keys.mission_end(c), self.mailbox)
                 bus.queryable(keys.launcher_control(c), self.mailbox)
-                self.replies = Mailbox()
-                bus.subscribe(keys.reply(c, "launcher"), self.replies)
+                self.caller = Caller(bus, c, "launcher")
                 bus.watch_liveliness(keys.all_alive(c), self.mailbox, history=False)
                 self.event_pub = bus.publisher(keys.events(c, "launcher"))
                 self.end_pub = bus.publisher(keys.mission_end(c))
                 bus.token(keys.alive(c, "launcher", "launcher"))
                 try:
                     self.start_apps(bus, log_path)
+                    registry.register(self.community, connect, str(log_path))  # tools can find it now
                     self.supervise()
                 except LaunchError as exc:
                     self.fail(str(exc))
@@ -274,6 +272,7 @@ class Launcher:
         self.wait_alive(bus, wanted, timeout)
         self.spawn("clock", "clock", "clock")
         self.clock_started = time.monotonic()
+        self.wait_alive(bus, [("clock", "clock")], timeout)  # so control requests can reach it
 
     def supervise(self) -> None:
         while True:
@@ -328,25 +327,8 @@ class Launcher:
             if mail.kind == "sample":
                 self.handle(mail)
 
-    def call(self, target: str, cmd: str, timeout: float, **args) -> ControlReply | None:
-        """Send a control request to an app instance (or "clock") and wait for its reply."""
-        request = Control(step=0, t=0.0, source="launcher", cmd=cmd, args=args, request_id=uuid.uuid4().hex, reply_to="launcher")
-        self.bus.put_when_matched(keys.control(self.community, target), encode(request))
-        end = time.monotonic() + timeout
-        while (remaining := end - time.monotonic()) > 0:
-            mail = self.replies.get(timeout=remaining)
-            if mail is None:
-                break
-            try:
-                reply = decode(mail.payload, ControlReply, mail.key)
-            except MessageError:
-                continue
-            if reply.request_id == request.request_id:
-                return reply
-        return None
-
     def current_step(self) -> str:
-        reply = self.call("clock", "status", timeout=1.0)
+        reply = self.caller.call("clock", "status", timeout=1.0)
         if reply is not None and reply.ok:
             return str(reply.data["step"])
         return "unknown (the clock did not answer)"
@@ -383,13 +365,14 @@ class Launcher:
             mail.reply_error(f"launcher: unknown command {command!r}")
             return
         try:
-            result = self.swap(str(request.get("app", "")), list(request.get("set", [])))
+            at = request.get("at_step")
+            result = self.swap(str(request.get("app", "")), list(request.get("set", [])), None if at is None else int(at))
         except LaunchError as exc:
             mail.reply_error(str(exc))
             return
         mail.reply(msgpack.packb(result))
 
-    def swap(self, role: str, overrides: list[str]) -> dict:
+    def swap(self, role: str, overrides: list[str], at_step: int | None = None) -> dict:
         if role not in ORDER:
             raise LaunchError(f"cannot swap {role!r}: only {', '.join(ORDER)} can be swapped")
         old = next((c for c in self.children.values() if c.role == role and not c.retiring and c.process.poll() is None), None)
@@ -400,9 +383,14 @@ class Launcher:
             mission_from_dict(apply_overrides(self.mission.model_dump(mode="json"), prefixed), "swap")
         except MissionError as exc:
             raise LaunchError(str(exc)) from None
-        paused = self.call("clock", "pause", timeout=self.mission.step_timeout + 5)
-        if paused is None or not paused.ok:
+        wait = self.mission.step_timeout + 5
+        if at_step is not None:
+            wait += 600.0  # the clock answers when it reaches the step
+        paused = self.caller.call("clock", "pause", timeout=wait, **({} if at_step is None else {"at": at_step}))
+        if paused is None:
             raise LaunchError("the clock did not pause")
+        if not paused.ok:
+            raise LaunchError(paused.error)
         step = int(paused.data["step"])
         instance = self.next_instance(role)
         extra = ["--takeover", old.instance, "--resume-step", str(step)]
@@ -414,15 +402,15 @@ class Launcher:
         except LaunchError:
             self._stop([new.process], grace=0.0)
             new.retiring = True
-            self.call("clock", "resume", timeout=5.0)
+            self.caller.call("clock", "resume", timeout=5.0)
             raise
         old.retiring = True
-        self.call(old.instance, "retire", timeout=5.0)
+        self.caller.call(old.instance, "retire", timeout=5.0)
         self._stop([old.process], grace=5.0)
         detail = f"{old.instance} -> {instance} at step {step}" + (f" with {', '.join(prefixed)}" if prefixed else "")
         self.publish_event("swap", detail, step, {"old": old.instance, "new": instance, "step": step, "set": prefixed})
         self.summary.swaps.append({"old": old.instance, "new": instance, "step": step})
-        self.call("clock", "resume", timeout=5.0)
+        self.caller.call("clock", "resume", timeout=5.0)
         return {"ok": True, "old": old.instance, "new": instance, "step": step}
 
 

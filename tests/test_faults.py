@@ -1,0 +1,160 @@
+"""Bad input and faults: nothing hangs silently, nothing is lost, every log closes."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import msgpack
+import pytest
+
+from conftest import ALPHA, nearsub
+from helpers import log_path
+from nearsub.common.logfile import LogWriter, read_log
+from nearsub.tools import registry
+
+pytestmark = pytest.mark.timeout(180)
+
+
+def wait_registered(community, timeout=30.0):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if community in registry.running():
+            return registry.running()[community]
+        time.sleep(0.05)
+    raise AssertionError(f"mission {community} did not register")
+
+
+def app_pid(log_dir, instance):
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            argv = open(f"/proc/{entry}/cmdline").read().split("\0")
+        except OSError:
+            continue
+        if "--instance" in argv and instance in argv and any(str(log_dir) in a for a in argv):
+            return int(entry)
+    raise AssertionError(f"no process for {instance}")
+
+
+def no_processes_left(log_dir):
+    out = subprocess.run(["pgrep", "-f", str(log_dir)], capture_output=True, text=True).stdout
+    return out.strip() == ""
+
+
+def summary_of(process, timeout=60):
+    out, err = process.communicate(timeout=timeout)
+    return process.returncode, json.loads(out.strip().splitlines()[-1]), err
+
+
+def test_malformed_messages_are_rejected_and_logged(launches, community):
+    process = launches.start(ALPHA, "--set", f"name={community}", "--warp", "10", "--until", "30")
+    wait_registered(community)
+    key = f"nearsub/{community}/remus100/state"
+    raw = nearsub("tap", "pub", key, "--raw-hex", "c1ffee")
+    bad = nearsub("tap", "pub", key, json.dumps({"step": 3, "t": 0.1, "source": "sim", "u": "fast"}), "--no-validate")
+    refused = nearsub("tap", "pub", key, json.dumps({"u": float("inf")}))
+    assert raw.returncode == 0 and bad.returncode == 0
+    assert refused.returncode == 2 and "'u'" in refused.stderr  # tap pub validates by default
+    code, summary, err = summary_of(process)
+    assert code == 0 and summary["outcome"] == "time_limit", err
+    records = read_log(log_path(summary)).records
+    errors = [r.value()["detail"] for r in records if "/events/" in r.topic and r.value()["kind"] == "error"]
+    assert any("not valid msgpack" in e for e in errors)
+    assert any("'u'" in e and "fast" in e for e in errors), errors
+    invalid = [r for r in records if r.topic == key + "#invalid"]
+    assert len(invalid) == 2  # both bad payloads kept, byte for byte
+    assert {r.data for r in invalid} == {bytes.fromhex("c1ffee"), msgpack.packb({"step": 3, "t": 0.1, "source": "sim", "u": "fast"})}
+
+
+def test_killed_app_is_reported_and_the_log_is_closed(launches, community):
+    process = launches.start(ALPHA, "--set", f"name={community}", "--warp", "5", "--until", "120")
+    wait_registered(community)
+    time.sleep(1.0)
+    os.kill(app_pid(launches.log_dir, "sim-1"), signal.SIGKILL)
+    killed_at = time.monotonic()
+    code, summary, err = summary_of(process)
+    assert code != 0
+    assert "app sim-1 exited with code -9 at step" in err
+    assert summary["outcome"] == "error" and summary["failed_app"] == "sim-1"
+    contents = read_log(log_path(summary))
+    assert not contents.recovered and contents.metadata["outcome"]["outcome"] == "error"
+    assert time.monotonic() - killed_at < 20
+    time.sleep(0.5)
+    assert no_processes_left(launches.log_dir)
+
+
+def test_report_comes_within_five_seconds(launches, community):
+    process = launches.start(ALPHA, "--set", f"name={community}", "--warp", "5", "--until", "120")
+    wait_registered(community)
+    os.kill(app_pid(launches.log_dir, "pid-1"), signal.SIGKILL)
+    killed_at = time.monotonic()
+    line = process.stderr.readline()
+    assert "app pid-1 exited" in line
+    assert time.monotonic() - killed_at < 5.0
+    process.communicate(timeout=60)
+
+
+def test_stalled_app_is_named_by_the_clock(launches, community):
+    process = launches.start(ALPHA, "--set", f"name={community}", "--set", "step_timeout=2", "--warp", "5", "--until", "120")
+    wait_registered(community)
+    os.kill(app_pid(launches.log_dir, "pid-1"), signal.SIGSTOP)
+    code, summary, err = summary_of(process)
+    assert code == 1
+    assert summary["outcome"] == "stalled"
+    assert "app 'pid' did not finish step" in summary["reason"] and "within 2 s" in summary["reason"]
+    assert read_log(log_path(summary)).metadata["outcome"]["outcome"] == "stalled"
+    time.sleep(0.5)
+    assert no_processes_left(launches.log_dir)
+
+
+def test_ctrl_c_stops_everything_and_closes_the_log(launches, community):
+    process = launches.start(ALPHA, "--set", f"name={community}", "--warp", "5", "--until", "120")
+    wait_registered(community)
+    process.send_signal(signal.SIGINT)
+    code, summary, err = summary_of(process)
+    assert code == 130 and summary["outcome"] == "interrupted"
+    assert not read_log(log_path(summary)).recovered
+    time.sleep(0.5)
+    assert no_processes_left(launches.log_dir)
+
+
+def test_two_communities_on_one_router_do_not_cross_talk(launches, tmp_path):
+    port = subprocess.run(
+        [sys.executable, "-c", "from nearsub.common.bus import free_tcp_port; print(free_tcp_port())"],
+        capture_output=True, text=True,
+    ).stdout.strip()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    router = subprocess.Popen([sys.executable, "-m", "nearsub", "router", "--listen", endpoint], process_group=0)
+    try:
+        time.sleep(0.5)
+        connect = f'network.connect=["{endpoint}"]'
+        a = launches.start(ALPHA, "--set", "name=alpha_one", "--set", connect, "--until", "30")
+        b = launches.start(ALPHA, "--set", "name=alpha_two", "--set", connect, "--until", "30")
+        for process, name in ((a, "alpha_one"), (b, "alpha_two")):
+            code, summary, err = summary_of(process, timeout=120)
+            assert code == 0 and summary["outcome"] == "time_limit", err
+            topics = read_log(log_path(summary)).topics()
+            assert topics and all(topic.startswith(f"nearsub/{name}/") for topic in topics)
+            assert summary["steps"] == 600
+    finally:
+        os.killpg(router.pid, signal.SIGKILL)
+        router.wait()
+
+
+def test_a_log_cut_short_is_readable_up_to_its_last_chunk(tmp_path):
+    path = tmp_path / "cut.mcap"
+    writer = LogWriter(path)
+    for i in range(20000):
+        writer.write("nearsub/x/remus100/input", msgpack.packb({"step": i, "t": i * 0.05, "source": "pid", "X_prop": 1.0, "delta_r": 0.0}), i * 0.05)
+    writer._file.flush()  # a crash: the writer never finishes
+    size = path.stat().st_size
+    with open(path, "r+b") as f:
+        f.truncate(size - 100)
+    contents = read_log(path)
+    assert contents.recovered
+    steps = [msgpack.unpackb(r.data)["step"] for r in contents.records]
+    assert steps == list(range(len(steps))) and len(steps) > 15000

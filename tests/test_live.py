@@ -1,0 +1,108 @@
+"""Tap, swap and the clock controls against running missions."""
+
+import json
+import time
+
+import pytest
+
+from conftest import ALPHA, nearsub
+from helpers import log_path, per_topic
+from nearsub.common.cores import build_cores
+from nearsub.common.lifecycle import Schedule, run_inprocess
+from nearsub.common.logfile import read_log
+from nearsub.common.messages import encode
+from nearsub.common.mission import load_mission
+from nearsub.tools import registry
+
+pytestmark = pytest.mark.timeout(180)
+
+
+def wait_registered(community, timeout=30.0):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if community in registry.running():
+            return
+        time.sleep(0.1)
+    raise AssertionError(f"mission {community} did not register")
+
+
+def finish(process, timeout=120):
+    out, err = process.communicate(timeout=timeout)
+    return process.returncode, json.loads(out.strip().splitlines()[-1]), err
+
+
+def test_tap_echo_and_hz_on_a_running_mission(launches, community):
+    process = launches.start(ALPHA, "--set", f"name={community}", "--warp", "5", "--until", "60")
+    wait_registered(community)
+    echo = nearsub("tap", "echo", f"nearsub/{community}/*/state", "--count", "5", "--field", "u", "--timeout", "30")
+    assert echo.returncode == 0, echo.stderr
+    lines = [json.loads(line) for line in echo.stdout.splitlines()]
+    assert len(lines) == 5 and all(line["key"] == f"nearsub/{community}/remus100/state" for line in lines)
+    assert all(isinstance(line["value"], float) for line in lines)
+    times = [line["t"] for line in lines]
+    assert times == sorted(times)
+
+    hz = nearsub("tap", "hz", f"nearsub/{community}/**", "--duration", "3", "--json")
+    assert hz.returncode == 0, hz.stderr
+    rates = {}
+    for line in hz.stdout.splitlines():
+        item = json.loads(line)
+        rates[item["key"].split("/", 2)[2]] = item["hz"]
+    assert rates["remus100/state"] == pytest.approx(20.0, rel=0.01)  # dt = 0.05 s of simulated time
+    assert rates["remus100/desired"] == pytest.approx(4.0, rel=0.01)  # helm period 5
+
+    listed = nearsub("tap", "list", "--community", community, "--json")
+    assert listed.returncode == 0, listed.stderr
+    apps = json.loads(listed.stdout)["apps"]
+    for role in ("helm", "pid", "sim", "clock", "logger"):
+        assert any(f"/alive/{role}/" in key for key in apps), (role, apps)
+    code, summary, err = finish(process)
+    assert code == 0 and summary["outcome"] == "time_limit", err
+
+
+def test_swap_at_a_fixed_step_keeps_the_trajectory(launches, community):
+    """Swapping the helm for an identical one mid-mission must not change a single bit."""
+    process = launches.start(ALPHA, "--set", f"name={community}", "--set", "pause_at_step=1000", "--until", "150")
+    wait_registered(community)
+    swap = nearsub("swap", community, "helm", "--at-step", "1000", "--with", "behaviour=waypoints", "--json")
+    assert swap.returncode == 0, swap.stderr
+    result = json.loads(swap.stdout)
+    assert result["step"] == 1000 and result["old"] == "helm-1" and result["new"] == "helm-2"
+    code, summary, err = finish(process)
+    assert code == 0, err
+    assert summary["swaps"] == [{"old": "helm-1", "new": "helm-2", "step": 1000}]
+
+    mission = load_mission(ALPHA, [f"name={community}", "time_limit=150"])
+    reference = run_inprocess(build_cores(mission), Schedule(mission.periods()), mission.dt, mission.max_steps)
+    logged = per_topic(log_path(summary))
+    for leaf in ("state", "desired", "input"):
+        assert logged[f"remus100/{leaf}"] == [encode(m) for m in reference.topic(leaf)], leaf
+    events = [r.value() for r in read_log(log_path(summary)).records if r.topic.endswith("/events/launcher")]
+    swaps = [e for e in events if e["kind"] == "swap"]
+    assert len(swaps) == 1 and swaps[0]["step"] == 1000 and "helm-1 -> helm-2" in swaps[0]["detail"]
+
+
+def test_swap_rejects_a_bad_setting_and_the_mission_goes_on(launches, community):
+    process = launches.start(ALPHA, "--set", f"name={community}", "--warp", "10", "--until", "40")
+    wait_registered(community)
+    swap = nearsub("swap", community, "helm", "--with", "period=0")
+    assert swap.returncode == 1 and "period" in swap.stderr
+    code, summary, err = finish(process)
+    assert code == 0 and summary["outcome"] == "time_limit" and summary["swaps"] == [], err
+
+
+def test_clock_pause_and_resume(launches, community):
+    process = launches.start(ALPHA, "--set", f"name={community}", "--set", "pause_at_step=200", "--until", "20")
+    wait_registered(community)
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline:
+        status = json.loads(nearsub("clock", community, "status").stdout)
+        if status["paused"]:
+            break
+        time.sleep(0.2)
+    assert status == {"step": 200, "paused": True}
+    assert process.poll() is None
+    resumed = nearsub("clock", community, "resume")
+    assert resumed.returncode == 0, resumed.stderr
+    code, summary, err = finish(process)
+    assert code == 0 and summary["steps"] == 400, err
