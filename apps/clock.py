@@ -18,8 +18,8 @@ from nearsub.apps.shell import prepare_process
 from nearsub.common import keys
 from nearsub.common.bus import Bus, DeadlineExceeded, Endpoints, deadline, signal_self
 from nearsub.common.clock import Pacer, StepBarrier
-from nearsub.common.lifecycle import ORDER, Schedule
-from nearsub.common.messages import Ack, Control, ControlReply, MessageError, MissionEnd, Tick, decode, encode
+from nearsub.common.lifecycle import DONE_TOPIC, ORDER, Schedule
+from nearsub.common.messages import VEHICLE_TOPICS, Ack, Control, ControlReply, MessageError, MissionEnd, Tick, decode, encode
 from nearsub.common.mission import RunConfig
 
 
@@ -35,6 +35,7 @@ class Clock:
         self.tick_pub = bus.publisher(keys.tick(c))
         self.end_pub = bus.publisher(keys.mission_end(c))
         self.ack_prefix = keys.ack(c, "")
+        self.done_topics = {keys.vehicle_topic(c, mission.vehicle_name, leaf): leaf for leaf in DONE_TOPIC.values()}
         self.control_key = keys.control(c, "clock")
         self.end_key = keys.mission_end(c)
         self.step = 0
@@ -69,7 +70,14 @@ class Clock:
 
     def handle(self, key: str, payload: bytes, barrier: StepBarrier | None) -> None:
         """One stream item, while waiting for acks (barrier) or between steps (None)."""
-        if key.startswith(self.ack_prefix):
+        leaf = self.done_topics.get(key)
+        if leaf is not None:
+            if barrier is not None:
+                try:
+                    barrier.record_output(leaf, decode(payload, VEHICLE_TOPICS[leaf], key))
+                except MessageError:
+                    pass  # the consumers report malformed data; the clock only counts
+        elif key.startswith(self.ack_prefix):
             if barrier is None:
                 print(f"[clock] error: ack outside a step from {key}", file=sys.stderr)
                 return

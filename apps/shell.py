@@ -28,7 +28,7 @@ import msgpack
 
 from nearsub.common import keys
 from nearsub.common.bus import Bus, DeadlineExceeded, Endpoints, deadline, signal_self
-from nearsub.common.lifecycle import Core, Inbox, Schedule
+from nearsub.common.lifecycle import DONE_TOPIC, Core, Inbox, Schedule
 from nearsub.common.messages import (
     VEHICLE_TOPICS,
     Ack,
@@ -203,11 +203,15 @@ class AppShell:
         self.core.new_mail(self.inbox.take(step))
         t = step * self.dt
         result = self.core.iterate(step, t)
+        done_topic = DONE_TOPIC[self.core.role]
+        if result.end is not None or all(leaf != done_topic for leaf, _ in result.outputs):
+            # The done-topic output normally acknowledges the step; say it explicitly otherwise.
+            ack = Ack(step=step, t=t, source=self.core.role, end=result.end, reason=result.reason)
+            self.ack_pub.put(encode(ack))
         for leaf, message in result.outputs:
             self.outputs[leaf].put(encode(message))
         for event in result.events:
             self.event_pub.put(encode(event))
-        self.ack_pub.put(encode(Ack(step=step, t=t, source=self.core.role, end=result.end, reason=result.reason)))
         self.pending = None
 
     # -- control: handover and retire (swap) -------------------------------------------------

@@ -1,7 +1,9 @@
 """The lock-stepped clock's protocol, free of transport (SPEC section 4).
 
 For each step the clock publishes a tick, then waits until every app the schedule runs at that
-step has acknowledged it. It never moves on with a missing acknowledgement: past `step_timeout`
+step has acknowledged it. An app acknowledges a step by publishing its done-topic output for it
+(lifecycle.DONE_TOPIC: the helm's desired state, the pid's input, the sim's next state), or with
+an explicit Ack when it asks to end the mission. It never moves on with a missing acknowledgement: past `step_timeout`
 it ends the mission naming the stalled app. Apps later in the thesis loop wait on earlier ones,
 so the first missing app in loop order is the one that stalled.
 
@@ -13,8 +15,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from .lifecycle import ORDER, Schedule, more_severe
-from .messages import Ack
+from .lifecycle import DONE_TOPIC, ORDER, Schedule, more_severe
+from .messages import Ack, Message
 
 
 @dataclass
@@ -23,13 +25,22 @@ class StepBarrier:
 
     step: int
     expected: list[str]
+    done_labels: dict[str, int]
     received: set[str] = field(default_factory=set)
     end: str | None = None
     reason: str = ""
 
     @classmethod
     def for_step(cls, schedule: Schedule, step: int) -> StepBarrier:
-        return cls(step, schedule.runners(step))
+        runners = schedule.runners(step)
+        return cls(step, runners, {role: schedule.done_label(role, step) for role in runners})
+
+    def record_output(self, leaf: str, message: Message) -> None:
+        """A lock-stepped output: the producer's acknowledgement if it is its done topic for this
+        step. Other outputs (the sim's initial state, held values) are not acknowledgements."""
+        role = message.source
+        if DONE_TOPIC.get(role) == leaf and self.done_labels.get(role) == message.step:
+            self.received.add(role)
 
     def record(self, ack: Ack) -> str | None:
         """Take an acknowledgement; return an error text for one that does not belong here."""

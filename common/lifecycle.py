@@ -28,6 +28,14 @@ ORDER = ("helm", "pid", "sim")
 # Which role publishes each lock-stepped topic.
 PRODUCER = {"desired": "helm", "input": "pid", "state": "sim"}
 
+# The output that tells the clock an app has finished a step: its acknowledgement. An app sends
+# an explicit Ack only when it asks to end the mission or did not publish this output (e.g. the
+# sim on divergence); that halves the messages per step (see common/clock.py).
+DONE_TOPIC = {"helm": "desired", "pid": "input", "sim": "state"}
+
+# Topics labelled with the step they lead to (the sim's x_{k+1} after step k).
+NEXT_STEP_TOPICS = frozenset({"state"})
+
 # Outcomes a core may request, from most to least severe; the clock keeps the most severe.
 OUTCOME_SEVERITY = ("diverged", "collision", "error", "completed", "time_limit")
 
@@ -67,6 +75,11 @@ class Schedule:
 
     def runners(self, step: int) -> list[str]:
         return [role for role in ORDER if self.runs(role, step)]
+
+    def done_label(self, role: str, step: int) -> int:
+        """Label of `role`'s done-topic output when it has finished `step`."""
+        topic = DONE_TOPIC[role]
+        return step + self.periods[role] if topic in NEXT_STEP_TOPICS else step
 
     def expected_label(self, topic: str, step: int) -> int:
         period = self.periods[PRODUCER[topic]]

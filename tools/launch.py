@@ -246,7 +246,7 @@ class Launcher:
             endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
             out = open(self.run_dir / "router.out", "wb")
             self.router = subprocess.Popen(
-                [sys.executable, "-u", "-m", "nearsub.apps.router", "--listen", endpoint],
+                [sys.executable, "-u", "-m", "nearsub.apps.router", "--listen", endpoint, "--with-parent"],
                 stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, process_group=0,
             )
             out.close()
