@@ -122,9 +122,10 @@ REMUS100 = Vehicle(
     max_rudder=15.0 * _DEG,  # PythonVehicleSimulator remus100 deltaMax_r (vehicles.md section 1)
     max_thrust=10.0,  # = -X_u|u| * 2.5^2, 2.5 m/s top speed (vehicles.md section 1 estimate)
     pid=PidTuning(
-        # Tuned in docs/pid-tuning.md (positional form, error in rad -> rudder in rad).
-        heading=Gains(kp=1.2, ki=0.05, kd=0.8, integral_limit=0.1),
-        speed=Gains(kp=8.0, ki=1.0, kd=0.0, integral_limit=4.0),
+        # docs/pid-tuning.md: positional form, designed at 1.5 m/s (rudder saturates beyond 10 deg
+        # of heading error, slowest PD poles at damping 0.9, Ki = Kp w/10; surge pole 3x drag pole).
+        heading=Gains(kp=1.5, ki=0.13, kd=3.4, integral_limit=0.1),
+        speed=Gains(kp=9.7, ki=0.45, kd=0.0, integral_limit=5.0),
     ),
 )
 
@@ -162,8 +163,9 @@ NPS_AUV_II = Vehicle(
     max_rudder=15.0 * _DEG,  # the thesis manoeuvre uses +/-15 deg (vehicles.md section 2)
     max_thrust=4.0 * 0.00778 * _NPS_Q2,  # assumption: X_prop for 2 m/s (= -X_u|u| * 2^2)
     pid=PidTuning(
-        heading=Gains(kp=2.0, ki=0.05, kd=3.0, integral_limit=0.1),
-        speed=Gains(kp=40.0, ki=4.0, kd=0.0, integral_limit=20.0),
+        # docs/pid-tuning.md: same method, designed at 1.0 m/s.
+        heading=Gains(kp=1.5, ki=0.073, kd=2.2, integral_limit=0.1),
+        speed=Gains(kp=77.0, ki=4.2, kd=0.0, integral_limit=38.0),
     ),
 )
 
@@ -201,8 +203,9 @@ SDV = Vehicle(
     max_rudder=20.0 * _DEG,  # [MSS] max_u
     max_thrust=192.0,  # [MSS] Xprop model at 1500 rpm (vehicles.md section 3)
     pid=PidTuning(
-        heading=Gains(kp=2.0, ki=0.05, kd=6.0, integral_limit=0.1),
-        speed=Gains(kp=400.0, ki=40.0, kd=0.0, integral_limit=150.0),
+        # docs/pid-tuning.md: same method, designed at 1.5 m/s.
+        heading=Gains(kp=2.0, ki=0.049, kd=6.2, integral_limit=0.1),
+        speed=Gains(kp=324.0, ki=2.6, kd=0.0, integral_limit=96.0),
     ),
 )
 

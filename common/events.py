@@ -1,0 +1,165 @@
+"""Event geometry of thesis section 5.11.2 (SPEC section 5): collision, close call, large stray.
+
+Everything works in the plane of both axes (the submarine frame of SPEC section 2) and is
+vectorised over arrays of UUV poses.
+
+- Collision: the UUV outline (Explorer profile of the vehicle's length and diameter, hull.py)
+  touches or overlaps the SUBOFF outline, i.e. `closest_distance <= 0`.
+- Close call: no collision, and either the outline comes within one UUV diameter of the hull
+  (`closest_distance <= D_uuv`), or the UUV is directly ahead of or behind the submarine. "Directly
+  ahead/behind" means the UUV's CB lies beyond the bow tip (x > SUB_BOW_X) or beyond the stern tip
+  (x < SUB_STERN_X) and inside the submarine's swept corridor widened by one UUV diameter,
+  |y| < R_sub + D_uuv: the submarine would run into it, or pass within one diameter of it.
+- Large stray: the UUV's CB is more than 1 m (thesis section 5.11.2) from the current track-line,
+  the segment from the previous to the next waypoint.
+
+Distances are computed from a polyline of the hull resampled every 1 cm of arc length and from
+the UUV polygon of `hull.uuv_outline`, so they are exact to about a millimetre.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .hull import (
+    L_SUB,
+    R_SUB,
+    SUB_BOW_X,
+    SUB_CB_FROM_NOSE,
+    SUB_STERN_X,
+    SUBOFF_JOINTS_M,
+    submarine_half_width,
+    suboff_radius,
+    uuv_body_outline,
+    uuv_outline,
+)
+
+STRAY_LIMIT = 1.0  # large stray: more than 1 m from the track-line (thesis section 5.11.2) [m]
+_HULL_SPACING = 0.01  # arc-length spacing of the hull polyline [m]
+
+
+def _resample(s_start: float, s_end: float) -> np.ndarray:
+    """Upper outline between two stations, frame (x, y) points every _HULL_SPACING of arc."""
+    s = s_start + 0.5 * (s_end - s_start) * (1.0 - np.cos(np.linspace(0.0, np.pi, 20000)))
+    r = suboff_radius(s)
+    arc = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(s), np.diff(r)))])
+    uniform = np.linspace(0.0, arc[-1], int(np.ceil(arc[-1] / _HULL_SPACING)) + 1)
+    return np.column_stack(
+        [SUB_CB_FROM_NOSE - np.interp(uniform, arc, s), np.interp(uniform, arc, r)]
+    )
+
+
+@lru_cache(maxsize=1)
+def _hull_curves() -> tuple[tuple[cKDTree, np.ndarray], tuple[cKDTree, np.ndarray]]:
+    """Dense polylines of the curved bow and stern (upper half), each with a KD-tree.
+
+    The outline is symmetric in y, so the distance from (x, y) is the distance from (x, |y|) to
+    the upper half. The parallel middle body is a straight line, handled exactly in closed form.
+    """
+    joint_bow, joint_aft, _ = SUBOFF_JOINTS_M
+    bow, stern = _resample(0.0, joint_bow), _resample(joint_aft, L_SUB)
+    return (cKDTree(bow), bow), (cKDTree(stern), stern)
+
+
+def _curve_distance(curve: tuple[cKDTree, np.ndarray], query: np.ndarray) -> np.ndarray:
+    """Distance from points (M, 2) to a polyline; the nearest vertex's two segments hold the
+    closest point."""
+    tree, pts = curve
+    _, nearest = tree.query(query)
+    best = np.full(len(query), np.inf)
+    for lo in (nearest - 1, nearest):
+        a = pts[np.clip(lo, 0, len(pts) - 1)]
+        ab = pts[np.clip(lo + 1, 0, len(pts) - 1)] - a
+        t = np.clip(
+            np.einsum("ij,ij->i", query - a, ab)
+            / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-300),
+            0,
+            1,
+        )
+        best = np.minimum(best, np.linalg.norm(query - (a + t[:, None] * ab), axis=1))
+    return best
+
+
+def hull_signed_distance(px, py):
+    """Signed distance [m] from points to the submarine outline: negative inside the hull.
+
+    Beside the parallel middle body the hull's widest line is the closest part, so the distance is
+    |y| - R_sub exactly; elsewhere the nearer of the bow and stern polylines decides.
+    """
+    px, py = np.broadcast_arrays(np.asarray(px, dtype=float), np.abs(np.asarray(py, dtype=float)))
+    x, y = px.ravel(), py.ravel()
+    bow, stern = _hull_curves()
+    x_bow_joint, x_aft_joint = bow[1][-1, 0], stern[1][0, 0]
+    beside = (x <= x_bow_joint) & (x >= x_aft_joint)
+    inside = y < submarine_half_width(x)
+    dist = np.where(beside, np.abs(y - R_SUB), np.inf)
+    for curve, side in ((bow, x > x_aft_joint), (stern, x < x_bow_joint)):
+        todo = side & (~beside | inside)  # inside points near a joint may be closer to a curve
+        if todo.any():
+            dist[todo] = np.minimum(
+                dist[todo], _curve_distance(curve, np.column_stack([x[todo], y[todo]]))
+            )
+    return np.where(inside, -dist, dist).reshape(px.shape)
+
+
+def closest_distance(x, y, psi, length: float, diameter: float, n: int = 64):
+    """Clearance [m] between the UUV outline at CB (x, y), heading psi and the hull outline.
+
+    Positive when apart; zero or negative when touching or overlapping (a collision). Shape is the
+    broadcast shape of x, y, psi.
+    """
+    ox, oy = uuv_outline(x, y, psi, length, diameter, n)
+    return hull_signed_distance(ox, oy).min(axis=-1)
+
+
+def _uuv_reach(length: float, diameter: float, n: int) -> float:
+    """Largest distance from the UUV's CB to its outline (a bound for the cheap pre-check)."""
+    bx, by = uuv_body_outline(length, diameter, n)
+    return float(np.max(np.hypot(bx, by)))
+
+
+def ahead_or_astern(x, y, diameter: float):
+    """True where the UUV's CB is directly ahead of the bow or behind the stern (module doc)."""
+    x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+    return ((x > SUB_BOW_X) | (x < SUB_STERN_X)) & (np.abs(y) < R_SUB + diameter)
+
+
+def track_distance(x, y, start, end):
+    """Distance [m] from (x, y) to the track-line segment from `start` to `end` (each (x, y))."""
+    x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+    ax, ay = start
+    dx, dy = end[0] - ax, end[1] - ay
+    seg2 = dx * dx + dy * dy
+    t = np.clip(((x - ax) * dx + (y - ay) * dy) / seg2, 0.0, 1.0) if seg2 > 0 else 0.0
+    return np.hypot(x - (ax + t * dx), y - (ay + t * dy))
+
+
+@dataclass(frozen=True)
+class Events:
+    """Event flags, one entry per UUV pose; large_stray is None when no track-line was given."""
+
+    collision: np.ndarray
+    close_call: np.ndarray
+    large_stray: np.ndarray | None
+
+
+def classify(x, y, psi, length: float, diameter: float, track=None, n: int = 64) -> Events:
+    """Classify UUV poses. `track` is the current track-line ((x0, y0), (x1, y1)) or None.
+
+    Poses whose CB is farther from the hull than the UUV's reach plus one diameter can be neither
+    a collision nor a near pass, so the outline is only built for the others.
+    """
+    x, y, psi = np.broadcast_arrays(*(np.asarray(a, dtype=float) for a in (x, y, psi)))
+    clearance = hull_signed_distance(x, y)
+    near = clearance - _uuv_reach(length, diameter, n) <= diameter
+    if near.any():
+        clearance = clearance.copy()
+        clearance[near] = closest_distance(x[near], y[near], psi[near], length, diameter, n)
+    collision = near & (clearance <= 0.0)
+    close_call = ~collision & ((near & (clearance <= diameter)) | ahead_or_astern(x, y, diameter))
+    stray = None if track is None else track_distance(x, y, *track) > STRAY_LIMIT
+    return Events(collision, close_call, stray)

@@ -1,0 +1,135 @@
+"""Collision, close-call and large-stray geometry (thesis section 5.11.2, SPEC section 5)."""
+
+import math
+from functools import lru_cache
+
+import numpy as np
+import pytest
+from nearsub.common import events, hull
+from scipy.spatial import cKDTree
+
+REMUS_L, REMUS_D = 1.33, 0.191  # vehicles.md section 1
+R = hull.R_SUB
+
+
+@lru_cache(maxsize=1)
+def _dense_hull():
+    """Upper hull as a dense point cloud, uniform in x plus clustering at the blunt ends."""
+    s = np.r_[
+        np.linspace(0.0, hull.L_SUB, 400001),
+        hull.L_SUB * (1 - np.cos(np.linspace(0, np.pi, 20001))) / 2,
+    ]
+    pts = np.column_stack([hull.SUB_CB_FROM_NOSE - s, hull.suboff_radius(s)])
+    return cKDTree(pts)
+
+
+def _brute_clearance(x, y, psi, length=REMUS_L, diameter=REMUS_D):
+    """Independent check: dense point clouds of both outlines; negative when they overlap."""
+    tree = _dense_hull()
+    ox, oy = hull.uuv_outline(x, y, psi, length, diameter, 800)
+    gap = tree.query(np.column_stack([ox, np.abs(oy)]))[0].min()
+    overlap = np.any(np.abs(oy) < hull.submarine_half_width(ox))
+    return -gap if overlap else gap
+
+
+def _bow_normal(s):
+    """Upper hull point s metres behind the nose and its outward unit normal."""
+    h = 1e-6
+    slope = (hull.suboff_radius(s + h) - hull.suboff_radius(s - h)) / (2 * h)
+    normal = np.array([slope, 1.0]) / math.hypot(slope, 1.0)
+    return np.array([hull.SUB_CB_FROM_NOSE - s, float(hull.suboff_radius(s))]), normal
+
+
+def test_hull_signed_distance_simple_points():
+    d = events.hull_signed_distance(
+        [0.0, 0.0, 0.0, hull.SUB_BOW_X + 2.0, hull.SUB_STERN_X - 3.0],
+        [R + 1.5, -R - 0.5, 1.0, 0.0, 0.0],
+    )
+    np.testing.assert_allclose(d, [1.5, 0.5, -(R - 1.0), 2.0, 3.0], atol=1e-6)
+
+
+def test_hull_signed_distance_matches_brute_force():
+    tree = _dense_hull()
+    rng = np.random.default_rng(7)
+    q = np.column_stack([rng.uniform(-55, 48, 3000), rng.uniform(0, 12, 3000)])
+    expected = tree.query(q)[0]
+    expected = np.where(q[:, 1] < hull.submarine_half_width(q[:, 0]), -expected, expected)
+    np.testing.assert_allclose(events.hull_signed_distance(q[:, 0], q[:, 1]), expected, atol=3e-4)
+
+
+def test_parallel_uuv_beside_the_middle_body():
+    gap = np.array([0.15, 1e-3, -1e-3])
+    y = R + REMUS_D / 2 + gap
+    d = events.closest_distance(0.0, y, 0.0, REMUS_L, REMUS_D)
+    np.testing.assert_allclose(d, gap, atol=1e-6)
+    ev = events.classify(np.zeros(3), -y, np.zeros(3), REMUS_L, REMUS_D)  # mirrored side
+    assert ev.collision.tolist() == [False, False, True]
+    assert ev.close_call.tolist() == [True, True, False]
+    assert ev.large_stray is None
+
+
+@pytest.mark.parametrize("s", [3.0, 10.0, 18.0])
+def test_uuv_pointing_at_the_bow_taper(s):
+    """A UUV nose-on to the bow along the hull normal, at an angle to the axis: the clearance is
+    the nose gap."""
+    point, normal = _bow_normal(s)
+    psi = math.atan2(-normal[1], -normal[0])
+    cb_behind_nose = hull.explorer_cb_from_nose(REMUS_L, REMUS_D)
+    for gap in (0.3, 0.01, -0.01):
+        cb = point + (gap + cb_behind_nose) * normal
+        d = float(events.closest_distance(cb[0], cb[1], psi, REMUS_L, REMUS_D))
+        assert d == pytest.approx(gap, abs=1e-4)
+        ev = events.classify(cb[0], cb[1], psi, REMUS_L, REMUS_D)
+        assert bool(ev.collision) == (gap < 0)
+        assert bool(ev.close_call) == (0 < gap <= REMUS_D)
+
+
+def test_oblique_uuv_side_touching_the_bow_taper():
+    """A UUV at 30 deg to the axis near the bow shoulder: find the touching offset by brute force,
+    then check both sides of it."""
+    x, psi = hull.SUB_BOW_X - 8.0, math.radians(30.0)
+    lo, hi = 0.0, 8.0  # y overlapping, y clear
+    for _ in range(22):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if _brute_clearance(x, mid, psi) < 0 else (lo, mid)
+    touch = hi
+    for offset in (-0.005, 0.005, 0.05):
+        d = float(events.closest_distance(x, touch + offset, psi, REMUS_L, REMUS_D))
+        assert (d <= 0) == (offset < 0)
+        if offset > 0:
+            assert d == pytest.approx(_brute_clearance(x, touch + offset, psi), abs=2e-3)
+    ev = events.classify([x, x], [touch - 0.005, touch + 0.05], [psi, psi], REMUS_L, REMUS_D)
+    assert ev.collision.tolist() == [True, False]
+    assert ev.close_call.tolist() == [False, True]
+
+
+def test_directly_ahead_or_behind_is_a_close_call():
+    xs = [hull.SUB_BOW_X + 30.0, hull.SUB_BOW_X + 30.0, hull.SUB_STERN_X - 10.0, 0.0]
+    ys = [0.0, R + REMUS_D + 0.5, -(R + 0.5 * REMUS_D), R + 20.0]
+    ev = events.classify(xs, ys, np.zeros(4), REMUS_L, REMUS_D)
+    assert ev.close_call.tolist() == [True, False, True, False]
+    assert not ev.collision.any()
+
+
+def test_large_stray_from_the_track_line_segment():
+    track = ((0.0, 20.0), (30.0, 20.0))
+    x = np.array([10.0, 10.0, 10.0, 33.0, -0.5])
+    y = np.array([21.5, 19.2, 20.9, 20.0, 20.0])
+    np.testing.assert_allclose(events.track_distance(x, y, *track), [1.5, 0.8, 0.9, 3.0, 0.5])
+    ev = events.classify(x, y, np.zeros(5), REMUS_L, REMUS_D, track=track)
+    assert ev.large_stray.tolist() == [True, False, False, True, False]
+    assert events.track_distance(3.0, 24.0, (0.0, 20.0), (0.0, 20.0)) == pytest.approx(5.0)
+
+
+def test_batch_equals_single_poses():
+    rng = np.random.default_rng(11)
+    x = rng.uniform(hull.SUB_STERN_X - 3, hull.SUB_BOW_X + 3, 40)
+    y = rng.choice([-1, 1], 40) * (hull.submarine_half_width(x) + rng.uniform(-0.3, 1.5, 40))
+    psi = rng.uniform(-math.pi, math.pi, 40)
+    batch = events.classify(x, y, psi, REMUS_L, REMUS_D)
+    d = events.closest_distance(x, y, psi, REMUS_L, REMUS_D)
+    assert batch.collision.any() and batch.close_call.any()
+    for i in range(40):
+        single = events.classify(x[i], y[i], psi[i], REMUS_L, REMUS_D)
+        assert bool(single.collision) == batch.collision[i] == (d[i] <= 0)
+        assert bool(single.close_call) == batch.close_call[i]
