@@ -9,8 +9,8 @@ import math
 
 import numpy as np
 
-from . import behaviours, control, dynamics
-from .lifecycle import Iteration
+from . import behaviours, control, dynamics, events
+from .lifecycle import InProcessResult, Iteration, Schedule, run_inprocess
 from .messages import Desired, Event, HelmProgress, Input, Message, State
 from .mission import Mission
 
@@ -36,6 +36,7 @@ class HelmCore:
         self.legs = self.settings.legs
         self.progress_state = behaviours.initial_progress(self.legs, (mission.start.x, mission.start.y))
         self.state: State | None = None
+        self.straying = False
 
     def startup(self) -> list[tuple[str, Message]]:
         return []
@@ -61,6 +62,16 @@ class HelmCore:
                 )
             )
         progress = decision.progress
+        cross_track = 0.0
+        if progress.previous is not None and decision.target is not None:
+            cross_track = float(events.track_distance(s.x, s.y, progress.previous, decision.target))
+        straying = cross_track > events.STRAY_LIMIT
+        if straying and not self.straying:
+            result.events.append(
+                Event(step=step, t=t, source=self.role, kind="large_stray",
+                      detail=f"{cross_track:.2f} m from the track-line", data={"x": s.x, "y": s.y, "cross_track": cross_track})
+            )
+        self.straying = straying
         result.outputs.append(("desired", Desired(step=step, t=t, source=self.role, u_d=decision.u_d, psi_d=decision.psi_d)))
         result.outputs.append(
             (
@@ -74,6 +85,7 @@ class HelmCore:
                     waypoint_index=progress.index,
                     waypoints_reached=progress.reached,
                     psi_d=decision.psi_d,
+                    cross_track=cross_track,
                     complete=progress.complete,
                 ),
             )
@@ -83,10 +95,11 @@ class HelmCore:
         return result
 
     def progress(self) -> dict:
-        return {"waypoints": self.progress_state.to_dict()}
+        return {"waypoints": self.progress_state.to_dict(), "straying": self.straying}
 
     def restore(self, progress: dict) -> None:
         self.progress_state = behaviours.WaypointProgress.from_dict(progress["waypoints"])
+        self.straying = bool(progress["straying"])
 
 
 class PidCore:
@@ -152,7 +165,9 @@ class SimCore:
     def __init__(self, mission: Mission):
         self.vehicle = mission.vehicle_model
         self.settings = mission.apps.sim
-        self.env = dynamics.Environment(u_sub=mission.environment.u_sub)
+        self.env = mission.environment.dynamics()
+        self.submarine = mission.environment.submarine
+        self.close = False
         self.base_dt = mission.dt
         self.dt = mission.dt * self.settings.period
         start = mission.start
@@ -167,11 +182,11 @@ class SimCore:
         self.inp = mail.get("input", self.inp)
 
     def iterate(self, step: int, t: float) -> Iteration:
-        command = np.array([self.inp.X_prop, self.inp.delta_r])
-        self.x = dynamics.step(self.x, command, self.vehicle, self.env, self.dt, self.settings.integrator)
+        result = Iteration()
+        command = self.saturated_command(step, t, result)
+        self.x = dynamics.step(self.x, command, self.vehicle, self.env, self.dt, self.settings.integrator, t)
         next_step = step + self.settings.period
         next_t = next_step * self.base_dt
-        result = Iteration()
         if not np.all(np.isfinite(self.x)) or abs(self.x[dynamics.U]) > self.settings.divergence_speed:
             result.end = "diverged"
             result.reason = (
@@ -181,13 +196,39 @@ class SimCore:
             result.events.append(Event(step=step, t=t, source=self.role, kind="error", detail=result.reason))
             return result
         result.outputs.append(("state", state_message(self.x, next_step, next_t, self.role)))
+        if self.submarine:
+            self.check_proximity(next_step, next_t, result)
         return result
 
+    def saturated_command(self, step: int, t: float, result: Iteration) -> np.ndarray:
+        """The input, clipped at the vehicle's limits (the pid already saturates; anything else
+        reaching the sim beyond them is clipped and reported)."""
+        v = self.vehicle
+        raw = np.array([self.inp.X_prop, self.inp.delta_r])
+        command = np.clip(raw, [-v.max_thrust, -v.max_rudder], [v.max_thrust, v.max_rudder])
+        if not np.array_equal(command, raw):
+            result.events.append(Event(step=step, t=t, source=self.role, kind="saturation", detail=f"input {raw.tolist()} clipped at the vehicle limits"))
+        return command
+
+    def check_proximity(self, step: int, t: float, result: Iteration) -> None:
+        """Collision ends the mission (a normal ending); a close call is reported on entry."""
+        u, v, r, x, y, psi = self.x
+        found = events.classify(x, y, psi, self.vehicle.length, self.vehicle.diameter)
+        data = {"x": float(x), "y": float(y), "psi": float(psi)}
+        if bool(found.collision):
+            result.events.append(Event(step=step, t=t, source=self.role, kind="collision", detail=f"UUV touched the submarine at ({x:.2f}, {y:.2f})", data=data))
+            result.end, result.reason = "collision", f"collision with the submarine at t = {t:.2f} s"
+        close = bool(found.close_call)
+        if close and not self.close:
+            result.events.append(Event(step=step, t=t, source=self.role, kind="close_call", detail=f"close call at ({x:.2f}, {y:.2f})", data=data))
+        self.close = close
+
     def progress(self) -> dict:
-        return {"x": self.x.tolist()}
+        return {"x": self.x.tolist(), "close": self.close}
 
     def restore(self, progress: dict) -> None:
         self.x = np.asarray(progress["x"], dtype=float)
+        self.close = bool(progress["close"])
 
 
 CORES = {"helm": HelmCore, "pid": PidCore, "sim": SimCore}
@@ -195,3 +236,8 @@ CORES = {"helm": HelmCore, "pid": PidCore, "sim": SimCore}
 
 def build_cores(mission: Mission) -> dict:
     return {role: factory(mission) for role, factory in CORES.items()}
+
+
+def run_mission(mission: Mission) -> InProcessResult:
+    """The whole mission in this process (the reference for the multi-process run)."""
+    return run_inprocess(build_cores(mission), Schedule(mission.periods()), mission.dt, mission.max_steps)

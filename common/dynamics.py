@@ -6,7 +6,8 @@ products), so each vehicle of a batch sees exactly the arithmetic of a single st
 
 State columns: [u, v, r, x, y, psi]; input columns: [X_prop, delta_r].
 Kinematics in the submarine frame (SPEC section 2): the water flows past at -U_sub, so
-x' = u cos psi - v sin psi - U_sub, y' = u sin psi + v cos psi, psi' = r.
+x' = u cos psi - v sin psi - U_sub + u_wave, y' = u sin psi + v cos psi + v_wave, psi' = r,
+with the wave orbital velocity of thesis (5.22)/(5.23) (`waves.orbital_velocity`).
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import waves
 from .vehicles import Vehicle
 
 U, V, R, X, Y, PSI = range(6)
@@ -23,9 +25,20 @@ X_PROP, DELTA_R = range(2)
 
 @dataclass(frozen=True)
 class Environment:
-    """What surrounds the vehicle: the submarine's speed through the water (0 = earth-fixed)."""
+    """What surrounds the vehicle: the submarine's speed through the water (0 = earth-fixed) and
+    the waves (sea state of thesis table 5.1, operating depth, wave heading in radians)."""
 
     u_sub: float = 0.0
+    sea_state: int = 0
+    depth: float = 50.0
+    wave_heading: float = 0.0
+
+    def wave_velocity(self, x, y, t: float):
+        """(u_wave, v_wave) at the positions, or None in calm water (sea states 0-1)."""
+        state = waves.sea_state(self.sea_state)
+        if state.amplitude == 0.0:
+            return None
+        return waves.orbital_velocity(x, y, t, state, self.depth, self.wave_heading, self.u_sub)
 
 
 def body_forces(state: np.ndarray, inp: np.ndarray, vehicle: Vehicle) -> np.ndarray:
@@ -67,13 +80,17 @@ def accelerations(forces: np.ndarray, vehicle: Vehicle) -> np.ndarray:
     return np.stack([udot, vdot, rdot], axis=-1)
 
 
-def derivatives(state: np.ndarray, inp: np.ndarray, vehicle: Vehicle, env: Environment) -> np.ndarray:
-    """Time derivative of the full state [u', v', r', x', y', psi']."""
+def derivatives(state: np.ndarray, inp: np.ndarray, vehicle: Vehicle, env: Environment, t: float = 0.0) -> np.ndarray:
+    """Time derivative of the full state [u', v', r', x', y', psi'] at time t."""
     acc = accelerations(body_forces(state, inp, vehicle), vehicle)
     u, v, r, psi = state[..., U], state[..., V], state[..., R], state[..., PSI]
     cos_psi, sin_psi = np.cos(psi), np.sin(psi)
     xdot = u * cos_psi - v * sin_psi - env.u_sub
     ydot = u * sin_psi + v * cos_psi
+    wave = env.wave_velocity(state[..., X], state[..., Y], t)
+    if wave is not None:
+        xdot = xdot + wave[0]
+        ydot = ydot + wave[1]
     return np.concatenate([acc, np.stack([xdot, ydot, r], axis=-1)], axis=-1)
 
 
@@ -84,15 +101,16 @@ def step(
     env: Environment,
     dt: float,
     method: str = "euler",
+    t: float = 0.0,
 ) -> np.ndarray:
-    """Advance the state by dt: explicit Euler (5.12) by default, classical RK4 on request."""
+    """Advance the state from time t by dt: explicit Euler (5.12) by default, RK4 on request."""
     if method == "euler":
-        return state + derivatives(state, inp, vehicle, env) * dt
+        return state + derivatives(state, inp, vehicle, env, t) * dt
     if method == "rk4":
-        k1 = derivatives(state, inp, vehicle, env)
-        k2 = derivatives(state + 0.5 * dt * k1, inp, vehicle, env)
-        k3 = derivatives(state + 0.5 * dt * k2, inp, vehicle, env)
-        k4 = derivatives(state + dt * k3, inp, vehicle, env)
+        k1 = derivatives(state, inp, vehicle, env, t)
+        k2 = derivatives(state + 0.5 * dt * k1, inp, vehicle, env, t + 0.5 * dt)
+        k3 = derivatives(state + 0.5 * dt * k2, inp, vehicle, env, t + 0.5 * dt)
+        k4 = derivatives(state + dt * k3, inp, vehicle, env, t + dt)
         return state + (dt / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
     raise ValueError(f"integration method {method!r} is not one of 'euler', 'rk4'")
 

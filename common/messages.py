@@ -94,6 +94,7 @@ class HelmProgress(Message):
     waypoints_reached: int
     psi_d: float
     delta_psi: float = 0.0
+    cross_track: float = Field(default=0.0, description="distance to the current track-line [m]")
     complete: bool = False
 
 

@@ -15,6 +15,7 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
+from . import dynamics
 from .behaviours import Leg
 from .messages import describe_validation_error
 from .vehicles import LIBRARY, Vehicle, get_vehicle
@@ -53,6 +54,14 @@ class Start(Strict):
 class Environment(Strict):
     u_sub: float = Field(default=0.0, description="submarine speed through the water [m/s]")
     rho: float = Field(default=1025.0, gt=0, description="sea water density [kg/m^3] (SPEC section 2)")
+    submarine: bool = Field(default=True, description="a submarine at the frame origin (collision checks)")
+    sea_state: int = Field(default=0, ge=0, le=6, description="thesis table 5.1")
+    depth: float = Field(default=50.0, gt=0, description="UUV operating depth [m] (wave decay)")
+    wave_heading_deg: float = Field(default=0.0, description="direction the waves travel, psi convention")
+
+    def dynamics(self) -> dynamics.Environment:
+        """The dynamics module's view of it."""
+        return dynamics.Environment(self.u_sub, self.sea_state, self.depth, math.radians(self.wave_heading_deg))
 
 
 class AppSettings(Strict):

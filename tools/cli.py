@@ -45,6 +45,12 @@ def _router(args):
     return serve(args.listen or ["tcp/127.0.0.1:7447"], args.connect)
 
 
+def _validate(args):
+    from .validate import validate_command
+
+    return validate_command(args)
+
+
 def _bench(args):
     from .bench import bench_command
 
@@ -126,6 +132,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--listen", action="append", default=[], help="endpoint, e.g. tcp/0.0.0.0:7447")
     p.add_argument("--connect", action="append", default=[], help="other routers to join")
     p.set_defaults(func=_router)
+
+    p = sub.add_parser("validate", help="physics validation cases (thesis 5.10) and scenario checks")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=_validate)
 
     p = sub.add_parser("bench", help="benchmarks that print measured figures")
     b = p.add_subparsers(dest="bench_command", required=True)

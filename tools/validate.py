@@ -1,0 +1,66 @@
+"""`nearsub validate`: the physics validation cases and scenario checks, run in-process.
+
+Prints measured value, target, tolerance and PASS/FAIL per case; `--json` for machines. Exits 1
+if any case fails.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+from rich.console import Console
+from rich.table import Table
+
+from nearsub.common.cores import run_mission
+from nearsub.common.mission import load_mission
+from nearsub.common.validation import Row, run_validation
+
+MISSIONS = Path(__file__).resolve().parents[1] / "missions"
+
+
+def scenario_rows() -> list[Row]:
+    """Missions whose outcome is part of the validation: alpha with each vehicle, and the
+    sea-state-5 track-line of thesis figure 5-6."""
+    rows = []
+    for vehicle in ("remus100", "nps_auv_ii", "sdv"):
+        mission = load_mission(MISSIONS / "alpha.toml", [f"vehicle={vehicle}"])
+        result = run_mission(mission)
+        reached = sum(1 for _, leaf, m in result.messages if leaf == "events" and m.kind == "waypoint")
+        rows.append(
+            Row(f"alpha mission, {vehicle}: waypoints reached", reached, 6, 0.0, "", result.outcome == "completed" and reached == 6,
+                f"{result.outcome} after {result.steps * mission.dt:.1f} s (MOOS-IvP: about 446 s)")
+        )
+    mission = load_mission(MISSIONS / "waves_ss5.toml")
+    result = run_mission(mission)
+    worst = max(m.cross_track for m in result.topic("helm"))
+    rows.append(
+        Row("waves_ss5 (figure 5-6): max cross-track error", worst, None, None, "m", result.outcome == "completed",
+            f"report only; passes if the UUV keeps the track and reaches the waypoint ({result.outcome})")
+    )
+    return rows
+
+
+def validate_command(args) -> int:
+    rows = run_validation() + scenario_rows()
+    failed = [r for r in rows if not r.passed]
+    if args.json:
+        print(json.dumps([r.__dict__ for r in rows]))
+    else:
+        table = Table(title="nearsub validate")
+        for column in ("case", "measured", "target", "tolerance", "unit", "result", "note"):
+            table.add_column(column, overflow="fold")
+        for r in rows:
+            table.add_row(
+                r.name,
+                f"{r.measured:.4g}",
+                "-" if r.target is None else f"{r.target:g}",
+                "-" if r.tolerance is None else f"{r.tolerance * 100:g} %",
+                r.unit,
+                "[green]PASS[/]" if r.passed else "[red]FAIL[/]",
+                r.note,
+            )
+        Console(width=160).print(table)
+        print(f"{len(rows) - len(failed)} passed, {len(failed)} failed")
+    return 1 if failed else 0
