@@ -19,7 +19,17 @@ from nearsub.common import keys
 from nearsub.common.bus import Bus, DeadlineExceeded, Endpoints, deadline, signal_self
 from nearsub.common.clock import Pacer, StepBarrier
 from nearsub.common.lifecycle import DONE_TOPIC, ORDER, Schedule
-from nearsub.common.messages import VEHICLE_TOPICS, Ack, Control, ControlReply, MessageError, MissionEnd, Tick, decode, encode
+from nearsub.common.messages import (
+    VEHICLE_TOPICS,
+    Ack,
+    Control,
+    ControlReply,
+    MessageError,
+    MissionEnd,
+    Tick,
+    decode,
+    encode,
+)
 from nearsub.common.mission import RunConfig
 
 
@@ -58,13 +68,20 @@ class Clock:
             time.sleep(0.02)
 
     def finish(self, step: int, outcome: str, reason: str) -> None:
-        self.end_pub.put(encode(MissionEnd(step=step, t=step * self.mission.dt, source="clock", outcome=outcome, reason=reason)))
+        self.end_pub.put(
+            encode(MissionEnd(step=step, t=step * self.mission.dt, source="clock", outcome=outcome, reason=reason))
+        )
         self.ended = True
 
     def reply(self, request: Control, ok: bool = True, error: str = "", **data) -> None:
         answer = ControlReply(
-            step=self.step, t=self.step * self.mission.dt, source="clock", request_id=request.request_id,
-            ok=ok, data=data, error=error,
+            step=self.step,
+            t=self.step * self.mission.dt,
+            source="clock",
+            request_id=request.request_id,
+            ok=ok,
+            data=data,
+            error=error,
         )
         self.bus.put_when_matched(keys.reply(self.community, request.reply_to), encode(answer))
 

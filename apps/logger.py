@@ -13,13 +13,14 @@ import sys
 import time
 from pathlib import Path
 
-from nearsub import __version__
 from nearsub.apps.shell import prepare_process
 from nearsub.common import keys
 from nearsub.common.bus import Bus, Endpoints, signal_self
 from nearsub.common.logfile import LogWriter
 from nearsub.common.messages import Event, MessageError, MissionEnd, decode, encode, model_for_key
 from nearsub.common.mission import RunConfig
+
+from nearsub import __version__
 
 DRAIN_SECONDS = 0.3  # after the mission end, keep what is still in flight (status, app_left)
 
@@ -41,7 +42,11 @@ class Recorder:
         except MessageError as exc:
             self.writer.write(key, payload, self.sim_time, valid=False)
             error = Event(
-                step=0, t=self.sim_time, source="logger", kind="error", detail=f"logger received an invalid message: {exc}"
+                step=0,
+                t=self.sim_time,
+                source="logger",
+                kind="error",
+                detail=f"logger received an invalid message: {exc}",
             )
             self.writer.write(keys.events(self.community, "logger"), encode(error), self.sim_time)
             return
@@ -90,7 +95,9 @@ def main(argv=None) -> int:
     finally:
         end = recorder.end
         if end is not None:
-            writer.metadata("outcome", {"outcome": end.outcome, "reason": end.reason, "steps": str(end.step), "t": f"{end.t:g}"})
+            writer.metadata(
+                "outcome", {"outcome": end.outcome, "reason": end.reason, "steps": str(end.step), "t": f"{end.t:g}"}
+            )
         writer.finish()
         print(f"[logger] wrote {writer.count} messages to {writer.path}", file=sys.stderr)
     return code

@@ -25,7 +25,6 @@ import sys
 import uuid
 
 import msgpack
-
 from nearsub.common import keys
 from nearsub.common.bus import Bus, DeadlineExceeded, Endpoints, deadline, signal_self
 from nearsub.common.lifecycle import DONE_TOPIC, Core, Inbox, Schedule
@@ -110,7 +109,9 @@ class AppShell:
             c = self.community
             self.stream = bus.stream(keys.everything(c))
             bus.on_liveliness_lost(keys.alive(c, "launcher", "*"), signal_self())
-            self.outputs = {leaf: bus.publisher(keys.vehicle_topic(c, self.vehicle, leaf)) for leaf in self.core.outputs}
+            self.outputs = {
+                leaf: bus.publisher(keys.vehicle_topic(c, self.vehicle, leaf)) for leaf in self.core.outputs
+            }
             self.ack_pub = bus.publisher(keys.ack(c, self.core.role))
             self.event_pub = bus.publisher(keys.events(c, self.instance))
             self.status_pub = bus.publisher(keys.status(c, self.instance))
@@ -145,7 +146,9 @@ class AppShell:
                     if reply.request_id == request.request_id:
                         break
         except DeadlineExceeded:
-            raise SystemExit(f"{self.instance}: no handover from {old_instance} within {HANDOVER_TIMEOUT:g} s") from None
+            raise SystemExit(
+                f"{self.instance}: no handover from {old_instance} within {HANDOVER_TIMEOUT:g} s"
+            ) from None
         if not reply.ok:
             raise SystemExit(f"{self.instance}: handover from {old_instance} failed: {reply.error}")
         handover = msgpack.unpackb(bytes.fromhex(reply.data["handover"]))
@@ -240,8 +243,13 @@ class AppShell:
 
     def reply(self, request: Control, ok: bool, data: dict | None = None, error: str = "") -> None:
         answer = ControlReply(
-            step=self.step, t=self.step * self.dt, source=self.instance, request_id=request.request_id,
-            ok=ok, data=data or {}, error=error,
+            step=self.step,
+            t=self.step * self.dt,
+            source=self.instance,
+            request_id=request.request_id,
+            ok=ok,
+            data=data or {},
+            error=error,
         )
         self.bus.put_when_matched(keys.reply(self.community, request.reply_to), encode(answer))
 
@@ -260,8 +268,12 @@ class AppShell:
 
     def publish_status(self, state: str) -> None:
         status = AppStatus(
-            step=self.step, t=self.step * self.dt, source=self.core.role, app=self.core.role,
-            instance=self.instance, state=state,
+            step=self.step,
+            t=self.step * self.dt,
+            source=self.core.role,
+            app=self.core.role,
+            instance=self.instance,
+            state=state,
         )
         self.status_pub.put(encode(status))
 

@@ -81,7 +81,9 @@ def pid_step(
     de_u = np.where(memory.started, -(u - memory.previous_u) / dt, 0.0)
 
     if form == "positional":
-        i_psi = np.clip(memory.heading_integral + heading.ki * e_psi * dt, -heading.integral_limit, heading.integral_limit)
+        i_psi = np.clip(
+            memory.heading_integral + heading.ki * e_psi * dt, -heading.integral_limit, heading.integral_limit
+        )
         i_u = np.clip(memory.speed_integral + speed.ki * e_u * dt, -speed.integral_limit, speed.integral_limit)
         feed_forward = -vehicle.X_uu * u_d * np.abs(u_d)
         thrust_cmd = feed_forward + speed.kp * e_u + speed.kd * de_u + i_u

@@ -68,11 +68,19 @@ class HelmCore:
         straying = cross_track > events.STRAY_LIMIT
         if straying and not self.straying:
             result.events.append(
-                Event(step=step, t=t, source=self.role, kind="large_stray",
-                      detail=f"{cross_track:.2f} m from the track-line", data={"x": s.x, "y": s.y, "cross_track": cross_track})
+                Event(
+                    step=step,
+                    t=t,
+                    source=self.role,
+                    kind="large_stray",
+                    detail=f"{cross_track:.2f} m from the track-line",
+                    data={"x": s.x, "y": s.y, "cross_track": cross_track},
+                )
             )
         self.straying = straying
-        result.outputs.append(("desired", Desired(step=step, t=t, source=self.role, u_d=decision.u_d, psi_d=decision.psi_d)))
+        result.outputs.append(
+            ("desired", Desired(step=step, t=t, source=self.role, u_d=decision.u_d, psi_d=decision.psi_d))
+        )
         result.outputs.append(
             (
                 "helm",
@@ -137,12 +145,20 @@ class PidCore:
             self.form,
         )
         result = Iteration()
-        result.outputs.append(("input", Input(step=step, t=t, source=self.role, X_prop=float(out.thrust), delta_r=float(out.rudder))))
+        result.outputs.append(
+            ("input", Input(step=step, t=t, source=self.role, X_prop=float(out.thrust), delta_r=float(out.rudder)))
+        )
         saturated = (bool(out.thrust_saturated), bool(out.rudder_saturated))
-        for name, now, before in zip(("thrust", "rudder"), saturated, self.saturated):
+        for name, now, before in zip(("thrust", "rudder"), saturated, self.saturated, strict=True):
             if now and not before:
                 result.events.append(
-                    Event(step=step, t=t, source=self.role, kind="saturation", detail=f"{name} saturated at the vehicle limit")
+                    Event(
+                        step=step,
+                        t=t,
+                        source=self.role,
+                        kind="saturation",
+                        detail=f"{name} saturated at the vehicle limit",
+                    )
                 )
         self.saturated = saturated
         return result
@@ -207,7 +223,15 @@ class SimCore:
         raw = np.array([self.inp.X_prop, self.inp.delta_r])
         command = np.clip(raw, [-v.max_thrust, -v.max_rudder], [v.max_thrust, v.max_rudder])
         if not np.array_equal(command, raw):
-            result.events.append(Event(step=step, t=t, source=self.role, kind="saturation", detail=f"input {raw.tolist()} clipped at the vehicle limits"))
+            result.events.append(
+                Event(
+                    step=step,
+                    t=t,
+                    source=self.role,
+                    kind="saturation",
+                    detail=f"input {raw.tolist()} clipped at the vehicle limits",
+                )
+            )
         return command
 
     def check_proximity(self, step: int, t: float, result: Iteration) -> None:
@@ -216,11 +240,29 @@ class SimCore:
         found = events.classify(x, y, psi, self.vehicle.length, self.vehicle.diameter)
         data = {"x": float(x), "y": float(y), "psi": float(psi)}
         if bool(found.collision):
-            result.events.append(Event(step=step, t=t, source=self.role, kind="collision", detail=f"UUV touched the submarine at ({x:.2f}, {y:.2f})", data=data))
+            result.events.append(
+                Event(
+                    step=step,
+                    t=t,
+                    source=self.role,
+                    kind="collision",
+                    detail=f"UUV touched the submarine at ({x:.2f}, {y:.2f})",
+                    data=data,
+                )
+            )
             result.end, result.reason = "collision", f"collision with the submarine at t = {t:.2f} s"
         close = bool(found.close_call)
         if close and not self.close:
-            result.events.append(Event(step=step, t=t, source=self.role, kind="close_call", detail=f"close call at ({x:.2f}, {y:.2f})", data=data))
+            result.events.append(
+                Event(
+                    step=step,
+                    t=t,
+                    source=self.role,
+                    kind="close_call",
+                    detail=f"close call at ({x:.2f}, {y:.2f})",
+                    data=data,
+                )
+            )
         self.close = close
 
     def progress(self) -> dict:

@@ -48,9 +48,7 @@ def _resample(s_start: float, s_end: float) -> np.ndarray:
     r = suboff_radius(s)
     arc = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(s), np.diff(r)))])
     uniform = np.linspace(0.0, arc[-1], int(np.ceil(arc[-1] / _HULL_SPACING)) + 1)
-    return np.column_stack(
-        [SUB_CB_FROM_NOSE - np.interp(uniform, arc, s), np.interp(uniform, arc, r)]
-    )
+    return np.column_stack([SUB_CB_FROM_NOSE - np.interp(uniform, arc, s), np.interp(uniform, arc, r)])
 
 
 @lru_cache(maxsize=1)
@@ -75,8 +73,7 @@ def _curve_distance(curve: tuple[cKDTree, np.ndarray], query: np.ndarray) -> np.
         a = pts[np.clip(lo, 0, len(pts) - 1)]
         ab = pts[np.clip(lo + 1, 0, len(pts) - 1)] - a
         t = np.clip(
-            np.einsum("ij,ij->i", query - a, ab)
-            / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-300),
+            np.einsum("ij,ij->i", query - a, ab) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-300),
             0,
             1,
         )
@@ -100,9 +97,7 @@ def hull_signed_distance(px, py):
     for curve, side in ((bow, x > x_aft_joint), (stern, x < x_bow_joint)):
         todo = side & (~beside | inside)  # inside points near a joint may be closer to a curve
         if todo.any():
-            dist[todo] = np.minimum(
-                dist[todo], _curve_distance(curve, np.column_stack([x[todo], y[todo]]))
-            )
+            dist[todo] = np.minimum(dist[todo], _curve_distance(curve, np.column_stack([x[todo], y[todo]])))
     return np.where(inside, -dist, dist).reshape(px.shape)
 
 

@@ -66,9 +66,7 @@ def _sq_dist_per_dim(U: np.ndarray) -> np.ndarray:
     return ((U.T[:, :, None] - U.T[:, None, :]) ** 2).reshape(d, -1)
 
 
-def _lml(
-    theta: np.ndarray, D2: np.ndarray, y: np.ndarray, eval_gradient: bool
-) -> tuple[float, np.ndarray | None]:
+def _lml(theta: np.ndarray, D2: np.ndarray, y: np.ndarray, eval_gradient: bool) -> tuple[float, np.ndarray | None]:
     """Log marginal likelihood of standardised data (R&W Alg. 2.1) and its gradient (R&W 5.9).
 
     Returns (-inf, None) when the Cholesky factorisation fails even with jitter, so the
@@ -252,9 +250,7 @@ class GaussianProcess:
         self._D2: np.ndarray | None = None
 
     # ----------------------------------------------------------------- fitting
-    def fit(
-        self, X: Any, y: Any, *, warm_start: bool = False, theta: Any = None
-    ) -> GaussianProcess:
+    def fit(self, X: Any, y: Any, *, warm_start: bool = False, theta: Any = None) -> GaussianProcess:
         """Fit hyperparameters by maximising the log marginal likelihood, then condition on data.
 
         warm_start: also start from the previous optimum (cheap refit after adding a point;
@@ -301,9 +297,7 @@ class GaussianProcess:
         return self
 
     def _theta_bounds(self, d: int) -> np.ndarray:
-        return np.log(
-            [self.length_scale_bounds] * d + [self.signal_variance_bounds, self.noise_bounds]
-        )
+        return np.log([self.length_scale_bounds] * d + [self.signal_variance_bounds, self.noise_bounds])
 
     def _optimise(self, previous: np.ndarray | None) -> np.ndarray:
         d = self._U.shape[1]
@@ -327,9 +321,7 @@ class GaussianProcess:
 
         best_theta, best_f = None, math.inf
         for x0 in starts:
-            res = minimize(
-                _neg_lml, x0, args=(self._D2, self._ys), jac=True, method="L-BFGS-B", bounds=tb
-            )
+            res = minimize(_neg_lml, x0, args=(self._D2, self._ys), jac=True, method="L-BFGS-B", bounds=tb)
             if math.isfinite(res.fun) and res.fun < best_f:
                 best_theta, best_f = res.x, float(res.fun)
         if best_theta is None:
@@ -575,9 +567,7 @@ class MultiOutputGP:
         outputs = state["outputs"]
         if Y.ndim != 2 or Y.shape[1] != len(outputs) or not outputs:
             raise ValueError("inconsistent MultiOutputGP state: Y columns do not match outputs")
-        gps = [
-            GaussianProcess.from_state({**s, "X": X, "y": Y[:, j]}) for j, s in enumerate(outputs)
-        ]
+        gps = [GaussianProcess.from_state({**s, "X": X, "y": Y[:, j]}) for j, s in enumerate(outputs)]
         first = gps[0]
         model = cls(
             bounds=first.bounds,

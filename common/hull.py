@@ -103,10 +103,7 @@ def revolution_properties(radius, breakpoints, n: int = 4000) -> RevolutionPrope
     pi r^2; the wetted area sums conical frustums, which stays finite at a blunt nose.
     """
     theta = np.linspace(0.0, np.pi, n)
-    pieces = [
-        a + 0.5 * (b - a) * (1.0 - np.cos(theta))
-        for a, b in zip(breakpoints[:-1], breakpoints[1:], strict=True)
-    ]
+    pieces = [a + 0.5 * (b - a) * (1.0 - np.cos(theta)) for a, b in zip(breakpoints[:-1], breakpoints[1:], strict=True)]
     s = np.unique(np.concatenate(pieces))
     r = radius(s)
     area = np.pi * r**2
@@ -159,9 +156,7 @@ def explorer_radius(s, length: float, diameter: float):
     if parallel < 0.0:
         raise ValueError(f"Explorer hull needs length >= 3 diameters, got L={length}, D={diameter}")
     s = np.asarray(s, dtype=float)
-    bow = radius * np.sqrt(
-        np.maximum(1.0 - ((s - 2.0 * radius) / (2.0 * radius)) ** 2, 0.0)
-    )  # (3.1)
+    bow = radius * np.sqrt(np.maximum(1.0 - ((s - 2.0 * radius) / (2.0 * radius)) ** 2, 0.0))  # (3.1)
     stern = radius * (1.0 - ((s - 2.0 * radius - parallel) / (4.0 * radius)) ** 2)  # (3.2)
     return np.select(
         [s < 0.0, s <= 2.0 * radius, s <= 2.0 * radius + parallel, s <= length],
@@ -186,14 +181,10 @@ def explorer_cb_from_nose(length: float, diameter: float) -> float:
 def uuv_body_outline(length: float, diameter: float, n: int = 64) -> tuple[np.ndarray, np.ndarray]:
     """Closed Explorer outline in the UUV body frame (origin at its CB, bow +x)."""
     s = _cosine_stations(length, n)
-    return _closed_outline(
-        explorer_cb_from_nose(length, diameter) - s, explorer_radius(s, length, diameter)
-    )
+    return _closed_outline(explorer_cb_from_nose(length, diameter) - s, explorer_radius(s, length, diameter))
 
 
-def uuv_outline(
-    x, y, psi, length: float, diameter: float, n: int = 64
-) -> tuple[np.ndarray, np.ndarray]:
+def uuv_outline(x, y, psi, length: float, diameter: float, n: int = 64) -> tuple[np.ndarray, np.ndarray]:
     """Closed UUV outline placed at CB position (x, y) and heading psi (from +x towards +y).
 
     x, y, psi broadcast together; the result has shape broadcast_shape + (2n - 1,).

@@ -18,8 +18,9 @@ from pathlib import Path
 
 import msgpack
 from mcap.reader import make_reader
+from mcap.records import Channel, Metadata, Schema
+from mcap.records import Message as McapMessage
 from mcap.stream_reader import StreamReader
-from mcap.records import Channel, Message as McapMessage, Metadata, Schema
 from mcap.writer import CompressionType, Writer
 
 from .messages import model_for_key

@@ -189,10 +189,7 @@ def load_model(path: str | os.PathLike) -> LoadedModel:
         found = meta.get("format") if isinstance(meta, dict) else None
         raise fail(f"not a nearsub model file (format {found!r}, expected {FORMAT_NAME!r})")
     if meta.get("version") != FORMAT_VERSION:
-        raise fail(
-            f"unsupported format version {meta.get('version')!r} "
-            f"(this nearsub reads version {FORMAT_VERSION})"
-        )
+        raise fail(f"unsupported format version {meta.get('version')!r} (this nearsub reads version {FORMAT_VERSION})")
 
     try:
         m = int(meta["n_outputs"])
@@ -224,10 +221,6 @@ def load_model(path: str | os.PathLike) -> LoadedModel:
     except (KeyError, ValueError, TypeError, IndexError) as exc:
         raise fail(f"inconsistent model file ({type(exc).__name__}: {exc})") from exc
     d = entries["X"].shape[1]
-    if (
-        len(loaded.input_names) != d
-        or len(loaded.output_names) != m
-        or loaded.bounds.shape != (d, 2)
-    ):
+    if len(loaded.input_names) != d or len(loaded.output_names) != m or loaded.bounds.shape != (d, 2):
         raise fail("metadata does not match the model (names or bounds vs. data shapes)")
     return loaded

@@ -60,9 +60,7 @@ def _relative_row(name, measured, target, rel_tol, unit, note) -> Row:
 
 
 def _bound_row(name, measured, bound, unit, note) -> Row:
-    return Row(
-        name, measured, bound, None, unit, bool(measured <= bound), f"pass if <= target; {note}"
-    )
+    return Row(name, measured, bound, None, unit, bool(measured <= bound), f"pass if <= target; {note}")
 
 
 # --- open-loop manoeuvres ---------------------------------------------------------------------
@@ -86,9 +84,7 @@ def held_speed_run(
     return out
 
 
-def rudder_step_yaw_rate(
-    vehicle: Vehicle, speed: float, rudder_deg: float, duration: float = 15.0, dt: float = DT
-):
+def rudder_step_yaw_rate(vehicle: Vehicle, speed: float, rudder_deg: float, duration: float = 15.0, dt: float = DT):
     """Yaw rate [deg/s] after a rudder step (thesis section 5.10, REMUS +4 deg), one value per
     step; the last one is the steady turn."""
     rudder = math.radians(rudder_deg)
@@ -106,9 +102,7 @@ def alternating_rudder_yaw_rate(
     """Yaw-rate amplitude [deg/s]: mean |r| at the end of legs 2..legs of a +/- rudder square
     wave switched every `leg` seconds (thesis section 5.10, NPS AUV II +/-15 deg every 45 s)."""
     rudder = math.radians(rudder_deg)
-    states = held_speed_run(
-        vehicle, speed, lambda t: rudder if int(t // leg) % 2 == 0 else -rudder, legs * leg, dt
-    )
+    states = held_speed_run(vehicle, speed, lambda t: rudder if int(t // leg) % 2 == 0 else -rudder, legs * leg, dt)
     ends = [int(round(k * leg / dt)) - 1 for k in range(2, legs + 1)]
     return float(np.degrees(np.mean(np.abs(states[ends, R]))))
 
@@ -150,9 +144,7 @@ def linearised_sway_yaw(vehicle: Vehicle, speed: float) -> tuple[np.ndarray, np.
     """(5.10) linearised about straight flight at u = speed: [v', r'] = A [v, r] + b delta_r.
     The quadratic drag terms vanish at v = r = 0; surge decouples."""
     m = vehicle.mass
-    mass = np.array(
-        [[m - vehicle.Y_vdot, -vehicle.Y_rdot], [-vehicle.N_vdot, vehicle.Izz - vehicle.N_rdot]]
-    )
+    mass = np.array([[m - vehicle.Y_vdot, -vehicle.Y_rdot], [-vehicle.N_vdot, vehicle.Izz - vehicle.N_rdot]])
     forces = np.array(
         [
             [vehicle.Y_uv * speed, (vehicle.Y_ur - m) * speed],
@@ -180,9 +172,7 @@ def closed_loop_poles(vehicle: Vehicle, speed: float, heading: Gains) -> np.ndar
     return np.linalg.eigvals(closed)
 
 
-def design_heading_gains(
-    vehicle: Vehicle, speed: float, band_deg: float = 10.0, zeta: float = 0.9
-) -> Gains:
+def design_heading_gains(vehicle: Vehicle, speed: float, band_deg: float = 10.0, zeta: float = 0.9) -> Gains:
     """The tuning rule of docs/pid-tuning.md, on the linearised model at the design speed:
     Kp saturates the rudder at `band_deg` of heading error; Kd is the smallest gain whose PD loop
     has every pole damped by at least `zeta`; Ki = Kp w / 10 with w the slowest PD pole (the rule
@@ -203,9 +193,7 @@ def design_speed_gains(vehicle: Vehicle, speed: float, ratio: float = 3.0) -> Ga
     integral clipped at half the thrust limit."""
     drag = 2.0 * abs(vehicle.X_uu) * speed
     kp = (ratio - 1.0) * drag
-    return Gains(
-        kp=kp, ki=kp * ratio * drag / vehicle.M11 / 10.0, integral_limit=0.5 * vehicle.max_thrust
-    )
+    return Gains(kp=kp, ki=kp * ratio * drag / vehicle.M11 / 10.0, integral_limit=0.5 * vehicle.max_thrust)
 
 
 def incremental_tuning(vehicle: Vehicle, kp_equiv: float, ki_equiv: float, dt: float) -> PidTuning:
@@ -299,9 +287,7 @@ def _heading_rows() -> list[Row]:
         t, psi, _, _ = heading_step(vehicle, speed, 1.5 * settle)
         overshoot, late = step_metrics(t, psi, 90.0, settle)
         label = f"{vehicle.name} 90 deg heading step at {speed} m/s"
-        rows.append(
-            _bound_row(f"{label}: overshoot", overshoot, MAX_OVERSHOOT_PCT, "%", "positional PID")
-        )
+        rows.append(_bound_row(f"{label}: overshoot", overshoot, MAX_OVERSHOOT_PCT, "%", "positional PID"))
         rows.append(
             _bound_row(
                 f"{label}: max abs error after {settle:g} s",
@@ -313,8 +299,7 @@ def _heading_rows() -> list[Row]:
         )
         lo, hi = CRUISE_SPEEDS[vehicle.name]
         worst = max(
-            float(np.max(closed_loop_poles(vehicle, u, vehicle.pid.heading).real))
-            for u in np.linspace(lo, hi, 8)
+            float(np.max(closed_loop_poles(vehicle, u, vehicle.pid.heading).real)) for u in np.linspace(lo, hi, 8)
         )
         rows.append(
             Row(
@@ -331,14 +316,10 @@ def _heading_rows() -> list[Row]:
         if vehicle.name not in INCREMENTAL_EQUIVALENT:
             continue
         tuning = incremental_tuning(vehicle, *INCREMENTAL_EQUIVALENT[vehicle.name], INCREMENTAL_DT)
-        t, psi, _, _ = heading_step(
-            vehicle, speed, 1.5 * settle, tuning=tuning, form="incremental", dt=INCREMENTAL_DT
-        )
+        t, psi, _, _ = heading_step(vehicle, speed, 1.5 * settle, tuning=tuning, form="incremental", dt=INCREMENTAL_DT)
         overshoot, late = step_metrics(t, psi, 90.0, settle)
         label = f"{vehicle.name} 90 deg step, incremental (5.21), dt={INCREMENTAL_DT}"
-        rows.append(
-            _bound_row(f"{label}: overshoot", overshoot, MAX_OVERSHOOT_PCT, "%", "optional form")
-        )
+        rows.append(_bound_row(f"{label}: overshoot", overshoot, MAX_OVERSHOOT_PCT, "%", "optional form"))
         rows.append(
             _bound_row(
                 f"{label}: max abs error after {settle:g} s",
@@ -366,7 +347,5 @@ def format_table(rows: list[Row]) -> str:
         target = "-" if r.target is None else f"{r.target:g}"
         tol = "-" if r.tolerance is None else f"{r.tolerance * 100:g} %"
         passed = "yes" if r.passed else "NO"
-        lines.append(
-            f"| {r.name} | {r.measured:.4g} | {target} | {tol} | {r.unit} | {passed} | {r.note} |"
-        )
+        lines.append(f"| {r.name} | {r.measured:.4g} | {target} | {tol} | {r.unit} | {passed} | {r.note} |")
     return "\n".join(lines)

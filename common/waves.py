@@ -57,9 +57,7 @@ class SeaState:
 
     def orbital_amplitude(self, depth):
         """Orbital velocity amplitude omega A e^(-k d) at depth d [m] (5.22, 5.23) [m/s]."""
-        return (
-            self.omega * self.amplitude * np.exp(-self.wavenumber * np.asarray(depth, dtype=float))
-        )
+        return self.omega * self.amplitude * np.exp(-self.wavenumber * np.asarray(depth, dtype=float))
 
 
 # Thesis table 5.1 [80]. Sea states 0 and 1 share the row "0-0.1 m" with no period; nearsub
@@ -83,9 +81,7 @@ def sea_state(number: int) -> SeaState:
         raise KeyError(f"sea state {number!r} is not in thesis table 5.1 (0-6)") from None
 
 
-def orbital_velocity(
-    x, y, t, state: SeaState, depth: float, heading: float = 0.0, u_sub: float = 0.0
-):
+def orbital_velocity(x, y, t, state: SeaState, depth: float, heading: float = 0.0, u_sub: float = 0.0):
     """Wave velocity (u_wave, v_wave) in the submarine frame at positions (x, y) and time t.
 
     x, y [m] are submarine-frame positions (any broadcastable shapes), t [s], depth [m] the UUV's

@@ -9,7 +9,6 @@ import time
 
 import msgpack
 import pytest
-
 from conftest import ALPHA, nearsub
 from helpers import log_path
 from nearsub.common.logfile import LogWriter, read_log
@@ -67,7 +66,10 @@ def test_malformed_messages_are_rejected_and_logged(launches, community):
     assert any("'u'" in e and "fast" in e for e in errors), errors
     invalid = [r for r in records if r.topic == key + "#invalid"]
     assert len(invalid) == 2  # both bad payloads kept, byte for byte
-    assert {r.data for r in invalid} == {bytes.fromhex("c1ffee"), msgpack.packb({"step": 3, "t": 0.1, "source": "sim", "u": "fast"})}
+    assert {r.data for r in invalid} == {
+        bytes.fromhex("c1ffee"),
+        msgpack.packb({"step": 3, "t": 0.1, "source": "sim", "u": "fast"}),
+    }
 
 
 def test_killed_app_is_reported_and_the_log_is_closed(launches, community):
@@ -99,7 +101,9 @@ def test_report_comes_within_five_seconds(launches, community):
 
 
 def test_stalled_app_is_named_by_the_clock(launches, community):
-    process = launches.start(ALPHA, "--set", f"name={community}", "--set", "step_timeout=2", "--warp", "5", "--until", "120")
+    process = launches.start(
+        ALPHA, "--set", f"name={community}", "--set", "step_timeout=2", "--warp", "5", "--until", "120"
+    )
     wait_registered(community)
     os.kill(app_pid(launches.log_dir, "pid-1"), signal.SIGSTOP)
     code, summary, err = summary_of(process)
@@ -125,7 +129,8 @@ def test_ctrl_c_stops_everything_and_closes_the_log(launches, community):
 def test_two_communities_on_one_router_do_not_cross_talk(launches, tmp_path):
     port = subprocess.run(
         [sys.executable, "-c", "from nearsub.common.bus import free_tcp_port; print(free_tcp_port())"],
-        capture_output=True, text=True,
+        capture_output=True,
+        text=True,
     ).stdout.strip()
     endpoint = f"tcp/127.0.0.1:{port}"
     router = subprocess.Popen([sys.executable, "-m", "nearsub", "router", "--listen", endpoint], process_group=0)
@@ -149,7 +154,11 @@ def test_a_log_cut_short_is_readable_up_to_its_last_chunk(tmp_path):
     path = tmp_path / "cut.mcap"
     writer = LogWriter(path)
     for i in range(20000):
-        writer.write("nearsub/x/remus100/input", msgpack.packb({"step": i, "t": i * 0.05, "source": "pid", "X_prop": 1.0, "delta_r": 0.0}), i * 0.05)
+        writer.write(
+            "nearsub/x/remus100/input",
+            msgpack.packb({"step": i, "t": i * 0.05, "source": "pid", "X_prop": 1.0, "delta_r": 0.0}),
+            i * 0.05,
+        )
     writer._file.flush()  # a crash: the writer never finishes
     size = path.stat().st_size
     with open(path, "r+b") as f:

@@ -35,9 +35,7 @@ def _sklearn_fixed(gp, X, y):
     normalize_y=True (population std); `alpha` keeps the noise out of the predicted std.
     """
     kernel = C(gp.signal_variance, "fixed") * RBF(gp.length_scales, "fixed")
-    return GaussianProcessRegressor(
-        kernel, alpha=gp.noise_variance, optimizer=None, normalize_y=True
-    ).fit(X, y)
+    return GaussianProcessRegressor(kernel, alpha=gp.noise_variance, optimizer=None, normalize_y=True).fit(X, y)
 
 
 @pytest.mark.parametrize("seed", range(3))
@@ -81,12 +79,8 @@ def test_fitted_lml_at_least_sklearn(seed):
     d = 3
     X, y = _data(seed, n=30, bounds=np.array([[0.0, 1.0]] * d), noise=0.01)
     gp = GaussianProcess(bounds=[[0.0, 1.0]] * d, n_restarts=5, seed=seed).fit(X, y)
-    kernel = C(1.0, (1e-2, 1e2)) * RBF(np.full(d, 0.5), (1e-2, 1e2)) + WhiteKernel(
-        1e-6, (1e-10, 1e-1)
-    )
-    sk = GaussianProcessRegressor(
-        kernel, alpha=0.0, normalize_y=True, n_restarts_optimizer=4, random_state=seed
-    )
+    kernel = C(1.0, (1e-2, 1e2)) * RBF(np.full(d, 0.5), (1e-2, 1e2)) + WhiteKernel(1e-6, (1e-10, 1e-1))
+    sk = GaussianProcessRegressor(kernel, alpha=0.0, normalize_y=True, n_restarts_optimizer=4, random_state=seed)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # sklearn's ConvergenceWarnings at bounds
         sk.fit(X, y)
@@ -192,9 +186,7 @@ def test_hyperparameter_attributes_and_warm_start():
     np.testing.assert_allclose(gp.length_scales, gp.length_scales_unit * np.ptp(BOUNDS, axis=1))
     assert gp.signal_variance == pytest.approx(np.exp(gp.theta_[d]))
     assert gp.noise_variance == pytest.approx(np.exp(gp.theta_[d + 1]))
-    assert gp.log_marginal_likelihood_value_ == pytest.approx(
-        gp.log_marginal_likelihood(eval_gradient=False)
-    )
+    assert gp.log_marginal_likelihood_value_ == pytest.approx(gp.log_marginal_likelihood(eval_gradient=False))
     # one start, from the previous optimum: a stationary point, so the fit stays there
     lml = gp.log_marginal_likelihood_value_
     gp.n_restarts = 1
@@ -227,9 +219,7 @@ def test_state_round_trip_is_bit_identical():
     gp = GaussianProcess().fit(X, y)  # data-derived scaling
     gp2 = GaussianProcess.from_state(gp.get_state())
     assert np.array_equal(gp.predict(Xt, return_std=True), gp2.predict(Xt, return_std=True))
-    assert gp2.log_marginal_likelihood(eval_gradient=False) == pytest.approx(
-        gp.log_marginal_likelihood_value_
-    )
+    assert gp2.log_marginal_likelihood(eval_gradient=False) == pytest.approx(gp.log_marginal_likelihood_value_)
 
 
 def test_input_validation():

@@ -10,9 +10,7 @@ FT = hull.FT
 
 
 def _model_properties():
-    joints = [
-        j * FT for j in (hull.SUBOFF_BOW_END_FT, hull.SUBOFF_PMB_END_FT, hull.SUBOFF_AFT_END_FT)
-    ]
+    joints = [j * FT for j in (hull.SUBOFF_BOW_END_FT, hull.SUBOFF_PMB_END_FT, hull.SUBOFF_AFT_END_FT)]
     return hull.revolution_properties(
         lambda x: hull.suboff_model_radius_ft(x / FT) * FT,
         (0.0, *joints, hull.SUBOFF_LENGTH_FT * FT),
@@ -63,9 +61,7 @@ def test_cb_is_volume_centroid_and_frame():
     assert w[0] == 0.0 and w[3] == 0.0 and w[2] == pytest.approx(hull.R_SUB)
     assert w[1] == pytest.approx(0.0, abs=1e-9)
     # The bow (blunt) is at +x: 5 m behind the bow tip is wider than 5 m before the stern tip.
-    assert hull.submarine_half_width(hull.SUB_BOW_X - 5) > hull.submarine_half_width(
-        hull.SUB_STERN_X + 5
-    )
+    assert hull.submarine_half_width(hull.SUB_BOW_X - 5) > hull.submarine_half_width(hull.SUB_STERN_X + 5)
 
 
 def test_submarine_outline_polygon():
@@ -77,9 +73,7 @@ def test_submarine_outline_polygon():
     np.testing.assert_allclose(np.abs(y), hull.submarine_half_width(x), atol=1e-9)
 
 
-@pytest.mark.parametrize(
-    "length, diameter", [(1.33, 0.191), (2.2256, 0.419), (5.3, 0.53), (1.0, 1.0 / 3)]
-)
+@pytest.mark.parametrize("length, diameter", [(1.33, 0.191), (2.2256, 0.419), (5.3, 0.53), (1.0, 1.0 / 3)])
 def test_explorer_profile(length, diameter):
     radius = diameter / 2
     joints = [2 * radius, length - 4 * radius]
@@ -121,7 +115,5 @@ def test_uuv_outline_pose():
     # Heading +90 deg points the nose to +y; batches broadcast.
     bx, by = hull.uuv_outline([0.0, 1.0], [0.0, 2.0], [math.pi / 2, 0.0], length, diameter, 32)
     assert bx.shape == by.shape == (2, 63)
-    assert by[0].max() == pytest.approx(cb) and np.abs(bx[0]).max() == pytest.approx(
-        diameter / 2, rel=1e-3
-    )
+    assert by[0].max() == pytest.approx(cb) and np.abs(bx[0]).max() == pytest.approx(diameter / 2, rel=1e-3)
     np.testing.assert_allclose(bx[1], x - 9.0)

@@ -2,7 +2,6 @@ import math
 
 import msgpack
 import pytest
-
 from nearsub.common.messages import Input, MessageError, State, decode, encode, model_for_key
 
 

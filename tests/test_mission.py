@@ -1,5 +1,4 @@
 import pytest
-
 from conftest import ALPHA, nearsub
 from nearsub.common.mission import MissionError, load_mission
 

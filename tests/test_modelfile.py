@@ -35,9 +35,7 @@ def saved(tmp_path, model):
 def test_round_trip_is_bit_identical(saved, model):
     loaded = load_model(saved)
     Xt = BOUNDS[:, 0] + np.ptp(BOUNDS, axis=1) * np.random.default_rng(1).uniform(size=(500, 3))
-    for a, b in zip(
-        model.predict(Xt, return_std=True), loaded.model.predict(Xt, return_std=True), strict=True
-    ):
+    for a, b in zip(model.predict(Xt, return_std=True), loaded.model.predict(Xt, return_std=True), strict=True):
         assert np.array_equal(a, b)
     for a, b in zip(model.predict_point(Xt[0]), loaded.model.predict_point(Xt[0]), strict=True):
         assert np.array_equal(a, b)

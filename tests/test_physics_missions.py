@@ -1,7 +1,6 @@
 """Physics in missions: vehicles, waves, collisions, divergence, custom vehicles, validate."""
 
 import pytest
-
 from conftest import ALPHA, ROOT, nearsub
 from nearsub.common.cores import run_mission
 from nearsub.common.hull import R_SUB, explorer_cb_from_nose
@@ -12,8 +11,14 @@ WAVES = ROOT / "missions" / "waves_ss5.toml"
 
 # A REMUS heading straight at the submarine's side (hull radius 5.18 m at mid-body).
 RAMMING = [
-    "name=ram", "environment.submarine=true", "start.x=0", "start.y=15", "start.psi_deg=-90", "start.speed=1.2",
-    "apps.helm.legs=[{points = [[0.0, -15.0]], speed = 1.2}]", "time_limit=60",
+    "name=ram",
+    "environment.submarine=true",
+    "start.x=0",
+    "start.y=15",
+    "start.psi_deg=-90",
+    "start.speed=1.2",
+    "apps.helm.legs=[{points = [[0.0, -15.0]], speed = 1.2}]",
+    "time_limit=60",
 ]
 
 

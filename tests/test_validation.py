@@ -40,9 +40,7 @@ def test_library_gains_follow_the_design_rule(vehicle, speed):
     speed_gains = val.design_speed_gains(vehicle, speed)
     for designed, library in ((heading, vehicle.pid.heading), (speed_gains, vehicle.pid.speed)):
         for field in ("kp", "ki", "kd", "integral_limit"):
-            assert getattr(library, field) == pytest.approx(
-                getattr(designed, field), rel=0.05, abs=1e-12
-            )
+            assert getattr(library, field) == pytest.approx(getattr(designed, field), rel=0.05, abs=1e-12)
 
 
 def test_incremental_form_cannot_stabilise_remus():
@@ -55,7 +53,5 @@ def test_incremental_form_cannot_stabilise_remus():
 
 def test_incremental_tuning_maps_gains_by_dt():
     tuning = val.incremental_tuning(NPS_AUV_II, 1.0, 0.2, 0.05)
-    assert (tuning.heading.kp, tuning.heading.kd, tuning.heading.ki) == pytest.approx(
-        (0.01, 0.05, 0.0)
-    )
+    assert (tuning.heading.kp, tuning.heading.kd, tuning.heading.ki) == pytest.approx((0.01, 0.05, 0.0))
     assert tuning.speed.kd == pytest.approx(NPS_AUV_II.pid.speed.kp * 0.05)

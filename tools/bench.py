@@ -60,7 +60,8 @@ def bench_pipeline(args) -> int:
         print(json.dumps(result))
     else:
         p = result["pipeline_steps_per_second"]
-        print(f"lock-stepped pipeline: median {p['median']:.0f} steps/s (min {p['min']:.0f}, max {p['max']:.0f}) over {args.repeats} runs")
+        spread = f"min {p['min']:.0f}, max {p['max']:.0f}"
+        print(f"lock-stepped pipeline: median {p['median']:.0f} steps/s ({spread}) over {args.repeats} runs")
         print(f"in-process loop:       median {result['inprocess_steps_per_second']['median']:.0f} steps/s")
         print(f"in-process / pipeline: {result['ratio_inprocess_over_pipeline']:.1f}x   (target: >= 1000 steps/s)")
     return 0

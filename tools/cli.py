@@ -118,14 +118,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--at-step", type=int, help="swap when the clock reaches this step (default: now)")
     p.add_argument("--timeout", type=float, default=120.0, help="wall seconds to wait for the swap")
     p.add_argument("--json", action="store_true")
-    p.add_argument("--connect", action="append", metavar="ENDPOINT", help="router endpoint (default: from the registry)")
+    p.add_argument(
+        "--connect", action="append", metavar="ENDPOINT", help="router endpoint (default: from the registry)"
+    )
     p.set_defaults(func=_swap)
 
     p = sub.add_parser("clock", help="status, pause or resume a running mission's clock")
     p.add_argument("community", help="mission name")
     p.add_argument("action", choices=("status", "pause", "resume"))
     p.add_argument("--at-step", type=int, help="with pause: pause when the clock reaches this step")
-    p.add_argument("--connect", action="append", metavar="ENDPOINT", help="router endpoint (default: from the registry)")
+    p.add_argument(
+        "--connect", action="append", metavar="ENDPOINT", help="router endpoint (default: from the registry)"
+    )
     p.set_defaults(func=_clock)
 
     p = sub.add_parser("router", help="run a Zenoh router (for multi-host setups)")

@@ -13,7 +13,9 @@ from . import registry
 
 
 def add_connect_arguments(parser) -> None:
-    parser.add_argument("--connect", action="append", metavar="ENDPOINT", help="router endpoint, e.g. tcp/127.0.0.1:7447")
+    parser.add_argument(
+        "--connect", action="append", metavar="ENDPOINT", help="router endpoint, e.g. tcp/127.0.0.1:7447"
+    )
     parser.add_argument("--community", help="mission (community) name; default: from the key, or the only running one")
 
 
@@ -46,7 +48,9 @@ class Caller:
 
     def call(self, target: str, cmd: str, timeout: float, **args) -> ControlReply | None:
         """Send `cmd` to `target` ("clock" or an app instance); None if no reply in time."""
-        request = Control(step=0, t=0.0, source=self.name, cmd=cmd, args=args, request_id=uuid.uuid4().hex, reply_to=self.name)
+        request = Control(
+            step=0, t=0.0, source=self.name, cmd=cmd, args=args, request_id=uuid.uuid4().hex, reply_to=self.name
+        )
         self.bus.put_when_matched(keys.control(self.community, target), encode(request))
         end = time.monotonic() + timeout
         while (remaining := end - time.monotonic()) > 0:

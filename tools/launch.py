@@ -24,7 +24,6 @@ from datetime import datetime
 from pathlib import Path
 
 import msgpack
-
 from nearsub.common import keys
 from nearsub.common.bus import Bus, Endpoints, Mailbox, free_tcp_port
 from nearsub.common.lifecycle import ORDER
@@ -137,9 +136,21 @@ class Launcher:
     # -- processes ----------------------------------------------------------------------------
     def spawn(self, module: str, instance: str, role: str, extra: list[str] = ()) -> Child:
         output = self.run_dir / f"{instance}.out"
-        argv = [sys.executable, "-u", "-m", f"nearsub.apps.{module}", "--run", str(self.run_file), "--instance", instance, *extra]
+        argv = [
+            sys.executable,
+            "-u",
+            "-m",
+            f"nearsub.apps.{module}",
+            "--run",
+            str(self.run_file),
+            "--instance",
+            instance,
+            *extra,
+        ]
         with open(output, "wb") as out:
-            process = subprocess.Popen(argv, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, process_group=0)
+            process = subprocess.Popen(
+                argv, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, process_group=0
+            )
         child = Child(instance, role, process, output)
         self.children[instance] = child
         return child
@@ -159,7 +170,9 @@ class Launcher:
             for inst in missing:
                 child = self.children.get(inst)
                 if child is not None and child.process.poll() is not None:
-                    raise LaunchError(f"app {inst} exited with code {child.process.returncode} during start-up\n{child.tail()}")
+                    raise LaunchError(
+                        f"app {inst} exited with code {child.process.returncode} during start-up\n{child.tail()}"
+                    )
             if time.monotonic() > deadline:
                 raise LaunchError(f"apps did not come up within {timeout:g} s: {', '.join(missing)}")
             if self.stop_requested:
@@ -247,7 +260,10 @@ class Launcher:
             out = open(self.run_dir / "router.out", "wb")
             self.router = subprocess.Popen(
                 [sys.executable, "-u", "-m", "nearsub.apps.router", "--listen", endpoint, "--with-parent"],
-                stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, process_group=0,
+                stdout=out,
+                stderr=subprocess.STDOUT,
+                stdin=subprocess.DEVNULL,
+                process_group=0,
             )
             out.close()
             time.sleep(0.1)
@@ -345,7 +361,9 @@ class Launcher:
         except ValueError:
             step = 0
         self.summary.steps, self.summary.sim_time = step, step * self.mission.dt
-        self.end_pub.put(encode(MissionEnd(step=step, t=step * self.mission.dt, source="launcher", outcome=outcome, reason=reason)))
+        self.end_pub.put(
+            encode(MissionEnd(step=step, t=step * self.mission.dt, source="launcher", outcome=outcome, reason=reason))
+        )
 
     def fail(self, text: str) -> None:
         first_line = text.splitlines()[0]
@@ -366,7 +384,9 @@ class Launcher:
             return
         try:
             at = request.get("at_step")
-            result = self.swap(str(request.get("app", "")), list(request.get("set", [])), None if at is None else int(at))
+            result = self.swap(
+                str(request.get("app", "")), list(request.get("set", [])), None if at is None else int(at)
+            )
         except LaunchError as exc:
             mail.reply_error(str(exc))
             return
@@ -375,7 +395,9 @@ class Launcher:
     def swap(self, role: str, overrides: list[str], at_step: int | None = None) -> dict:
         if role not in ORDER:
             raise LaunchError(f"cannot swap {role!r}: only {', '.join(ORDER)} can be swapped")
-        old = next((c for c in self.children.values() if c.role == role and not c.retiring and c.process.poll() is None), None)
+        old = next(
+            (c for c in self.children.values() if c.role == role and not c.retiring and c.process.poll() is None), None
+        )
         if old is None:
             raise LaunchError(f"no running {role} to swap")
         prefixed = [o if o.startswith("apps.") else f"apps.{role}.{o}" for o in overrides]
@@ -432,7 +454,10 @@ def launch_command(args) -> int:
         print(f"nearsub launch: {exc}", file=sys.stderr)
         return 2
     if mission.name in registry.running():
-        print(f"nearsub launch: a mission named {mission.name!r} is already running; use --set name=OTHER", file=sys.stderr)
+        print(
+            f"nearsub launch: a mission named {mission.name!r} is already running; use --set name=OTHER",
+            file=sys.stderr,
+        )
         return 2
     launcher = Launcher(mission, args.mission, args.log, quiet=args.json)
     summary = launcher.run()

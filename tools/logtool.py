@@ -60,7 +60,12 @@ def info_command(args) -> int:
         "sim_end": max((r.sim_time for r in contents.records), default=0.0),
         "outcome": outcome,
         "topics": {
-            topic: {"count": n, "hz": (n - 1) / (max(spans[topic]) - min(spans[topic])) if n > 1 and max(spans[topic]) > min(spans[topic]) else 0.0}
+            topic: {
+                "count": n,
+                "hz": (n - 1) / (max(spans[topic]) - min(spans[topic]))
+                if n > 1 and max(spans[topic]) > min(spans[topic])
+                else 0.0,
+            }
             for topic, n in sorted(counts.items())
         },
     }
@@ -117,7 +122,10 @@ def _write_csv(records, output: str | None) -> int:
         print("nearsub log export: no messages match", file=sys.stderr)
         return 1
     if output is None and len(by_topic) > 1:
-        print("nearsub log export: several topics match; pass --topic KEY or -o DIR for one CSV per topic", file=sys.stderr)
+        print(
+            "nearsub log export: several topics match; pass --topic KEY or -o DIR for one CSV per topic",
+            file=sys.stderr,
+        )
         return 2
     for topic, rows in by_topic.items():
         columns = list(dict.fromkeys(c for row in rows for c in row))
@@ -132,4 +140,3 @@ def _write_csv(records, output: str | None) -> int:
         if target is not sys.stdout:
             target.close()
     return 0
-

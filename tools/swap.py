@@ -2,8 +2,9 @@
 
 SPEC is a comma-separated list of settings of the new app, e.g. `behaviour=waypoints,period=5`;
 keys are relative to the app's mission section (`apps.helm`) unless they start with `apps.`.
-The launcher pauses the clock at the next step boundary (or at `--at-step N`), starts the new instance, which takes over the
-old one's progress (the current waypoint) and inputs, retires the old one and resumes.
+The launcher pauses the clock at the next step boundary (or at `--at-step N`), starts the new
+instance, which takes over the old one's progress (the current waypoint) and inputs, retires the
+old one and resumes.
 """
 
 from __future__ import annotations
@@ -13,7 +14,6 @@ import sys
 import uuid
 
 import msgpack
-
 from nearsub.common import keys
 
 from .connect import Caller, open_bus

@@ -8,7 +8,6 @@ import time
 from collections import defaultdict, deque
 
 import msgpack
-
 from nearsub.common import keys
 from nearsub.common.bus import Mailbox
 from nearsub.common.messages import MessageError, decode, encode, model_for_key
@@ -81,8 +80,11 @@ def tap_echo(args) -> int:
                 line = {"key": mail.key, "error": error}
             else:
                 try:
-                    line = {"key": mail.key, "t": value.get("t") if isinstance(value, dict) else None,
-                            "value": _project(value, args.field)}
+                    line = {
+                        "key": mail.key,
+                        "t": value.get("t") if isinstance(value, dict) else None,
+                        "value": _project(value, args.field),
+                    }
                 except KeyError as exc:
                     print(f"nearsub tap echo: {exc.args[0]} in {mail.key}", file=sys.stderr)
                     return 2

@@ -7,15 +7,13 @@ if any case fails.
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
-
-from rich.console import Console
-from rich.table import Table
 
 from nearsub.common.cores import run_mission
 from nearsub.common.mission import load_mission
 from nearsub.common.validation import Row, run_validation
+from rich.console import Console
+from rich.table import Table
 
 MISSIONS = Path(__file__).resolve().parents[1] / "missions"
 
@@ -29,15 +27,29 @@ def scenario_rows() -> list[Row]:
         result = run_mission(mission)
         reached = sum(1 for _, leaf, m in result.messages if leaf == "events" and m.kind == "waypoint")
         rows.append(
-            Row(f"alpha mission, {vehicle}: waypoints reached", reached, 6, 0.0, "", result.outcome == "completed" and reached == 6,
-                f"{result.outcome} after {result.steps * mission.dt:.1f} s (MOOS-IvP: about 446 s)")
+            Row(
+                f"alpha mission, {vehicle}: waypoints reached",
+                reached,
+                6,
+                0.0,
+                "",
+                result.outcome == "completed" and reached == 6,
+                f"{result.outcome} after {result.steps * mission.dt:.1f} s (MOOS-IvP: about 446 s)",
+            )
         )
     mission = load_mission(MISSIONS / "waves_ss5.toml")
     result = run_mission(mission)
     worst = max(m.cross_track for m in result.topic("helm"))
     rows.append(
-        Row("waves_ss5 (figure 5-6): max cross-track error", worst, None, None, "m", result.outcome == "completed",
-            f"report only; passes if the UUV keeps the track and reaches the waypoint ({result.outcome})")
+        Row(
+            "waves_ss5 (figure 5-6): max cross-track error",
+            worst,
+            None,
+            None,
+            "m",
+            result.outcome == "completed",
+            f"report only; passes if the UUV keeps the track and reaches the waypoint ({result.outcome})",
+        )
     )
     return rows
 
