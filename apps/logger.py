@@ -13,14 +13,13 @@ import sys
 import time
 from pathlib import Path
 
+from nearsub import __version__
 from nearsub.apps.shell import prepare_process
 from nearsub.common import keys
 from nearsub.common.bus import Bus, Endpoints, signal_self
 from nearsub.common.logfile import LogWriter
 from nearsub.common.messages import Event, MessageError, MissionEnd, decode, encode, model_for_key
 from nearsub.common.mission import RunConfig
-
-from nearsub import __version__
 
 DRAIN_SECONDS = 0.3  # after the mission end, keep what is still in flight (status, app_left)
 
@@ -70,7 +69,9 @@ def main(argv=None) -> int:
     writer.metadata("mission", {"name": community, "resolved": run.mission.model_dump_json()})
     writer.metadata("run", {"nearsub_version": __version__, "started_unix": f"{time.time():.3f}"})
     if args.mission_file and Path(args.mission_file).is_file():
-        writer.attach(Path(args.mission_file).name, Path(args.mission_file).read_bytes(), "application/toml")
+        text = Path(args.mission_file).read_bytes()
+        writer.metadata("mission_file", {"path": args.mission_file, "toml": text.decode(errors="replace")})
+        writer.attach(Path(args.mission_file).name, text, "application/toml")
     recorder = Recorder(writer, community)
     code = 0
     try:

@@ -66,7 +66,6 @@ class Environment(Strict):
 
 class AppSettings(Strict):
     period: int = Field(default=1, ge=1, description="runs every `period` base steps")
-    restart: Literal["never", "on-failure"] = "never"
 
 
 class HelmSettings(AppSettings):

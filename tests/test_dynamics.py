@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+
 from nearsub.common.dynamics import Environment, step
 from nearsub.common.vehicles import NPS_AUV_II, REMUS100, SDV
 

@@ -5,8 +5,9 @@ from functools import lru_cache
 
 import numpy as np
 import pytest
-from nearsub.common import events, hull
 from scipy.spatial import cKDTree
+
+from nearsub.common import events, hull
 
 REMUS_L, REMUS_D = 1.33, 0.191  # vehicles.md section 1
 R = hull.R_SUB

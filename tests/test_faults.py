@@ -9,6 +9,7 @@ import time
 
 import msgpack
 import pytest
+
 from conftest import ALPHA, nearsub
 from helpers import log_path
 from nearsub.common.logfile import LogWriter, read_log

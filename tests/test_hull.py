@@ -4,6 +4,7 @@ import math
 
 import numpy as np
 import pytest
+
 from nearsub.common import hull
 
 FT = hull.FT

@@ -1,6 +1,7 @@
 """The functional core run in one process: the reference the multi-process run must equal."""
 
 import numpy as np
+
 from conftest import ALPHA
 from nearsub.common.cores import build_cores
 from nearsub.common.lifecycle import Schedule, run_inprocess

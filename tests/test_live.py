@@ -4,6 +4,7 @@ import json
 import time
 
 import pytest
+
 from conftest import ALPHA, nearsub
 from helpers import log_path, per_topic
 from nearsub.common.cores import build_cores

@@ -2,6 +2,7 @@ import math
 
 import msgpack
 import pytest
+
 from nearsub.common.messages import Input, MessageError, State, decode, encode, model_for_key
 
 

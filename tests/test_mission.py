@@ -1,4 +1,5 @@
 import pytest
+
 from conftest import ALPHA, nearsub
 from nearsub.common.mission import MissionError, load_mission
 

@@ -5,6 +5,7 @@ from datetime import datetime
 
 import numpy as np
 import pytest
+
 from nearsub.common.gp import MultiOutputGP
 from nearsub.common.modelfile import FORMAT_VERSION, ModelFileError, load_model, save_model
 

@@ -1,6 +1,7 @@
 """Physics in missions: vehicles, waves, collisions, divergence, custom vehicles, validate."""
 
 import pytest
+
 from conftest import ALPHA, ROOT, nearsub
 from nearsub.common.cores import run_mission
 from nearsub.common.hull import R_SUB, explorer_cb_from_nose

@@ -1,6 +1,7 @@
 """The multi-process mission: complete, deterministic, warp-independent, equal to in-process."""
 
 import pytest
+
 from conftest import ALPHA
 from helpers import log_path, per_topic
 from nearsub.common.cores import build_cores

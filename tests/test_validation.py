@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+
 from nearsub.common import validation as val
 from nearsub.common.vehicles import NPS_AUV_II, REMUS100, SDV, Gains
 
