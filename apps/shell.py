@@ -25,6 +25,7 @@ import sys
 import uuid
 
 import msgpack
+
 from nearsub.common import keys
 from nearsub.common.bus import Bus, DeadlineExceeded, Endpoints, deadline, signal_self
 from nearsub.common.lifecycle import DONE_TOPIC, Core, Inbox, Schedule

@@ -29,10 +29,10 @@ from typing import Any
 
 import numpy as np
 import scipy
-from nearsub.common.gp import MultiOutputGP
 from numpy.lib.npyio import NpzFile
 
 from nearsub import __version__ as nearsub_version
+from nearsub.common.gp import MultiOutputGP
 
 __all__ = [
     "FORMAT_NAME",

@@ -24,6 +24,7 @@ from datetime import datetime
 from pathlib import Path
 
 import msgpack
+
 from nearsub.common import keys
 from nearsub.common.bus import Bus, Endpoints, Mailbox, free_tcp_port
 from nearsub.common.lifecycle import ORDER

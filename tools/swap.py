@@ -14,6 +14,7 @@ import sys
 import uuid
 
 import msgpack
+
 from nearsub.common import keys
 
 from .connect import Caller, open_bus

@@ -8,6 +8,7 @@ import time
 from collections import defaultdict, deque
 
 import msgpack
+
 from nearsub.common import keys
 from nearsub.common.bus import Mailbox
 from nearsub.common.messages import MessageError, decode, encode, model_for_key

@@ -9,11 +9,12 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from rich.console import Console
+from rich.table import Table
+
 from nearsub.common.cores import run_mission
 from nearsub.common.mission import load_mission
 from nearsub.common.validation import Row, run_validation
-from rich.console import Console
-from rich.table import Table
 
 MISSIONS = Path(__file__).resolve().parents[1] / "missions"
 
