@@ -168,6 +168,55 @@ class Stream:
         return str(sample.key_expr), sample.payload.to_bytes()
 
 
+class Request:
+    """A received query: its key, payload and selector parameters; answer exactly once."""
+
+    def __init__(self, query: zenoh.Query):
+        self._query = query
+        self.key = str(query.key_expr)
+        self.payload = query.payload.to_bytes() if query.payload is not None else b""
+        self.parameters = dict(query.parameters)
+
+    def reply(self, payload: bytes) -> None:
+        with self._query as q:
+            q.reply(q.key_expr, payload, encoding=ENCODING)
+
+    def reply_error(self, text: str) -> None:
+        with self._query as q:
+            q.reply_err(text.encode())
+
+
+class RequestStream:
+    """Queries to one queryable, in a FIFO drained by the serving app's main loop."""
+
+    def __init__(self, handler):
+        self._handler = handler
+
+    def recv(self) -> Request:
+        return Request(self._handler.recv())
+
+
+class ReplyError(RuntimeError):
+    """A query that got no answer, or an error answer; the text says which and from where."""
+
+
+class Querier:
+    """Repeated queries to one key (the sim asking the surrogate server every step)."""
+
+    def __init__(self, querier, key: str, timeout: float):
+        self._querier = querier
+        self.key = key
+        self.timeout = timeout
+
+    def ask(self, payload: bytes) -> bytes:
+        """The first reply's payload; ReplyError when nobody answers or the answer is an error."""
+        for reply in self._querier.get(payload=payload):
+            if reply.ok is not None:
+                return reply.ok.payload.to_bytes()
+            raise ReplyError(f"{self.key}: {reply.err.payload.to_bytes().decode(errors='replace')}")
+        raise ReplyError(f"{self.key}: no reply within {self.timeout:g} s (is the server running?)")
+
+
 def signal_self(signum: int = signal.SIGTERM) -> Callable[[Any], None]:
     """A liveliness callback that asks this process to shut down (non-blocking, no Zenoh call);
     the signal interrupts a blocked `Stream.recv` in the main thread."""
@@ -257,6 +306,20 @@ class Bus:
 
     def subscribe(self, key: str, mailbox: Mailbox) -> None:
         self._keep.append(self._session.declare_subscriber(key, _direct(mailbox.on_sample)))
+
+    def serve(self, key: str, capacity: int = 1024) -> RequestStream:
+        """A queryable whose queries queue in a FIFO for the main loop (a server app)."""
+        queryable = self._session.declare_queryable(key, zenoh.handlers.FifoChannel(capacity))
+        self._keep.append(queryable)
+        return RequestStream(queryable.handler)
+
+    def querier(self, key: str, timeout: float = 2.0) -> Querier:
+        """A pre-declared querier (cheaper than `request` when asking the same key repeatedly)."""
+        querier = self._session.declare_querier(
+            key, timeout=timeout, congestion_control=zenoh.CongestionControl.BLOCK, express=True
+        )
+        self._keep.append(querier)
+        return Querier(querier, key, timeout)
 
     def queryable(self, key: str, mailbox: Mailbox) -> None:
         self._keep.append(self._session.declare_queryable(key, _direct(mailbox.on_query)))
