@@ -78,3 +78,11 @@ def test_csv_of_several_topics_needs_a_folder(log, tmp_path):
     folder = tmp_path / "csv"
     done = nearsub("log", "export", str(path), "--format", "csv", "-o", str(folder))
     assert done.returncode == 0 and (folder / "nearsub_alpha_remus100_state.csv").exists()
+
+
+def test_plot_draws_a_png(log, tmp_path):
+    path, _ = log
+    target = tmp_path / "plot.png"
+    out = nearsub("log", "plot", str(path), "-o", str(target))
+    assert out.returncode == 0, out.stderr
+    assert target.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and target.stat().st_size > 20000

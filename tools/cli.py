@@ -22,6 +22,10 @@ def _tap(args):
 
 
 def _log(args):
+    if args.log_command == "plot":
+        from .plot import plot_command
+
+        return plot_command(args)
     from . import logtool
 
     return {"info": logtool.info_command, "export": logtool.export_command}[args.log_command](args)
@@ -108,6 +112,10 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--format", choices=("csv", "json", "alog"), default="json")
     t.add_argument("--topic", help="key expression to select (wildcards allowed)")
     t.add_argument("-o", "--output", help="output file (json, alog) or folder (csv)")
+    t = lg.add_parser("plot", help="trajectory in the submarine frame and time series (PNG)")
+    t.add_argument("log")
+    t.add_argument("-o", "--output", help="PNG file (default: next to the log)")
+    t.add_argument("--title")
     p.set_defaults(func=_log)
 
     p = sub.add_parser("swap", help="replace a running app (the helm) without stopping the mission")

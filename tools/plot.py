@@ -1,0 +1,130 @@
+"""`nearsub log plot LOG`: the trajectory in the submarine frame and the time series of a mission.
+
+The left panel shows the submarine outline (when the mission has one), the waypoints and
+track-lines from the mission in the log, the UUV path and where events happened. The right
+panels show desired and actual heading and speed, the rudder and thrust, and the interaction
+forces when the log has them. This is how the thesis figures 5-5, 6-2, 6-3 and 6-6 are drawn.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from nearsub.common.hull import submarine_outline  # noqa: E402
+from nearsub.common.logfile import read_log  # noqa: E402
+from nearsub.common.mission import mission_from_dict  # noqa: E402
+
+EVENT_STYLE = {
+    "collision": ("X", "red"),
+    "close_call": ("o", "orange"),
+    "large_stray": ("^", "purple"),
+    "waypoint": ("*", "green"),
+}
+
+
+def series(records, leaf: str) -> dict[str, np.ndarray]:
+    """Columns of one vehicle topic, keyed by field name."""
+    columns = defaultdict(list)
+    for record in records:
+        if record.topic.endswith(f"/{leaf}") and "#" not in record.topic:
+            for name, value in record.value().items():
+                if isinstance(value, (int, float)) and not isinstance(value, bool):
+                    columns[name].append(value)
+    return {name: np.asarray(values) for name, values in columns.items()}
+
+
+def plot_log(path: str | Path, output: str | Path | None = None, title: str | None = None) -> Path:
+    contents = read_log(path)
+    resolved = contents.metadata.get("mission", {}).get("resolved")
+    mission = mission_from_dict(json.loads(resolved)) if resolved else None
+    state = series(contents.records, "state")
+    desired = series(contents.records, "desired")
+    command = series(contents.records, "input")
+    forces = series(contents.records, "forces")
+    if not state:
+        raise ValueError(f"{path}: no state messages to plot")
+
+    fig = plt.figure(figsize=(14, 8), constrained_layout=True)
+    grid = fig.add_gridspec(4, 2, width_ratios=[1.2, 1])
+    ax = fig.add_subplot(grid[:, 0])
+    if mission is None or mission.environment.submarine:
+        sx, sy = submarine_outline()
+        ax.fill(sx, sy, color="0.8", label="submarine")
+    if mission is not None:
+        previous = (mission.start.x, mission.start.y)
+        for leg in mission.apps.helm.legs:
+            points = np.array(leg.points)
+            track = np.vstack([previous, points])
+            ax.plot(
+                track[:, 0], track[:, 1], "b--", lw=1, label="track-lines" if leg is mission.apps.helm.legs[0] else None
+            )
+            ax.plot(points[:, 0], points[:, 1], "bs", ms=5)
+            previous = tuple(points[-1])
+    ax.plot(state["x"], state["y"], "r-", lw=1.5, label="UUV")
+    for record in contents.records:
+        if "/events/" in record.topic:
+            event = record.value()
+            style = EVENT_STYLE.get(event.get("kind"))
+            if style and "x" in event.get("data", {}):
+                ax.plot(event["data"]["x"], event["data"]["y"], style[0], color=style[1], ms=9)
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x [m] (submarine frame, bow towards +x)")
+    ax.set_ylabel("y [m]")
+    ax.legend(loc="best", fontsize=8)
+    outcome = contents.metadata.get("outcome", {})
+    ax.set_title(title or f"{Path(path).stem}: {outcome.get('outcome', '?')}")
+
+    t = state["t"]
+    panels = [
+        (
+            "heading [deg]",
+            [
+                (t, np.degrees(state["psi"]), "actual"),
+                (desired.get("t"), np.degrees(desired.get("psi_d", [])), "desired"),
+            ],
+        ),
+        ("speed [m/s]", [(t, state["u"], "u"), (desired.get("t"), desired.get("u_d"), "desired")]),
+        (
+            "rudder [deg] / thrust [N]",
+            [
+                (command.get("t"), np.degrees(command.get("delta_r", [])), "rudder"),
+                (command.get("t"), command.get("X_prop"), "thrust"),
+            ],
+        ),
+    ]
+    if forces:
+        panels.append(
+            ("interaction", [(forces["t"], forces[name], name) for name in ("X_s", "Y_s", "N_s") if name in forces])
+        )
+    for row, (label, lines) in enumerate(panels):
+        panel = fig.add_subplot(grid[row, 1])
+        for x, y, name in lines:
+            if x is not None and y is not None and len(x):
+                panel.step(x, y, where="post", label=name, lw=1)
+        panel.set_ylabel(label)
+        panel.legend(loc="best", fontsize=7)
+        panel.grid(alpha=0.3)
+    panel.set_xlabel("simulated time [s]")
+    output = Path(output) if output else Path(path).with_suffix(".png")
+    fig.savefig(output, dpi=110)
+    plt.close(fig)
+    return output
+
+
+def plot_command(args) -> int:
+    try:
+        out = plot_log(args.log, args.output, args.title)
+    except (OSError, ValueError) as exc:
+        print(f"nearsub log plot: {exc}", file=sys.stderr)
+        return 1
+    print(out)
+    return 0
