@@ -130,9 +130,23 @@ def _arrived(leg: Leg, progress: WaypointProgress, target: np.ndarray, pos: np.n
     return False
 
 
-def waypoints(legs: list[Leg], progress: WaypointProgress, x: float, y: float, psi: float) -> HelmDecision:
-    """The standard waypoints behaviour: advance past reached waypoints, then steer at the lead
-    point of the current track-line at the leg's speed."""
+@dataclass(frozen=True)
+class CrossFlow:
+    """What the modified waypoints behaviour needs to know: the submarine's speed through the
+    water (the cross-flow in the submarine frame), alpha of (6.2) and the UUV's length."""
+
+    u_sub: float
+    alpha: float
+    uuv_length: float
+
+
+def waypoints(
+    legs: list[Leg], progress: WaypointProgress, x: float, y: float, psi: float, cross_flow: CrossFlow | None = None
+) -> HelmDecision:
+    """The waypoints behaviour: advance past reached waypoints, then steer at the lead point of
+    the current track-line. Standard (section 5.7): the lead point lies on the track-line and the
+    speed is the leg's. Modified (section 6.3.2, when `cross_flow` is given): the lead point and
+    the speed come from (6.2) and (6.3), with U_ot = leg speed - U_sub."""
     pos = np.array([x, y])
     captured = []
     while not progress.complete:
@@ -159,8 +173,56 @@ def waypoints(legs: list[Leg], progress: WaypointProgress, x: float, y: float, p
         return HelmDecision(0.0, psi, progress, None, tuple(captured))
     leg = legs[progress.leg]
     target = np.asarray(leg.points[progress.index], dtype=float)
-    aim = target
+    aim, speed = target, leg.speed
     if leg.lead is not None and progress.previous is not None:
-        aim = lead_point(np.asarray(progress.previous), target, pos, leg.lead, leg.lead_damper)
+        previous = np.asarray(progress.previous)
+        if cross_flow is None:
+            aim = lead_point(previous, target, pos, leg.lead, leg.lead_damper)
+        else:
+            u_ot = leg.speed - cross_flow.u_sub
+            aim = modified_lead_point(previous, target, pos, leg.lead, u_ot, cross_flow.u_sub, cross_flow.alpha)
+            speed = float(speed_policy(previous, target, pos, cross_flow.u_sub, u_ot, cross_flow.uuv_length))
     psi_d = float(np.arctan2(aim[1] - y, aim[0] - x))
-    return HelmDecision(leg.speed, psi_d, progress, (float(target[0]), float(target[1])), tuple(captured))
+    return HelmDecision(speed, psi_d, progress, (float(target[0]), float(target[1])), tuple(captured))
+
+
+# --- Modified waypoints (thesis section 6.3.2) ------------------------------------------------
+def modified_lead_point(prev_xy, next_xy, pos_xy, d_lead, u_ot, u_sub, alpha):
+    """Lead point of the modified waypoints behaviour (thesis figure 6-4): from the perpendicular
+    foot on the track-line, move d_lead along U_sub (+x) and d_off (6.2) across it, towards the
+    next waypoint: d_off = alpha d_lead U_ot sin(beta) / U_sub, beta the angle from U_sub to the
+    track-line. The UUV then points mostly into the cross-flow and crabs along the track."""
+    direction, _, along, _ = track_geometry(prev_xy, next_xy, pos_xy)
+    foot = prev_xy + direction * along[..., None]
+    sin_beta = direction[..., 1]  # U_sub is along +x, so sin(beta) is the track's y component
+    d_off = alpha * d_lead * u_ot * sin_beta / u_sub  # (6.2)
+    return np.stack([foot[..., 0] + d_lead, foot[..., 1] + d_off], axis=-1)
+
+
+def speed_policy(prev_xy, next_xy, pos_xy, u_sub, u_ot, uuv_length):
+    """Desired speed (6.3): U_UUV = U_sub + U_ot cos(beta) + epsilon.
+
+    The curve of figure 6-5 chosen here: epsilon = |U_ot| * sat(d_lag / L_uuv), with d_lag the
+    distance by which the UUV lags its perpendicular foot on the track-line in the direction of
+    U_sub (+x), and sat the unit saturation. So epsilon is proportional to the lag and saturates
+    at +/-|U_ot| when the UUV lags (or leads) by one UUV length, as section 6.3.2 describes.
+    """
+    direction, _, along, _ = track_geometry(prev_xy, next_xy, pos_xy)
+    foot_x = prev_xy[..., 0] + direction[..., 0] * along
+    lag = foot_x - pos_xy[..., 0]
+    epsilon = np.abs(u_ot) * np.clip(lag / uuv_length, -1.0, 1.0)
+    return u_sub + u_ot * direction[..., 0] + epsilon  # cos(beta) = the track's x component
+
+
+# --- N_uv compensation (thesis section 6.3.1) ------------------------------------------------
+def gamma_from_m11(m11):
+    """gamma(M11) = 10^(4.538 log10(M11)^-4.364), thesis (6.4)."""
+    return 10.0 ** (4.538 * np.log10(m11) ** -4.364)
+
+
+def nuv_heading_offset(n_s, u_d, n_uv, gamma):
+    """Delta psi of (6.1) as corrected in SPEC errata 5: v_comp = gamma N_s / (N_uv u_d) and
+    Delta psi = atan2(v_comp, u_d). Flying at psi_d + Delta psi while the course stays on psi_d
+    gives the sway v = -u sin(Delta psi), whose Munk moment N_uv u v then opposes N_s."""
+    v_comp = gamma * n_s / (n_uv * u_d)
+    return np.arctan2(v_comp, u_d)

@@ -34,6 +34,10 @@ class HelmCore:
     def __init__(self, mission: Mission):
         self.settings = mission.apps.helm
         self.legs = self.settings.legs
+        self.cross_flow = None
+        if self.settings.modified:
+            u_sub = mission.environment.u_sub
+            self.cross_flow = behaviours.CrossFlow(u_sub, self.settings.alpha, mission.vehicle_model.length)
         self.progress_state = behaviours.initial_progress(self.legs, (mission.start.x, mission.start.y))
         self.state: State | None = None
         self.straying = False
@@ -47,7 +51,7 @@ class HelmCore:
 
     def iterate(self, step: int, t: float) -> Iteration:
         s = self.state
-        decision = behaviours.waypoints(self.legs, self.progress_state, s.x, s.y, s.psi)
+        decision = behaviours.waypoints(self.legs, self.progress_state, s.x, s.y, s.psi, self.cross_flow)
         self.progress_state = decision.progress
         result = Iteration()
         for leg, index, point in decision.captured:

@@ -68,10 +68,26 @@ class AppSettings(Strict):
     period: int = Field(default=1, ge=1, description="runs every `period` base steps")
 
 
+BEHAVIOURS = ("waypoints", "modified_waypoints", "nuv_compensation", "modified_waypoints+nuv_compensation")
+
+
 class HelmSettings(AppSettings):
+    """The helm's behaviour: the standard waypoints (thesis 5.7), the modified waypoints (6.3.2),
+    N_uv compensation (6.3.1) on top of the standard waypoints, or both composed."""
+
     period: int = Field(default=5, ge=1)
-    behaviour: Literal["waypoints"] = "waypoints"
+    behaviour: Literal[BEHAVIOURS] = "waypoints"
+    alpha: float = Field(default=1.0, ge=0.0, le=1.0, description="modified waypoints: alpha of (6.2)")
+    gamma: float | None = Field(default=None, gt=0, description="N_uv compensation gain; default from (6.4)")
     legs: list[Leg] = Field(min_length=1)
+
+    @property
+    def modified(self) -> bool:
+        return self.behaviour.startswith("modified_waypoints")
+
+    @property
+    def compensated(self) -> bool:
+        return self.behaviour.endswith("nuv_compensation")
 
 
 class PidSettings(AppSettings):
@@ -130,9 +146,14 @@ class Mission(Strict):
         return value
 
     @model_validator(mode="after")
-    def _finite_numbers(self) -> Mission:
+    def _consistent(self) -> Mission:
         if not math.isfinite(self.dt * self.time_limit):
             raise ValueError("dt and time_limit must be finite")
+        if self.apps.helm.modified and self.environment.u_sub <= 0:
+            raise ValueError(
+                f"apps.helm.behaviour = {self.apps.helm.behaviour!r} steers against the submarine's cross-flow "
+                f"and needs environment.u_sub > 0 (got {self.environment.u_sub})"
+            )
         return self
 
     @property
