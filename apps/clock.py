@@ -1,10 +1,14 @@
-"""The clock app: lock-stepped ticks for the helm, pid and sim (common/clock.py has the rules).
+"""The clock app: grants lock-stepped steps to the helm, pid and sim (common/clock.py has the rules).
+
+The clock is off the critical path: it drains its stream in batches (a short sleep between
+polls), so it wakes a few hundred times a second rather than once per message.
 
 Control requests (messages on nearsub/<community>/control/clock) are answered on the requester's
 reply key:
-- status: the current step and whether the clock is paused;
-- pause: answered once the current step is complete, with the next step to run;
-- resume: continue ticking.
+- status: the next step to complete and whether the clock is paused;
+- pause: stop granting; answered when the apps have finished the step before the pause, with the
+  step at which the mission will resume (args.at: pause before that step instead);
+- resume: grant again.
 A mission end published by someone else (the launcher, aborting) stops the clock.
 """
 
@@ -16,8 +20,8 @@ import time
 
 from nearsub.apps.shell import prepare_process
 from nearsub.common import keys
-from nearsub.common.bus import Bus, DeadlineExceeded, Endpoints, deadline, signal_self
-from nearsub.common.clock import Pacer, StepBarrier
+from nearsub.common.bus import Bus, Endpoints, signal_self
+from nearsub.common.clock import GrantPolicy, Progress
 from nearsub.common.lifecycle import DONE_TOPIC, ORDER, Schedule
 from nearsub.common.messages import (
     VEHICLE_TOPICS,
@@ -32,27 +36,30 @@ from nearsub.common.messages import (
 )
 from nearsub.common.mission import RunConfig
 
+POLL = 0.002  # seconds between stream polls while the apps work (the grant window covers it)
+IDLE_POLL = 0.01  # while paused or waiting for the warp's release time
+
 
 class Clock:
     def __init__(self, run: RunConfig, bus: Bus):
         mission = self.mission = run.mission
         c = self.community = mission.name
-        self.schedule = Schedule(mission.periods())
-        self.pacer = Pacer(mission.dt, mission.warp)
+        self.progress = Progress(Schedule(mission.periods()))
+        self.policy = GrantPolicy(mission.dt, mission.warp, mission.max_steps)
         self.bus = bus
         self.stream = bus.stream(keys.everything(c))
         bus.on_liveliness_lost(keys.alive(c, "launcher", "*"), signal_self())
         self.tick_pub = bus.publisher(keys.tick(c))
         self.end_pub = bus.publisher(keys.mission_end(c))
         self.ack_prefix = keys.ack(c, "")
-        self.done_topics = {keys.vehicle_topic(c, mission.vehicle_name, leaf): leaf for leaf in DONE_TOPIC.values()}
         self.control_key = keys.control(c, "clock")
         self.end_key = keys.mission_end(c)
-        self.step = 0
-        self.paused = False
+        self.done_topics = {keys.vehicle_topic(c, mission.vehicle_name, leaf): leaf for leaf in DONE_TOPIC.values()}
+        self.granted = -1
+        self.pause_before: int | None = mission.pause_at_step
         self.pause_requests: list[Control] = []
+        self.paused = False
         self.ended = False
-        self.pause_at_step_done = False
 
     def wait_for_apps(self) -> str | None:
         """Block until helm, pid and sim have liveliness tokens; an error text on timeout."""
@@ -67,10 +74,14 @@ class Clock:
                 return f"apps did not start within {self.mission.startup_timeout:g} s: {', '.join(missing)}"
             time.sleep(0.02)
 
+    @property
+    def step(self) -> int:
+        """The next step to complete."""
+        return self.progress.completed + 1
+
     def finish(self, step: int, outcome: str, reason: str) -> None:
-        self.end_pub.put(
-            encode(MissionEnd(step=step, t=step * self.mission.dt, source="clock", outcome=outcome, reason=reason))
-        )
+        end = MissionEnd(step=step, t=step * self.mission.dt, source="clock", outcome=outcome, reason=reason)
+        self.end_pub.put(encode(end))
         self.ended = True
 
     def reply(self, request: Control, ok: bool = True, error: str = "", **data) -> None:
@@ -85,75 +96,41 @@ class Clock:
         )
         self.bus.put_when_matched(keys.reply(self.community, request.reply_to), encode(answer))
 
-    def handle(self, key: str, payload: bytes, barrier: StepBarrier | None) -> None:
-        """One stream item, while waiting for acks (barrier) or between steps (None)."""
+    def handle(self, key: str, payload: bytes) -> None:
+        """One stream item: progress, a control request, or someone else's mission end."""
         leaf = self.done_topics.get(key)
-        if leaf is not None:
-            if barrier is not None:
-                try:
-                    barrier.record_output(leaf, decode(payload, VEHICLE_TOPICS[leaf], key))
-                except MessageError:
-                    pass  # the consumers report malformed data; the clock only counts
-        elif key.startswith(self.ack_prefix):
-            if barrier is None:
-                print(f"[clock] error: ack outside a step from {key}", file=sys.stderr)
-                return
-            try:
-                error = barrier.record(decode(payload, Ack, key))
-            except MessageError as exc:
-                error = f"rejected message: {exc}"
-            if error:
-                print(f"[clock] error: {error}", file=sys.stderr)
-        elif key == self.control_key:
-            try:
+        try:
+            if leaf is not None:
+                self.progress.record_output(leaf, decode(payload, VEHICLE_TOPICS[leaf], key))
+            elif key.startswith(self.ack_prefix):
+                self.progress.record_ack(decode(payload, Ack, key))
+            elif key == self.control_key:
                 self.on_control(decode(payload, Control, key))
-            except MessageError as exc:
+            elif key == self.end_key:
+                self.ended = True
+        except MessageError as exc:
+            if leaf is None:  # consumers report malformed data; the clock only reports its own mail
                 print(f"[clock] error: rejected message: {exc}", file=sys.stderr)
-        elif key == self.end_key:
-            self.ended = True  # someone else (the launcher) ended the mission
 
     def on_control(self, request: Control) -> None:
         if request.cmd == "status":
             self.reply(request, step=self.step, paused=self.paused)
         elif request.cmd == "pause":
-            at = request.args.get("at")
-            if at is not None and int(at) < self.step:
-                self.reply(request, ok=False, error=f"step {at} has passed (the clock is at step {self.step})")
-            else:
-                self.pause_requests.append(request)
+            at = int(request.args.get("at", self.granted + 1))
+            if at <= self.granted:
+                self.reply(
+                    request, ok=False, error=f"step {at} has passed or is granted (granted up to {self.granted})"
+                )
+                return
+            self.pause_before = at if self.pause_before is None else min(self.pause_before, at)
+            self.pause_requests.append(request)
         elif request.cmd == "resume":
             self.paused = False
-            self.pacer.rebase(time.monotonic(), self.step)
+            self.pause_before = None
+            self.policy.rebase(time.monotonic(), self.step)
             self.reply(request, step=self.step)
         else:
             self.reply(request, ok=False, error=f"clock: unknown command {request.cmd!r}")
-
-    def serve_pause_requests(self) -> None:
-        """Answer the pause requests due at this step; only called between steps, so the reply
-        names the next step to run. The mission's pause_at_step pauses without a request."""
-        if self.mission.pause_at_step == self.step and not self.pause_at_step_done:
-            self.paused = self.pause_at_step_done = True
-        due = [r for r in self.pause_requests if int(r.args.get("at", self.step)) <= self.step]
-        for request in due:
-            self.paused = True
-            self.reply(request, step=self.step)
-            self.pause_requests.remove(request)
-
-    def between_steps(self) -> None:
-        """Serve control and wait while paused or until the warp's release time."""
-        self.serve_pause_requests()
-        while not self.ended:
-            while (item := self.stream.try_recv()) is not None:
-                self.handle(*item, None)
-                self.serve_pause_requests()
-            if self.paused:
-                self.handle(*self.stream.recv(), None)
-                self.serve_pause_requests()
-                continue
-            wait = self.pacer.release_time(self.step) - time.monotonic()
-            if wait <= 0:
-                return
-            time.sleep(min(wait, 0.05))
 
     def run(self) -> int:
         error = self.wait_for_apps()
@@ -161,33 +138,47 @@ class Clock:
             self.finish(0, "error", error)
             print(f"[clock] {error}", file=sys.stderr)
             return 1
-        self.pacer.rebase(time.monotonic(), 0)
+        self.policy.rebase(time.monotonic(), 0)
         timeout = self.mission.step_timeout
-        while True:
-            self.between_steps()
-            if self.ended:
+        last_completed, last_progress = -1, time.monotonic()
+        while not self.ended:
+            while (item := self.stream.try_recv()) is not None:
+                self.handle(*item)
+            now = time.monotonic()
+            completed, end = self.progress.completed, self.progress.end
+            if completed != last_completed:
+                last_completed, last_progress = completed, now
+            if end is not None and completed >= end.step:
+                self.finish(end.step + 1, end.outcome, end.reason)
                 return 0
-            step = self.step
-            barrier = StepBarrier.for_step(self.schedule, step)
-            self.tick_pub.put(encode(Tick(step=step, t=step * self.mission.dt, source="clock")))
-            try:
-                with deadline(timeout):
-                    while barrier.missing and not self.ended:
-                        self.handle(*self.stream.recv(), barrier)
-            except DeadlineExceeded:
-                reason = barrier.stall_reason(timeout)
+            if completed >= self.mission.max_steps - 1:
+                self.finish(
+                    self.mission.max_steps, "time_limit", f"reached the time limit of {self.mission.time_limit:g} s"
+                )
+                return 0
+            if self.pause_before is not None and completed == self.pause_before - 1 and not self.paused:
+                self.paused = True
+                for request in self.pause_requests:
+                    self.reply(request, step=self.step)
+                self.pause_requests.clear()
+            if not self.paused:
+                self.grant(completed, now)
+            if self.granted > completed and now - last_progress > timeout:
+                reason = self.progress.stall_reason(timeout)
                 print(f"[clock] stalled: {reason}", file=sys.stderr)
-                self.finish(step, "stalled", reason)
+                self.finish(completed + 1, "stalled", reason)
                 return 1
-            if self.ended:
-                return 0
-            self.step = step + 1
-            if barrier.end is not None:
-                self.finish(self.step, barrier.end, barrier.reason)
-                return 0
-            if self.step >= self.mission.max_steps:
-                self.finish(self.step, "time_limit", f"reached the time limit of {self.mission.time_limit:g} s")
-                return 0
+            time.sleep(POLL if self.granted > completed else IDLE_POLL)
+        return 0
+
+    def grant(self, completed: int, now: float) -> None:
+        """Extend the grant in chunks of half the window (fewer ticks), or up to a cap."""
+        limit = self.policy.limit(completed, now, self.pause_before, self.progress.end)
+        if limit > self.granted and (
+            limit - self.granted >= self.policy.window // 2 or limit - completed < self.policy.window
+        ):
+            self.granted = limit
+            self.tick_pub.put(encode(Tick(step=limit, t=limit * self.mission.dt, source="clock")))
 
 
 def main(argv=None) -> int:

@@ -3,11 +3,12 @@
 Start-up: open the session, subscribe one FIFO stream to the community (nearsub/<c>/**), declare
 publishers, optionally take over from a running instance, publish "running", declare the
 liveliness token. Then the loop drains the stream in arrival order:
-- a tick for a step the app runs at marks that step pending;
+- a tick grants the steps up to the one it carries (common/clock.py);
 - an input is validated and offered to the inbox (malformed or out-of-protocol messages are
   reported as error events and dropped; the app keeps running);
-- once the pending step has every input the schedule expects, the core gets its new mail and
-  iterates; the outputs, events and the acknowledgement are published, in that order;
+- an end request (an Ack with `end`) from any app at step k: this app runs no step after k;
+- the app then runs, in order, every granted step it has the inputs for: the core gets its new
+  mail and iterates; an end request, the outputs and the events are published, in that order;
 - control requests (handover, retire) are answered between steps;
 - the mission end leaves the loop.
 
@@ -97,9 +98,11 @@ class AppShell:
         self.end_key = keys.mission_end(c)
         self.control_key = keys.control(c, instance)
         self.reply_key = keys.reply(c, instance)
-        self.pending: int | None = None
+        self.ack_prefix = keys.ack(c, "")
+        self.granted = -1
+        self.stop_after = mission.max_steps - 1
         self.started = False
-        self.step = 0
+        self.step = 0  # the next step this app will run
         self.handover_request: Control | None = None
         self.backlog: list[tuple[str, bytes]] = []
 
@@ -159,6 +162,7 @@ class AppShell:
         self.inbox.delivered = dict(handover["delivered"])
         self.started = True
         self.step = resume_step
+        self.granted = resume_step - 1
 
     # -- the loop -----------------------------------------------------------------------------
     def loop(self) -> int:
@@ -168,8 +172,12 @@ class AppShell:
                 self.on_input(self.input_of_key[key], payload)
             elif key == self.tick_key:
                 tick = self.decode_or_report(payload, Tick, key)
-                if tick is not None and self.schedule.runs(self.core.role, tick.step):
-                    self.on_tick(tick.step)
+                if tick is not None:
+                    self.granted = max(self.granted, tick.step)
+            elif key.startswith(self.ack_prefix):
+                ack = self.decode_or_report(payload, Ack, key)
+                if ack is not None and ack.end is not None:
+                    self.stop_after = min(self.stop_after, ack.step)
             elif key == self.control_key:
                 request = self.decode_or_report(payload, Control, key)
                 if request is not None and self.on_control(request):
@@ -178,19 +186,22 @@ class AppShell:
                 return 0
             else:
                 continue
-            self.try_iterate()
+            self.run_granted_steps()
             self.try_handover()
 
-    def on_tick(self, step: int) -> None:
-        if self.pending is not None:
-            self.report_error(f"tick {step} arrived while step {self.pending} is unfinished")
-            return
-        if not self.started:
-            for leaf, message in self.core.startup():
-                self.outputs[leaf].put(encode(message))
-            self.started = True
-        self.pending = step
-        self.step = step
+    def run_granted_steps(self) -> None:
+        """Run every granted step, in order, as far as the inputs have arrived."""
+        role = self.core.role
+        while self.step <= min(self.granted, self.stop_after):
+            if not self.started:
+                for leaf, message in self.core.startup():
+                    self.outputs[leaf].put(encode(message))
+                self.started = True
+            if self.schedule.runs(role, self.step):
+                if self.inbox.waiting_for(self.step):
+                    return
+                self.iterate(self.step)
+            self.step += 1
 
     def on_input(self, leaf: str, payload: bytes) -> None:
         key = keys.vehicle_topic(self.community, self.vehicle, leaf)
@@ -200,23 +211,22 @@ class AppShell:
             if error:
                 self.report_error(error)
 
-    def try_iterate(self) -> None:
-        step = self.pending
-        if step is None or self.inbox.waiting_for(step):
-            return
+    def iterate(self, step: int) -> None:
         self.core.new_mail(self.inbox.take(step))
         t = step * self.dt
         result = self.core.iterate(step, t)
         done_topic = DONE_TOPIC[self.core.role]
         if result.end is not None or all(leaf != done_topic for leaf, _ in result.outputs):
             # The done-topic output normally acknowledges the step; say it explicitly otherwise.
+            # An end request goes first, so every app hears of it before it could run step + 1.
             ack = Ack(step=step, t=t, source=self.core.role, end=result.end, reason=result.reason)
             self.ack_pub.put(encode(ack))
+            if result.end is not None:
+                self.stop_after = min(self.stop_after, step)
         for leaf, message in result.outputs:
             self.outputs[leaf].put(encode(message))
         for event in result.events:
             self.event_pub.put(encode(event))
-        self.pending = None
 
     # -- control: handover and retire (swap) -------------------------------------------------
     def on_control(self, request: Control) -> bool:
@@ -235,7 +245,7 @@ class AppShell:
         if request is None:
             return
         step = int(request.args["step"])
-        if self.inbox.waiting_for(step) or self.pending is not None:
+        if self.step != step or self.inbox.waiting_for(step):
             return
         held = {leaf: encode(message) for leaf, message in self.inbox.held.items()}
         handover = msgpack.packb({"progress": self.core.progress(), "held": held, "delivered": self.inbox.delivered})

@@ -12,8 +12,13 @@ def log_path(summary: dict) -> Path:
     return Path(summary["log"])
 
 
-def per_topic(path: Path, skip=("/events/launcher", "/status/", "/control/", "/reply/")) -> dict[str, list[bytes]]:
-    """Payload bytes of each topic in arrival order, leaving out wall-clock-dependent topics."""
+WALL_CLOCK_TOPICS = ("/events/launcher", "/status/", "/control/", "/reply/", "/clock/tick")
+
+
+def per_topic(path: Path, skip=WALL_CLOCK_TOPICS) -> dict[str, list[bytes]]:
+    """Payload bytes of each topic in arrival order, leaving out the topics whose content depends
+    on the wall clock: the clock's grants (how far ahead it lets the apps run), app status and
+    join/leave events, and control traffic."""
     topics = defaultdict(list)
     for record in read_log(path).records:
         if not any(part in record.topic for part in skip):
