@@ -32,16 +32,13 @@ class Strict(BaseModel):
 
 
 class Network(Strict):
-    """Where the apps meet. By default the launcher starts its own router on a free loopback
-    port and every app connects to it as a client. `connect` points the apps at an existing
-    router instead (for example on another host); `mode = "peer"` makes the apps peers that
-    listen on `listen` and connect to `connect` (Zenoh peers do not relay for each other, so
-    every peer must listen, see zenoh-notes.md section 1.1)."""
+    """Where the apps meet. By default (`connect` empty) the launcher starts its own router on a
+    free loopback port and every app connects to it as a client. `connect` points the apps, the
+    logger and the tools at existing Zenoh endpoints instead: a `nearsub router` (or zenohd) on
+    this or another host, or a Zenoh peer that routes for clients. Multicast scouting stays off;
+    endpoints are always explicit (SPEC section 3)."""
 
-    mode: Literal["client", "peer"] = "client"
     connect: list[str] = Field(default_factory=list)
-    listen: list[str] = Field(default_factory=lambda: ["tcp/127.0.0.1:0"])
-    multicast_scouting: bool = False
 
 
 class Start(Strict):
