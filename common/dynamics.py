@@ -41,28 +41,62 @@ class Environment:
         return waves.orbital_velocity(x, y, t, state, self.depth, self.wave_heading, self.u_sub)
 
 
-def body_forces(state: np.ndarray, inp: np.ndarray, vehicle: Vehicle) -> np.ndarray:
-    """Right-hand side of (5.11): surge force, sway force and yaw moment, shape (..., 3)."""
+INTERACTION_MODES = ("replace", "increment", "thesis")
+
+
+@dataclass(frozen=True)
+class Interaction:
+    """Interaction forces near the submarine, from the surrogate (thesis (5.20), SPEC section 5).
+
+    forces: (..., 3) X_s, Y_s, N_s [N, N, N m] in the frame's sign convention; weight: (...,) in
+    [0, 1], 1 well inside the surrogate's domain and 0 outside, smooth across the boundary, so no
+    force jumps. mode:
+    - "replace" (default): the surrogate stands for the u- and v-dependent hydrodynamic terms
+      X_u|u| u|u|, Y_v|v| v|v| + Y_uv u v, N_v|v| v|v| + N_uv u v; the rate, rigid-body and control
+      terms stay (the surrogate is quasi-static, it has no yaw-rate input);
+    - "thesis": (5.20) as printed, the surrogate replaces every hydrodynamic and rigid-body term;
+    - "increment": (5.11) unchanged plus weight * forces, where forces is the surrogate's
+      prediction minus the same model's free-stream value (it tends to zero far away).
+    """
+
+    forces: np.ndarray
+    weight: np.ndarray
+    mode: str = "replace"
+
+
+def body_forces(state: np.ndarray, inp: np.ndarray, vehicle: Vehicle, interaction: Interaction | None = None):
+    """Right-hand side of (5.11) (or (5.20) near the submarine): surge, sway, yaw; shape (..., 3)."""
     u, v, r = state[..., U], state[..., V], state[..., R]
     thrust, rudder = inp[..., X_PROP], inp[..., DELTA_R]
     m = vehicle.mass
     uu = u * u
-    surge = vehicle.X_uu * u * np.abs(u) + (vehicle.X_vr + m) * v * r + vehicle.X_rr * r * r + thrust
-    sway = (
-        vehicle.Y_vv * v * np.abs(v)
-        + vehicle.Y_rr * r * np.abs(r)
-        + vehicle.Y_uv * u * v
-        + (vehicle.Y_ur - m) * u * r
-        + vehicle.Y_uudr * uu * rudder
+    flow = np.stack(  # the u- and v-dependent terms a quasi-static surrogate stands for
+        [
+            vehicle.X_uu * u * np.abs(u),
+            vehicle.Y_vv * v * np.abs(v) + vehicle.Y_uv * u * v,
+            vehicle.N_vv * v * np.abs(v) + vehicle.N_uv * u * v,
+        ],
+        axis=-1,
     )
-    yaw = (
-        vehicle.N_vv * v * np.abs(v)
-        + vehicle.N_rr * r * np.abs(r)
-        + vehicle.N_uv * u * v
-        + vehicle.N_ur * u * r
-        + vehicle.N_uudr * uu * rudder
+    rates = np.stack(  # rate and rigid-body terms
+        [
+            (vehicle.X_vr + m) * v * r + vehicle.X_rr * r * r,
+            vehicle.Y_rr * r * np.abs(r) + (vehicle.Y_ur - m) * u * r,
+            vehicle.N_rr * r * np.abs(r) + vehicle.N_ur * u * r,
+        ],
+        axis=-1,
     )
-    return np.stack([surge, sway, yaw], axis=-1)
+    control = np.stack([thrust, vehicle.Y_uudr * uu * rudder, vehicle.N_uudr * uu * rudder], axis=-1)
+    if interaction is None:
+        return flow + rates + control
+    w = interaction.weight[..., None]
+    if interaction.mode == "replace":
+        return (1.0 - w) * flow + w * interaction.forces + rates + control
+    if interaction.mode == "thesis":
+        return (1.0 - w) * (flow + rates) + w * interaction.forces + control
+    if interaction.mode == "increment":
+        return flow + rates + control + w * interaction.forces
+    raise ValueError(f"interaction mode {interaction.mode!r} is not one of {INTERACTION_MODES}")
 
 
 def accelerations(forces: np.ndarray, vehicle: Vehicle) -> np.ndarray:
@@ -80,9 +114,16 @@ def accelerations(forces: np.ndarray, vehicle: Vehicle) -> np.ndarray:
     return np.stack([udot, vdot, rdot], axis=-1)
 
 
-def derivatives(state: np.ndarray, inp: np.ndarray, vehicle: Vehicle, env: Environment, t: float = 0.0) -> np.ndarray:
+def derivatives(
+    state: np.ndarray,
+    inp: np.ndarray,
+    vehicle: Vehicle,
+    env: Environment,
+    t: float = 0.0,
+    interaction: Interaction | None = None,
+) -> np.ndarray:
     """Time derivative of the full state [u', v', r', x', y', psi'] at time t."""
-    acc = accelerations(body_forces(state, inp, vehicle), vehicle)
+    acc = accelerations(body_forces(state, inp, vehicle, interaction), vehicle)
     u, v, r, psi = state[..., U], state[..., V], state[..., R], state[..., PSI]
     cos_psi, sin_psi = np.cos(psi), np.sin(psi)
     xdot = u * cos_psi - v * sin_psi - env.u_sub
@@ -102,15 +143,18 @@ def step(
     dt: float,
     method: str = "euler",
     t: float = 0.0,
+    interaction: Interaction | None = None,
 ) -> np.ndarray:
-    """Advance the state from time t by dt: explicit Euler (5.12) by default, RK4 on request."""
+    """Advance the state from time t by dt: explicit Euler (5.12) by default, RK4 on request.
+    The interaction forces are evaluated once per step, at the start (held over RK4's stages)."""
+    f = interaction
     if method == "euler":
-        return state + derivatives(state, inp, vehicle, env, t) * dt
+        return state + derivatives(state, inp, vehicle, env, t, f) * dt
     if method == "rk4":
-        k1 = derivatives(state, inp, vehicle, env, t)
-        k2 = derivatives(state + 0.5 * dt * k1, inp, vehicle, env, t + 0.5 * dt)
-        k3 = derivatives(state + 0.5 * dt * k2, inp, vehicle, env, t + 0.5 * dt)
-        k4 = derivatives(state + dt * k3, inp, vehicle, env, t + dt)
+        k1 = derivatives(state, inp, vehicle, env, t, f)
+        k2 = derivatives(state + 0.5 * dt * k1, inp, vehicle, env, t + 0.5 * dt, f)
+        k3 = derivatives(state + 0.5 * dt * k2, inp, vehicle, env, t + 0.5 * dt, f)
+        k4 = derivatives(state + dt * k3, inp, vehicle, env, t + dt, f)
         return state + (dt / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
     raise ValueError(f"integration method {method!r} is not one of 'euler', 'rk4'")
 

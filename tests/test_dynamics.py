@@ -35,3 +35,28 @@ def test_batch_step_equals_single_steps_bitwise(vehicle, method, u_sub):
     for i in range(n):
         single = step(states[i], inputs[i], vehicle, env, 0.05, method)
         assert np.array_equal(batch[i], single)
+
+
+def test_interaction_forces_replace_only_the_flow_terms():
+    from nearsub.common.dynamics import Interaction, body_forces
+    from nearsub.common.vehicles import REMUS100 as v
+
+    state = np.array([1.5, 0.1, 0.05, 0.0, 0.0, 0.0])
+    inp = np.array([3.0, 0.1])
+    plain = body_forces(state, inp, v)
+    surrogate = np.array([-2.0, 5.0, -1.0])
+    outside = body_forces(state, inp, v, Interaction(surrogate, np.asarray(0.0)))
+    inside = body_forces(state, inp, v, Interaction(surrogate, np.asarray(1.0)))
+    half = body_forces(state, inp, v, Interaction(surrogate, np.asarray(0.5)))
+    np.testing.assert_allclose(outside, plain, rtol=1e-14)
+    u, vv, r = state[:3]
+    flow = np.array(
+        [v.X_uu * u * abs(u), v.Y_vv * vv * abs(vv) + v.Y_uv * u * vv, v.N_vv * vv * abs(vv) + v.N_uv * u * vv]
+    )
+    np.testing.assert_allclose(inside, plain - flow + surrogate, rtol=1e-12)
+    np.testing.assert_allclose(half, 0.5 * (inside + outside), rtol=1e-12)  # linear in the weight: no jump
+    increment = body_forces(state, inp, v, Interaction(surrogate, np.asarray(1.0), "increment"))
+    np.testing.assert_allclose(increment, plain + surrogate, rtol=1e-12)
+    thesis = body_forces(state, inp, v, Interaction(surrogate, np.asarray(1.0), "thesis"))
+    control = np.array([inp[0], v.Y_uudr * u * u * inp[1], v.N_uudr * u * u * inp[1]])
+    np.testing.assert_allclose(thesis, surrogate + control, rtol=1e-12)  # (5.20) as printed
