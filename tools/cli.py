@@ -6,7 +6,13 @@ Tool modules are imported only when their subcommand runs, so `nearsub --help` s
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+
+# One BLAS thread per process: the apps and tools are many small processes on few cores, where
+# OpenBLAS threading made a GP fit 25x slower (measured on the 2-core machine). Override by
+# setting the variable.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 
 def _launch(args):
@@ -145,6 +151,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--connect", action="append", default=[], help="other routers to join")
     p.set_defaults(func=_router)
 
+    from .surrogate_cli import add_bench_parser, add_parser
+
+    add_parser(sub)
+
     p = sub.add_parser("validate", help="physics validation cases (thesis 5.10) and scenario checks")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_validate)
@@ -155,6 +165,7 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--mission", default=None, help="mission file (default: missions/alpha.toml)")
     t.add_argument("--repeats", type=int, default=3)
     t.add_argument("--json", action="store_true")
+    add_bench_parser(b)
     p.set_defaults(func=_bench)
     return parser
 

@@ -1,0 +1,89 @@
+"""The surrogate server app: answers GP queries on nearsub/<community>/surrogate (SPEC sections 1, 3).
+
+    python -m nearsub.apps.surrogate [--model PATH] --community NAME --connect ENDPOINT [--instance NAME]
+    python -m nearsub.apps.surrogate [--model PATH] --run RUNFILE [--instance NAME]
+
+Each query is a `SurrogateQuery` (common/surrogate.py) with a batch of points; the whole batch is
+predicted at once and answered with a `SurrogateReply`. A malformed query gets an error reply
+naming the field and value, and the server carries on. Without --model the shipped model is
+used, or, until one ships, the analytic test fixture (with a warning). The server stops on
+SIGTERM/SIGINT, when its parent dies (PR_SET_PDEATHSIG) or when the launcher's token goes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import NoReturn
+
+from nearsub.apps.shell import prepare_process
+from nearsub.common import keys
+from nearsub.common.bus import Bus, Endpoints, signal_self
+from nearsub.common.messages import MessageError
+from nearsub.common.mission import MissionError, RunConfig
+from nearsub.common.modelfile import ModelFileError
+from nearsub.common.surrogate import Surrogate, answer_query, load_surrogate, surrogate_key
+
+# Error replies are cut to this many characters: a 100,000-point batch of NaNs would otherwise
+# name every value (a nearsub choice; the first errors say what is wrong).
+MAX_ERROR_CHARS = 2000
+
+
+def serve(bus: Bus, community: str, surrogate: Surrogate, instance: str = "surrogate") -> NoReturn:
+    """Answer queries until the process is stopped; the liveliness token
+    nearsub/<community>/alive/surrogate/<instance> says the server is up."""
+    requests = bus.serve(surrogate_key(community))
+    bus.on_liveliness_lost(keys.alive(community, "launcher", "*"), signal_self())
+    bus.token(keys.alive(community, "surrogate", instance))
+    print(
+        f"[{instance}] serving {surrogate_key(community)}: model {surrogate.model_id} from {surrogate.source} "
+        f"({surrogate.loaded.provenance.get('method', 'no method recorded')})",
+        flush=True,
+    )
+    while True:
+        request = requests.recv()
+        try:
+            answer = answer_query(surrogate, request.payload, instance)
+        except MessageError as exc:
+            text = str(exc)
+            if len(text) > MAX_ERROR_CHARS:
+                text = text[:MAX_ERROR_CHARS] + f" ... ({len(text) - MAX_ERROR_CHARS} more characters)"
+            print(f"[{instance}] rejected query: {text}", file=sys.stderr, flush=True)
+            request.reply_error(text)
+        else:
+            request.reply(answer)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description="nearsub surrogate server: GP predictions of X', Y', N'")
+    parser.add_argument("--model", help="surrogate model file (default: the shipped model)")
+    parser.add_argument("--run", help="run configuration written by `nearsub launch` (community and endpoints)")
+    parser.add_argument("--community", help="mission (community) name; overrides --run")
+    parser.add_argument("--connect", action="append", metavar="ENDPOINT", help="router endpoint; overrides --run")
+    parser.add_argument("--instance", default="surrogate", help="instance name for the liveliness token")
+    args = parser.parse_args(argv)
+    prepare_process()
+    community, connect = args.community, args.connect
+    if args.run:
+        try:
+            run = RunConfig.load(args.run)
+        except (OSError, ValueError, MissionError) as exc:
+            print(f"[{args.instance}] cannot read {args.run}: {exc}", file=sys.stderr)
+            return 2
+        community, connect = community or run.mission.name, connect or run.connect
+    if not community or not connect:
+        parser.error("give --run RUNFILE, or --community NAME and --connect ENDPOINT")
+    try:
+        surrogate = load_surrogate(args.model)
+    except ModelFileError as exc:
+        print(f"[{args.instance}] {exc}", file=sys.stderr)
+        return 2
+    try:
+        with Bus(Endpoints("client", tuple(connect))) as bus:
+            serve(bus, community, surrogate, args.instance)
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,128 @@
+"""The surrogate server as a process: its own loopback router, good, batched and malformed queries,
+the liveliness token, start-up from a run file, and a clean SIGTERM."""
+
+import subprocess
+import sys
+import time
+import uuid
+
+import msgpack
+import numpy as np
+import pytest
+
+from conftest import ALPHA
+from nearsub.common import keys
+from nearsub.common import surrogate as sg
+from nearsub.common.bus import ReplyError
+from nearsub.common.mission import RunConfig, load_mission
+from nearsub.common.modelfile import load_model
+from nearsub.tools.surrogate_cli import child_env, local_server, write_analytic_model
+
+pytestmark = pytest.mark.timeout(90)
+
+
+@pytest.fixture(scope="module")
+def model_path(tmp_path_factory):
+    return write_analytic_model(tmp_path_factory.mktemp("surrogate") / "analytic.npz")
+
+
+@pytest.fixture(scope="module")
+def community():
+    return f"t{uuid.uuid4().hex[:10]}"
+
+
+@pytest.fixture(scope="module")
+def server(model_path, community):
+    """(client bus, router endpoint); the router and server processes are killed at teardown."""
+    with local_server(model_path, community) as handle:
+        yield handle
+
+
+@pytest.fixture(scope="module")
+def querier(server, community):
+    bus, _ = server
+    return bus.querier(sg.surrogate_key(community), timeout=5.0)
+
+
+@pytest.fixture(scope="module")
+def surrogate(model_path):
+    return sg.Surrogate(load_model(model_path))
+
+
+def test_liveliness_token_is_visible(server, community):
+    bus, _ = server
+    assert bus.alive(keys.alive(community, "surrogate", "*")) == [f"nearsub/{community}/alive/surrogate/surrogate"]
+
+
+def test_single_point_equals_the_in_process_prediction(querier, surrogate):
+    point = sg.sample_feasible(1, seed=5)
+    reply = sg.decode_reply(querier.ask(sg.encode_query(point, step=3, t=0.15, source="test")))
+    expected = surrogate.predict(point)
+    assert (reply.step, reply.t, reply.source) == (3, 0.15, "surrogate")
+    assert reply.model_id == surrogate.model_id and reply.output_names == list(sg.OUTPUT_NAMES)
+    p = reply.prediction()
+    assert np.array_equal(p.mean, expected.mean) and np.array_equal(p.std, expected.std)
+    assert p.in_domain.tolist() == [True] and p.constraints_ok.tolist() == [True]
+
+
+def test_a_batch_of_1000_points_with_flags(querier, surrogate):
+    X = sg.sample_feasible(1000, seed=6)
+    X[0, 0] = 0.9  # outside the bounds
+    X[1, 1] = 0.059  # the infeasible low corner
+    reply = sg.decode_reply(querier.ask(sg.encode_query(X)))
+    p, expected = reply.prediction(), surrogate.predict(X)
+    assert p.mean.shape == (1000, 3)
+    assert np.array_equal(p.mean, expected.mean) and np.array_equal(p.std, expected.std)
+    assert np.array_equal(p.in_domain, expected.in_domain) and np.array_equal(p.constraints_ok, expected.constraints_ok)
+    assert not p.in_domain[0] and not p.constraints_ok[1] and p.valid[2:].all()
+
+
+@pytest.mark.parametrize(
+    "payload, expected",
+    [
+        (b"\xc1not msgpack", "not valid msgpack"),
+        (msgpack.packb({"step": 0, "t": 0.0}), "field 'points'"),
+        (msgpack.packb({"step": 0, "t": 0.0, "points": [[0.1, 0.07, 3.0, float("nan"), 14.0, 7.0]]}), "'points.0.3'"),
+    ],
+)
+def test_malformed_queries_get_an_error_and_the_server_keeps_serving(querier, surrogate, payload, expected):
+    with pytest.raises(ReplyError) as info:
+        querier.ask(payload)
+    assert "surrogate query" in str(info.value) and expected in str(info.value)
+    point = sg.sample_feasible(1, seed=8)
+    reply = sg.decode_reply(querier.ask(sg.encode_query(point)))
+    assert np.array_equal(reply.prediction().mean, surrogate.predict(point).mean)
+
+
+def test_a_second_instance_from_a_run_file_and_clean_sigterm(server, model_path, tmp_path):
+    bus, endpoint = server
+    other = f"t{uuid.uuid4().hex[:10]}"
+    run_file = tmp_path / "run.json"
+    RunConfig(mission=load_mission(ALPHA, [f"name={other}"]), connect=[endpoint]).save(run_file)
+    argv = [sys.executable, "-m", "nearsub.apps.surrogate", "--model", str(model_path), "--run", str(run_file)]
+    process = subprocess.Popen(
+        [*argv, "--instance", "second"], env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+    )
+    try:
+        end = time.monotonic() + 30
+        while not bus.alive(keys.alive(other, "surrogate", "second")):
+            assert process.poll() is None and time.monotonic() < end, "the second server did not start"
+            time.sleep(0.05)
+        querier = bus.querier(sg.surrogate_key(other), timeout=10.0)
+        reply = sg.decode_reply(querier.ask(sg.encode_query(sg.sample_feasible(1))))
+        assert reply.source == "second"
+        process.terminate()
+        code = process.wait(timeout=20)
+        output = process.stdout.read()
+        assert code == 128 + 15, output  # SystemExit from the SIGTERM handler: the session closed
+        assert "ANALYTIC TEST FIXTURE" in output  # says which model it serves
+    finally:
+        process.kill()
+        process.wait()
+
+
+def test_missing_arguments_exit_with_2():
+    result = subprocess.run(
+        [sys.executable, "-m", "nearsub.apps.surrogate", "--community", "x"], capture_output=True, text=True
+    )
+    assert result.returncode == 2 and "--connect" in result.stderr

@@ -1,0 +1,344 @@
+"""`nearsub surrogate info|predict` (inspect and query a surrogate model file) and
+`nearsub bench surrogate` (prediction, query and fit timings against their targets).
+
+Without a MODEL argument both commands use the shipped model, or, until one ships, the analytic
+test fixture (with a warning on stderr; common/surrogate.py).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+
+from nearsub.common import keys
+from nearsub.common.bus import Bus, Endpoints, free_tcp_port
+from nearsub.common.gp import GaussianProcess, MultiOutputGP
+from nearsub.common.modelfile import ModelFileError, load_model
+from nearsub.common.surrogate import (
+    BOUNDS,
+    CONSTRAINT_NAMES,
+    INPUT_NAMES,
+    Surrogate,
+    analytic_coefficients,
+    constraint_values,
+    decode_reply,
+    encode_query,
+    load_surrogate,
+    sample_feasible,
+    surrogate_key,
+)
+
+# Child processes (router, server, fixture fit) use one BLAS thread: on a busy 2-core machine
+# OpenBLAS's threads made an n = 100 fit 25x and a 10,000-point batch 5x slower (measured).
+SINGLE_THREAD_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+# Targets of the surrogate issue (issue 4): in-process point and batch, query round trip, fit.
+TARGETS = {"point_us": 50.0, "batch_ms": 50.0, "query_median_us": 500.0, "query_p99_us": 2000.0, "fit_s": 1.0}
+
+
+def child_env() -> dict[str, str]:
+    """This environment with single-threaded BLAS, for the child processes we start."""
+    return {**os.environ, **SINGLE_THREAD_ENV}
+
+
+def write_analytic_model(path: str | os.PathLike, n: int = 100, seed: int = 0) -> Path:
+    """Write the analytic test fixture to `path`, fitted in a child process with one BLAS thread."""
+    code = (
+        "import sys; from nearsub.common.surrogate import analytic_model; "
+        "analytic_model(int(sys.argv[2]), int(sys.argv[3]), sys.argv[1])"
+    )
+    subprocess.run([sys.executable, "-c", code, str(path), str(n), str(seed)], env=child_env(), check=True)
+    return Path(path)
+
+
+def _stop(process: subprocess.Popen) -> None:
+    """SIGTERM the process group we started, SIGKILL it if it has not gone after 5 s."""
+    for signum, wait in ((signal.SIGTERM, 5.0), (signal.SIGKILL, 10.0)):
+        if process.poll() is not None:
+            return
+        try:
+            os.killpg(process.pid, signum)
+            process.wait(timeout=wait)
+        except (ProcessLookupError, subprocess.TimeoutExpired):
+            pass
+
+
+@contextmanager
+def local_server(model_path: str | os.PathLike, community: str, timeout: float = 30.0) -> Iterator[tuple[Bus, str]]:
+    """A router on a free loopback port and a surrogate server (separate processes); yields a client
+    bus that already sees the server's liveliness token, and the router's endpoint. Both processes
+    are stopped on exit."""
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    started: list[subprocess.Popen] = []
+    with tempfile.TemporaryFile() as output:
+        try:
+            for argv in (
+                ["nearsub.apps.router", "--listen", endpoint, "--with-parent"],
+                ["nearsub.apps.surrogate", "--model", str(model_path), "--community", community, "--connect", endpoint],
+            ):
+                started.append(
+                    subprocess.Popen(
+                        [sys.executable, "-m", *argv],
+                        stdout=output,
+                        stderr=subprocess.STDOUT,
+                        stdin=subprocess.DEVNULL,
+                        env=child_env(),
+                        process_group=0,
+                    )
+                )
+            with Bus(Endpoints("client", (endpoint,))) as bus:
+                token = keys.alive(community, "surrogate", "*")
+                end = time.monotonic() + timeout
+                while not bus.alive(token, timeout=0.5):
+                    if time.monotonic() > end or any(p.poll() is not None for p in started):
+                        output.seek(0)
+                        text = output.read().decode(errors="replace")
+                        raise RuntimeError(f"surrogate server did not come up on {endpoint}:\n{text}")
+                    time.sleep(0.05)
+                yield bus, endpoint
+        finally:
+            for process in reversed(started):
+                _stop(process)
+
+
+# ---------------------------------------------------------------------------------- info
+def describe(surrogate: Surrogate) -> dict:
+    """What `info` shows: the model's identity, domain, training size, hyperparameters, provenance."""
+    loaded = surrogate.loaded
+    gps = surrogate.model.gps
+    return {
+        "model": surrogate.source,
+        "model_id": surrogate.model_id,
+        "format_version": loaded.format_version,
+        "saved_utc": loaded.saved_utc,
+        "training_points": int(gps[0].X_train_.shape[0]),
+        "inputs": [
+            {
+                "name": name,
+                "unit": loaded.units.get(name, ""),
+                "bounds": [float(low), float(high)],
+                "length_scales": {
+                    out: float(gp.length_scales[k]) for out, gp in zip(loaded.output_names, gps, strict=True)
+                },
+            }
+            for k, (name, (low, high)) in enumerate(zip(loaded.input_names, loaded.bounds, strict=True))
+        ],
+        "outputs": [
+            {
+                "name": name,
+                "unit": loaded.units.get(name, ""),
+                "signal_std": math.sqrt(gp.signal_variance) * gp.y_std_,
+                "noise_std": math.sqrt(gp.noise_variance) * gp.y_std_,
+                "mean": gp.y_mean_,
+                "log_marginal_likelihood": gp.log_marginal_likelihood_value_,
+            }
+            for name, gp in zip(loaded.output_names, gps, strict=True)
+        ],
+        "constraints": loaded.constraints,
+        "provenance": loaded.provenance,
+    }
+
+
+def _load_or_report(model: str | None) -> Surrogate | None:
+    try:
+        return load_surrogate(model)
+    except ModelFileError as exc:
+        print(f"nearsub surrogate: {exc}", file=sys.stderr)
+        return None
+
+
+def info_command(args) -> int:
+    surrogate = _load_or_report(args.model)
+    if surrogate is None:
+        return 2
+    info = describe(surrogate)
+    if args.json:
+        print(json.dumps(info))
+        return 0
+    outputs = [o["name"] for o in info["outputs"]]
+    print(f"model       {info['model']}")
+    print(f"model id    {info['model_id']}  (format version {info['format_version']}, saved {info['saved_utc']})")
+    print(f"training    {info['training_points']} points, {len(info['inputs'])} inputs, {len(outputs)} outputs")
+    print(f"{'input':<10} {'unit':<5} {'lower':>8} {'upper':>8}   length scales in input units ({', '.join(outputs)})")
+    for item in info["inputs"]:
+        scales = " ".join(f"{v:9.3g}" for v in item["length_scales"].values())
+        print(f"{item['name']:<10} {item['unit']:<5} {item['bounds'][0]:>8g} {item['bounds'][1]:>8g}   {scales}")
+    print(f"{'output':<10} {'mean':>10} {'signal std':>11} {'noise std':>10} {'log ML':>9}   unit")
+    for o in info["outputs"]:
+        print(
+            f"{o['name']:<10} {o['mean']:>10.3g} {o['signal_std']:>11.3g} {o['noise_std']:>10.3g} "
+            f"{o['log_marginal_likelihood']:>9.1f}   {o['unit']}"
+        )
+    print("constraints")
+    for name, text in info["constraints"].items():
+        print(f"  {name}: {text}")
+    print("provenance")
+    for name, value in info["provenance"].items():
+        print(f"  {name}: {value}")
+    return 0
+
+
+# ------------------------------------------------------------------------------- predict
+def parse_point(items: list[str]) -> tuple[str | None, np.ndarray]:
+    """[MODEL] NAME=VALUE ... -> (model path or None, the point in INPUT_NAMES order).
+    Raises ValueError naming the unknown, missing or unreadable inputs."""
+    model = items[0] if items and "=" not in items[0] else None
+    values: dict[str, float] = {}
+    for item in items[1:] if model is not None else items:
+        name, sep, text = item.partition("=")
+        if not sep or name not in INPUT_NAMES:
+            raise ValueError(f"expected NAME=VALUE with NAME one of {', '.join(INPUT_NAMES)}, got {item!r}")
+        try:
+            values[name] = float(text)
+        except ValueError:
+            raise ValueError(f"{name}: not a number: {text!r}") from None
+    missing = [name for name in INPUT_NAMES if name not in values]
+    if missing:
+        raise ValueError(f"missing inputs: {', '.join(missing)}")
+    return model, np.array([values[name] for name in INPUT_NAMES])
+
+
+def predict_command(args) -> int:
+    try:
+        model, point = parse_point(args.items)
+    except ValueError as exc:
+        print(f"nearsub surrogate predict: {exc}", file=sys.stderr)
+        return 2
+    surrogate = _load_or_report(model)
+    if surrogate is None:
+        return 2
+    p = surrogate.predict(point)
+    outside = [
+        name for name, x, (low, high) in zip(INPUT_NAMES, point, surrogate.bounds, strict=True) if not low <= x <= high
+    ]
+    violated = [name for name, g in zip(CONSTRAINT_NAMES, constraint_values(point)[0], strict=True) if not g >= 0.0]
+    result = {
+        "model_id": surrogate.model_id,
+        "inputs": dict(zip(INPUT_NAMES, point.tolist(), strict=True)),
+        "mean": dict(zip(surrogate.output_names, p.mean[0].tolist(), strict=True)),
+        "std": dict(zip(surrogate.output_names, p.std[0].tolist(), strict=True)),
+        "in_domain": bool(p.in_domain[0]),
+        "constraints_ok": bool(p.constraints_ok[0]),
+        "outside_bounds": outside,
+        "violated_constraints": violated,
+    }
+    if args.json:
+        print(json.dumps(result))
+        return 0
+    for name in surrogate.output_names:
+        print(f"{name} = {result['mean'][name]: .6e} +/- {result['std'][name]:.2e}")
+    print("in domain (table 4.2):   " + ("yes" if not outside else f"NO, outside: {', '.join(outside)}"))
+    print("constraints (4.4)-(4.7): " + ("ok" if not violated else f"VIOLATED: {', '.join(violated)}"))
+    if outside or violated:
+        print("(answered with the GP's value at this point; it is not trained there)")
+    return 0
+
+
+# --------------------------------------------------------------------------------- bench
+def _times(call: Callable[[], object], repeats: int) -> np.ndarray:
+    """Wall seconds of each of `repeats` calls."""
+    out = np.empty(repeats)
+    for i in range(repeats):
+        start = time.perf_counter()
+        call()
+        out[i] = time.perf_counter() - start
+    return out
+
+
+def bench_surrogate(args) -> int:
+    X = sample_feasible(10_000, seed=1)
+    X_train = sample_feasible(100, seed=0)
+    Y_train = analytic_coefficients(X_train)
+    with tempfile.TemporaryDirectory(prefix="nearsub-bench-") as folder:
+        path = write_analytic_model(Path(folder) / "analytic.npz", n=100)
+        surrogate = Surrogate(load_model(path))
+        point = X[:1]
+        _times(lambda: surrogate.predict(point), 200)  # warm-up
+        core = _times(lambda: surrogate.model.predict_point(point[0]), args.repeats)
+        flagged = _times(lambda: surrogate.predict(point), args.repeats)
+        batch = _times(lambda: surrogate.predict(X), 10)
+        community = f"benchsurrogate{os.getpid()}"
+        with local_server(path, community) as (bus, _):
+            querier = bus.querier(surrogate_key(community), timeout=2.0)
+            one, thousand = encode_query(point), encode_query(X[:1000])
+            _times(lambda: querier.ask(one), 200)  # warm-up: connections, caches
+            query = _times(lambda: decode_reply(querier.ask(one)), args.repeats)
+            query_batch = _times(lambda: decode_reply(querier.ask(thousand)), 20)
+            same = np.array_equal(decode_reply(querier.ask(one)).prediction().mean, surrogate.predict(point).mean)
+    fit3 = _times(lambda: MultiOutputGP(bounds=BOUNDS, n_restarts=5).fit(X_train, Y_train), args.fit_repeats)
+    fit1 = _times(lambda: GaussianProcess(bounds=BOUNDS, n_restarts=5).fit(X_train, Y_train[:, 1]), args.fit_repeats)
+    med = statistics.median
+    result = {
+        "model": "analytic fixture: 100 training points, 6 inputs, 3 outputs",
+        "blas_threads": os.environ.get("OPENBLAS_NUM_THREADS", "default"),
+        "point_core_us": med(core) * 1e6,
+        "point_flagged_us": med(flagged) * 1e6,
+        "batch_10000_ms": med(batch) * 1e3,
+        "query_median_us": med(query) * 1e6,
+        "query_p99_us": float(np.percentile(query, 99)) * 1e6,
+        "query_1000_points_ms": med(query_batch) * 1e3,
+        "query_equals_inprocess": bool(same),
+        "fit_3_outputs_s": med(fit3),
+        "fit_1_output_s": med(fit1),
+        "targets": TARGETS,
+    }
+    if args.json:
+        print(json.dumps(result))
+        return 0
+
+    def row(label: str, value: float, unit: str, target: float | None = None) -> None:
+        verdict = "" if target is None else f"target <= {target:g} {unit}  " + ("ok" if value <= target else "MISSED")
+        print(f"  {label:<52} {value:9.1f} {unit:<3} {verdict}")
+
+    print(f"surrogate bench: {result['model']}; OPENBLAS_NUM_THREADS={result['blas_threads']}")
+    row("in-process point, mean+std of 3 outputs (GP core)", result["point_core_us"], "us", TARGETS["point_us"])
+    row("in-process point with domain flags (Surrogate)", result["point_flagged_us"], "us")
+    row("in-process batch of 10,000 points, mean+std+flags", result["batch_10000_ms"], "ms", TARGETS["batch_ms"])
+    row("Zenoh query round trip, 1 point: median", result["query_median_us"], "us", TARGETS["query_median_us"])
+    row("Zenoh query round trip, 1 point: p99", result["query_p99_us"], "us", TARGETS["query_p99_us"])
+    row("Zenoh query round trip, 1,000 points: median", result["query_1000_points_ms"], "ms")
+    row("fit, 5 restarts, n = 100, d = 6, 3 outputs", result["fit_3_outputs_s"], "s", TARGETS["fit_s"])
+    row("fit, 5 restarts, n = 100, d = 6, 1 output", result["fit_1_output_s"], "s")
+    print(f"  query reply equals the in-process prediction: {'yes' if same else 'NO'}")
+    return 0
+
+
+# ------------------------------------------------------------------------------- parsers
+def add_parser(subparsers) -> None:
+    """Register `surrogate info` and `surrogate predict` on the `nearsub` command line."""
+    p = subparsers.add_parser("surrogate", help="inspect and query a surrogate model file")
+    sub = p.add_subparsers(dest="surrogate_command", required=True)
+    t = sub.add_parser("info", help="inputs, bounds, training size, hyperparameters and provenance")
+    t.add_argument("model", nargs="?", help="model file (default: the shipped model)")
+    t.add_argument("--json", action="store_true")
+    t.set_defaults(func=info_command)
+    t = sub.add_parser(
+        "predict",
+        help="mean +/- std of X', Y', N' at one point, with the domain flags",
+        usage=f"nearsub surrogate predict [-h] [--json] [MODEL] {' '.join(n + '=...' for n in INPUT_NAMES)}",
+    )
+    t.add_argument(
+        "items", nargs="+", metavar="ARG", help="optional model file, then NAME=VALUE for each of the six inputs"
+    )
+    t.add_argument("--json", action="store_true")
+    t.set_defaults(func=predict_command)
+
+
+def add_bench_parser(bench_subparsers) -> None:
+    """Register `bench surrogate`."""
+    t = bench_subparsers.add_parser("surrogate", help="surrogate prediction, query round trip and fit timings")
+    t.add_argument("--repeats", type=int, default=2000, help="timed single-point calls (default 2000)")
+    t.add_argument("--fit-repeats", type=int, default=3, help="timed fits (default 3)")
+    t.add_argument("--json", action="store_true")
+    t.set_defaults(func=bench_surrogate)
