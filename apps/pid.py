@@ -5,7 +5,7 @@ from nearsub.common.cores import PidCore
 
 
 def main(argv=None) -> int:
-    return main_for(PidCore, "nearsub pid app", argv)
+    return main_for(lambda mission, surrogate: PidCore(mission), "nearsub pid app", argv)
 
 
 if __name__ == "__main__":

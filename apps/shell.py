@@ -24,12 +24,15 @@ import ctypes
 import signal
 import sys
 import uuid
+from collections.abc import Callable
 
 import msgpack
 
+from nearsub.apps.services import RemoteSurrogate
 from nearsub.common import keys
 from nearsub.common.bus import Bus, DeadlineExceeded, Endpoints, deadline, signal_self
-from nearsub.common.lifecycle import DONE_TOPIC, Core, Inbox, Schedule
+from nearsub.common.interaction import ServiceError
+from nearsub.common.lifecycle import DONE_TOPIC, Core, Inbox, Iteration, Schedule
 from nearsub.common.messages import (
     VEHICLE_TOPICS,
     Ack,
@@ -81,10 +84,11 @@ def load_run(args) -> RunConfig:
 
 
 class AppShell:
-    """Runs one core under the lock-step protocol."""
+    """Runs one core under the lock-step protocol. `core_factory(mission, surrogate)` builds the
+    core once the bus is open; `surrogate` is the remote surrogate server when the mission needs it."""
 
-    def __init__(self, core: Core, run: RunConfig, instance: str):
-        self.core = core
+    def __init__(self, core_factory: Callable[..., Core], run: RunConfig, instance: str):
+        self.core_factory = core_factory
         self.run = run
         self.instance = instance
         mission = run.mission
@@ -92,8 +96,6 @@ class AppShell:
         self.vehicle = mission.vehicle_name
         self.dt = mission.dt
         self.schedule = Schedule(mission.periods())
-        self.inbox = Inbox(core.inputs, self.schedule)
-        self.input_of_key = {keys.vehicle_topic(c, self.vehicle, leaf): leaf for leaf in core.inputs}
         self.tick_key = keys.tick(c)
         self.end_key = keys.mission_end(c)
         self.control_key = keys.control(c, instance)
@@ -111,6 +113,11 @@ class AppShell:
         with Bus(Endpoints("client", tuple(self.run.connect))) as bus:
             self.bus = bus
             c = self.community
+            mission = self.run.mission
+            surrogate = RemoteSurrogate(bus, c) if mission.needs_surrogate else None
+            self.core = self.core_factory(mission, surrogate)
+            self.inbox = Inbox(self.core.inputs, self.schedule)
+            self.input_of_key = {keys.vehicle_topic(c, self.vehicle, leaf): leaf for leaf in self.core.inputs}
             self.stream = bus.stream(keys.everything(c))
             bus.on_liveliness_lost(keys.alive(c, "launcher", "*"), signal_self())
             self.outputs = {
@@ -214,7 +221,11 @@ class AppShell:
     def iterate(self, step: int) -> None:
         self.core.new_mail(self.inbox.take(step))
         t = step * self.dt
-        result = self.core.iterate(step, t)
+        try:
+            result = self.core.iterate(step, t)
+        except ServiceError as exc:  # e.g. the surrogate server stopped answering: end, naming it
+            self.report_error(str(exc))
+            result = Iteration(end="error", reason=str(exc))
         done_topic = DONE_TOPIC[self.core.role]
         if result.end is not None or all(leaf != done_topic for leaf, _ in result.outputs):
             # The done-topic output normally acknowledges the step; say it explicitly otherwise.
@@ -298,7 +309,7 @@ def main_for(core_factory, description: str, argv=None) -> int:
     except MissionError as exc:
         print(f"[{args.instance}] {exc}", file=sys.stderr)
         return 2
-    shell = AppShell(core_factory(run.mission), run, args.instance)
+    shell = AppShell(core_factory, run, args.instance)
     try:
         return shell.serve(args.takeover, args.resume_step)
     except KeyboardInterrupt:

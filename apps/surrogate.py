@@ -63,7 +63,7 @@ def main(argv=None) -> int:
     parser.add_argument("--instance", default="surrogate", help="instance name for the liveliness token")
     args = parser.parse_args(argv)
     prepare_process()
-    community, connect = args.community, args.connect
+    community, connect, model = args.community, args.connect, args.model
     if args.run:
         try:
             run = RunConfig.load(args.run)
@@ -71,10 +71,11 @@ def main(argv=None) -> int:
             print(f"[{args.instance}] cannot read {args.run}: {exc}", file=sys.stderr)
             return 2
         community, connect = community or run.mission.name, connect or run.connect
+        model = model or run.mission.surrogate.model or None
     if not community or not connect:
         parser.error("give --run RUNFILE, or --community NAME and --connect ENDPOINT")
     try:
-        surrogate = load_surrogate(args.model)
+        surrogate = load_surrogate(model)
     except ModelFileError as exc:
         print(f"[{args.instance}] {exc}", file=sys.stderr)
         return 2

@@ -10,9 +10,11 @@ import math
 import numpy as np
 
 from . import behaviours, control, dynamics, events
+from .interaction import ForceModel, geometry_outside, interaction_at
 from .lifecycle import InProcessResult, Iteration, Schedule, run_inprocess
-from .messages import Desired, Event, HelmProgress, Input, Message, State
+from .messages import Desired, Event, Forces, HelmProgress, Input, Message, State
 from .mission import Mission
+from .surrogate import load_surrogate
 
 
 def state_array(message: State) -> np.ndarray:
@@ -25,14 +27,23 @@ def state_message(values: np.ndarray, step: int, t: float, source: str) -> State
 
 
 class HelmCore:
-    """pHelmIvP: the waypoints behaviour (thesis section 5.7) turning x_k into x_d,k."""
+    """pHelmIvP: the waypoints behaviour (thesis 5.7) or the modified one (6.3.2), optionally with
+    N_uv compensation (6.3.1, which asks the surrogate for N_s), turning x_k into x_d,k."""
 
     role = "helm"
     inputs = ("state",)
     outputs = ("desired", "helm")
 
-    def __init__(self, mission: Mission):
+    def __init__(self, mission: Mission, surrogate: ForceModel | None = None):
         self.settings = mission.apps.helm
+        self.vehicle = mission.vehicle_model
+        self.rho = mission.environment.rho
+        self.surrogate = surrogate if self.settings.compensated else None
+        if self.settings.compensated and surrogate is None:
+            raise ValueError("N_uv compensation needs the surrogate (a force model)")
+        v = self.vehicle
+        # gamma from (6.4) at the M11 the thesis quotes for library vehicles (5.21, 1.30, 1.03).
+        self.gamma = self.settings.gamma or float(behaviours.gamma_from_m11(v.thesis_M11 or v.M11))
         self.legs = self.settings.legs
         self.cross_flow = None
         if self.settings.modified:
@@ -53,6 +64,14 @@ class HelmCore:
         s = self.state
         decision = behaviours.waypoints(self.legs, self.progress_state, s.x, s.y, s.psi, self.cross_flow)
         self.progress_state = decision.progress
+        psi_d, delta_psi, n_s = decision.psi_d, 0.0, 0.0
+        if self.surrogate is not None and not decision.progress.complete:
+            seen = interaction_at(self.surrogate, state_array(s), self.vehicle, self.rho, "replace")
+            n_s = float(seen.interaction.weight * seen.interaction.forces[2])
+            delta_psi = float(
+                behaviours.nuv_heading_offset(n_s, decision.u_d, self.vehicle.compensation_N_uv, self.gamma)
+            )
+            psi_d = decision.psi_d + delta_psi
         result = Iteration()
         for leg, index, point in decision.captured:
             result.events.append(
@@ -96,8 +115,10 @@ class HelmCore:
                     leg=progress.leg,
                     waypoint_index=progress.index,
                     waypoints_reached=progress.reached,
-                    psi_d=decision.psi_d,
+                    psi_d=psi_d,
+                    delta_psi=delta_psi,
                     cross_track=cross_track,
+                    n_s=n_s,
                     complete=progress.complete,
                 ),
             )
@@ -176,14 +197,21 @@ class PidCore:
 
 
 class SimCore:
-    """uSimMarine: integrates (5.10)/(5.12) from x_k and u_k to x_{k+1}."""
+    """uSimMarine: integrates (5.10)/(5.12) from x_k and u_k to x_{k+1}; near the submarine with
+    the surrogate's interaction forces, (5.20) (SPEC section 5)."""
 
     role = "sim"
     inputs = ("input",)
-    outputs = ("state",)
+    outputs = ("state", "forces")
 
-    def __init__(self, mission: Mission):
+    def __init__(self, mission: Mission, surrogate: ForceModel | None = None):
         self.vehicle = mission.vehicle_model
+        self.rho = mission.environment.rho
+        self.interaction_mode = mission.apps.sim.interaction
+        wanted = mission.environment.submarine and self.interaction_mode != "off"
+        if wanted and surrogate is None:
+            raise ValueError("the sim's interaction forces need the surrogate (a force model)")
+        self.surrogate = surrogate if wanted else None
         self.settings = mission.apps.sim
         self.env = mission.environment.dynamics()
         self.submarine = mission.environment.submarine
@@ -204,7 +232,31 @@ class SimCore:
     def iterate(self, step: int, t: float) -> Iteration:
         result = Iteration()
         command = self.saturated_command(step, t, result)
-        self.x = dynamics.step(self.x, command, self.vehicle, self.env, self.dt, self.settings.integrator, t)
+        interaction = None
+        if self.surrogate is not None:
+            if step == 0 and (outside := geometry_outside(self.vehicle)):
+                result.events.append(Event(step=step, t=t, source=self.role, kind="info", detail=outside))
+            seen = interaction_at(self.surrogate, self.x, self.vehicle, self.rho, self.interaction_mode)
+            interaction = seen.interaction
+            (fx, fy, fn), (sx, sy, sn) = seen.forces[0].tolist(), seen.std[0].tolist()
+            forces = Forces(
+                step=step,
+                t=t,
+                source=self.role,
+                X_s=fx,
+                Y_s=fy,
+                N_s=fn,
+                std_X=sx,
+                std_Y=sy,
+                std_N=sn,
+                weight=float(interaction.weight),
+                in_domain=bool(seen.in_domain[0]),
+                constraints_ok=bool(seen.constraints_ok[0]),
+            )
+            result.outputs.append(("forces", forces))
+        self.x = dynamics.step(
+            self.x, command, self.vehicle, self.env, self.dt, self.settings.integrator, t, interaction
+        )
         next_step = step + self.settings.period
         next_t = next_step * self.base_dt
         if not np.all(np.isfinite(self.x)) or abs(self.x[dynamics.U]) > self.settings.divergence_speed:
@@ -277,13 +329,17 @@ class SimCore:
         self.close = bool(progress["close"])
 
 
-CORES = {"helm": HelmCore, "pid": PidCore, "sim": SimCore}
+def build_cores(mission: Mission, surrogate: ForceModel | None = None) -> dict:
+    return {
+        "helm": HelmCore(mission, surrogate),
+        "pid": PidCore(mission),
+        "sim": SimCore(mission, surrogate),
+    }
 
 
-def build_cores(mission: Mission) -> dict:
-    return {role: factory(mission) for role, factory in CORES.items()}
-
-
-def run_mission(mission: Mission) -> InProcessResult:
-    """The whole mission in this process (the reference for the multi-process run)."""
-    return run_inprocess(build_cores(mission), Schedule(mission.periods()), mission.dt, mission.max_steps)
+def run_mission(mission: Mission, surrogate: ForceModel | None = None) -> InProcessResult:
+    """The whole mission in this process (the reference for the multi-process run). The surrogate
+    is loaded from the mission's model file when the mission needs one and none is given."""
+    if surrogate is None and mission.needs_surrogate:
+        surrogate = load_surrogate(mission.surrogate.model or None)
+    return run_inprocess(build_cores(mission, surrogate), Schedule(mission.periods()), mission.dt, mission.max_steps)

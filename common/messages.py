@@ -95,7 +95,23 @@ class HelmProgress(Message):
     psi_d: float
     delta_psi: float = 0.0
     cross_track: float = Field(default=0.0, description="distance to the current track-line [m]")
+    n_s: float = Field(default=0.0, description="interaction yaw moment used by N_uv compensation [N m]")
     complete: bool = False
+
+
+class Forces(Message):
+    """Interaction forces on the vehicle at step `step` (surrogate mean and std, frame convention),
+    the blend weight with which they enter the dynamics, and the surrogate's domain flags."""
+
+    X_s: float
+    Y_s: float
+    N_s: float
+    std_X: float
+    std_Y: float
+    std_N: float
+    weight: float
+    in_domain: bool
+    constraints_ok: bool
 
 
 class Tick(Message):
@@ -199,6 +215,7 @@ VEHICLE_TOPICS: dict[str, type[Message]] = {
     "desired": Desired,
     "input": Input,
     "helm": HelmProgress,
+    "forces": Forces,
 }
 
 
@@ -228,6 +245,7 @@ ALL_MODELS: tuple[type[Message], ...] = (
     Desired,
     Input,
     HelmProgress,
+    Forces,
     Tick,
     Ack,
     MissionEnd,

@@ -93,7 +93,15 @@ class PidSettings(AppSettings):
 
 class SimSettings(AppSettings):
     integrator: Literal["euler", "rk4"] = "euler"
+    interaction: Literal["replace", "increment", "thesis", "off"] = Field(
+        default="replace",
+        description="how the surrogate's forces enter the dynamics near the submarine (dynamics.Interaction)",
+    )
     divergence_speed: float = Field(default=50.0, gt=0, description="|u| beyond this ends the mission [m/s]")
+
+
+class SurrogateSettings(Strict):
+    model: str = Field(default="", description="model file; empty = the shipped model")
 
 
 class LoggerSettings(Strict):
@@ -123,6 +131,7 @@ class Mission(Strict):
     start: Start = Field(default_factory=Start)
     environment: Environment = Field(default_factory=Environment)
     network: Network = Field(default_factory=Network)
+    surrogate: SurrogateSettings = Field(default_factory=SurrogateSettings)
     apps: Apps
 
     @field_validator("name")
@@ -161,6 +170,11 @@ class Mission(Strict):
     def vehicle_name(self) -> str:
         """The vehicle chunk of the key expressions."""
         return self.vehicle_model.name
+
+    @property
+    def needs_surrogate(self) -> bool:
+        """A submarine is near, and the sim adds its interaction forces or the helm compensates."""
+        return self.environment.submarine and (self.apps.sim.interaction != "off" or self.apps.helm.compensated)
 
     @property
     def max_steps(self) -> int:

@@ -68,6 +68,10 @@ class Vehicle(BaseModel):
     N_uv: float
     N_ur: float
     N_uudr: float
+    N_uv_compensation: float | None = Field(
+        default=None, description="N_uv for N_uv compensation (6.1) where the data set's N_uv is 0"
+    )
+    thesis_M11: float | None = Field(default=None, description="M11 the thesis quotes (section 6.3.1), for gamma (6.4)")
     # Actuator limits
     max_rudder: float = Field(gt=0, le=math.pi / 2, description="rudder limit [rad]")
     max_thrust: float = Field(gt=0, description="propeller thrust limit [N]")
@@ -89,6 +93,10 @@ class Vehicle(BaseModel):
     def M11(self) -> float:
         """Surge inertia m - X_udot (thesis section 6.3.1 quotes it per vehicle)."""
         return self.mass - self.X_udot
+
+    @property
+    def compensation_N_uv(self) -> float:
+        return self.N_uv_compensation if self.N_uv_compensation is not None else self.N_uv
 
 
 _DEG = math.pi / 180.0
@@ -119,6 +127,7 @@ REMUS100 = Vehicle(
     N_uv=-24.0,  # [PRE] N_uva + N_uvb + N_uvf
     N_ur=-2.00,  # [PRE] 1.93 - 3.93
     N_uudr=-6.15,  # [PRE]
+    thesis_M11=33.6,  # thesis section 6.3.1 (Prestero's numbers give 31.41 kg; docs/physics.md)
     max_rudder=15.0 * _DEG,  # PythonVehicleSimulator remus100 deltaMax_r (vehicles.md section 1)
     max_thrust=10.0,  # = -X_u|u| * 2.5^2, 2.5 m/s top speed (vehicles.md section 1 estimate)
     pid=PidTuning(
@@ -160,6 +169,8 @@ NPS_AUV_II = Vehicle(
     N_uv=0.0,  # [NPSNET] (Marco gives -7.69e-3; not used, vehicles.md)
     N_ur=-3.90e-3 * _NPS_Q4,  # [NPSNET] N'_r
     N_uudr=-7.79e-3 * _NPS_Q3,  # -(0.283+0.377)*1.18e-2, consistent form (vehicles.md section 2)
+    N_uv_compensation=-7.69e-3 * _NPS_Q3,  # Marco's N'_v = -7.69e-3 (vehicles.md section 2): N_uv is 0 here
+    thesis_M11=212.9,  # thesis section 6.3.1
     max_rudder=15.0 * _DEG,  # the thesis manoeuvre uses +/-15 deg (vehicles.md section 2)
     max_thrust=4.0 * 0.00778 * _NPS_Q2,  # assumption: X_prop for 2 m/s (= -X_u|u| * 2^2)
     pid=PidTuning(
@@ -200,6 +211,7 @@ SDV = Vehicle(
     N_uv=-7.4e-3 * _SDV_Q3,  # [MSS-old] N'_v
     N_ur=-1.6e-2 * _SDV_Q4,  # [MSS-old] N'_r
     N_uudr=-1.3e-2 * _SDV_Q3,  # [MSS-old] N'_dr
+    thesis_M11=6020.0,  # thesis section 6.3.1
     max_rudder=20.0 * _DEG,  # [MSS] max_u
     max_thrust=192.0,  # [MSS] Xprop model at 1500 rpm (vehicles.md section 3)
     pid=PidTuning(

@@ -92,4 +92,4 @@ def _toml_table(values: dict) -> str:
             return "inf"
         return repr(v)
 
-    return "{" + ", ".join(f"{k} = {value(v)}" for k, v in values.items()) + "}"
+    return "{" + ", ".join(f"{k} = {value(v)}" for k, v in values.items() if v is not None) + "}"

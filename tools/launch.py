@@ -181,8 +181,10 @@ class Launcher:
             time.sleep(0.02)
 
     def stop_all(self) -> None:
-        """Let apps leave on their own (they exit on the mission end), then escalate."""
-        self._stop([c.process for c in self.children.values() if c.role != "logger"], grace=3.0)
+        """Let apps leave on their own (the lock-stepped ones exit on the mission end), then
+        escalate; the surrogate server serves until told; the logger closes its file last."""
+        self._stop([c.process for c in self.children.values() if c.role == "surrogate"], grace=0.0)
+        self._stop([c.process for c in self.children.values() if c.role not in ("logger", "surrogate")], grace=3.0)
         self._stop([c.process for c in self.children.values() if c.role == "logger"], grace=5.0)
 
     def _stop(self, processes: list[subprocess.Popen], grace: float) -> None:
@@ -281,6 +283,9 @@ class Launcher:
             self.spawn("logger", "logger", "logger", extra)
             self.wait_alive(bus, [("logger", "logger")], timeout)
             self.summary.log = str(log_path)
+        if self.mission.needs_surrogate:
+            self.spawn("surrogate", "surrogate", "surrogate")
+            self.wait_alive(bus, [("surrogate", "surrogate")], timeout)
         wanted = []
         for role in reversed(ORDER):
             instance = self.next_instance(role)

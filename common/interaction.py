@@ -1,0 +1,108 @@
+"""Interaction forces for the sim and the helm: surrogate predictions at the vehicle's state,
+turned into dimensional forces with a blend weight (thesis (5.20), SPEC section 5).
+
+The weight is 1 well inside the surrogate's domain (table 4.2 bounds and constraints (4.4)-(4.7))
+and falls smoothly to 0 across a band inside its boundary, so the dynamics move from (5.20) to
+(5.10) without a force jump (`dynamics.Interaction`). A force model is anything with
+`predict(inputs) -> surrogate.Prediction`: the in-process `surrogate.Surrogate`, or
+`apps.services.RemoteSurrogate`, which asks the surrogate server over the bus. Both compute the
+same numbers.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from . import surrogate as sg
+from .dynamics import PSI, Interaction, U, X, Y
+from .vehicles import Vehicle
+
+# Width of the ramp inside each bound, as a fraction of the input's range (table 4.2): 0.08 deg of
+# the +/-2 deg heading range, 2.5 m of R_long, 0.06 kn of speed. nearsub's choice.
+BLEND_FRACTION = 0.02
+# Width of the ramp inside each constraint (4.4)-(4.7), in the units of `constraint_values`:
+# (4.4), (4.5) change by 0.0965 per metre of lateral distance (8.575 / L_sub), so 0.005 is about
+# 5 cm; (4.6), (4.7) are in L/D_uuv. Narrow, because (4.4) (a 5 cm clearance) and (4.5) (at most
+# 2 D_uuv off the hull, where the thesis says the interaction has died out) leave a lateral window
+# of 0.26 m for the REMUS 100 and 0.7 m for the SDV. nearsub's choice.
+CONSTRAINT_BAND = np.array([0.005, 0.005, 0.1, 0.1])
+GEOMETRY = slice(4, 6)  # D_sub/D_uuv and L/D_uuv: fixed for a vehicle
+
+
+class ServiceError(RuntimeError):
+    """A service the mission depends on (the surrogate server) is missing or failed."""
+
+
+class ForceModel(Protocol):
+    def predict(self, inputs: np.ndarray, return_std: bool = True) -> sg.Prediction: ...
+
+
+def smoothstep(x: np.ndarray) -> np.ndarray:
+    """0 below 0, 1 above 1, x^2 (3 - 2x) between: continuous with a continuous slope."""
+    x = np.clip(x, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+def blend_weight(inputs: np.ndarray, bounds: np.ndarray = sg.BOUNDS) -> np.ndarray:
+    """(n,) weight of the surrogate's forces at inputs (n, 6). The ramp runs inside the bounds of
+    the state inputs (position, speed, heading) and the constraints; the hull ratios are constants
+    of a vehicle, so they switch the surrogate on or off for a whole mission (see `interaction_at`)."""
+    inputs = np.atleast_2d(inputs)
+    span = bounds[:, 1] - bounds[:, 0]
+    inside = np.minimum(inputs - bounds[:, 0], bounds[:, 1] - inputs) / (BLEND_FRACTION * span)
+    inside[:, GEOMETRY] = np.where(inside[:, GEOMETRY] >= 0, np.inf, -np.inf)
+    feasible = sg.constraint_values(inputs) / CONSTRAINT_BAND
+    margin = np.minimum(inside.min(axis=1), feasible.min(axis=1))
+    return smoothstep(np.where(np.isfinite(margin), margin, 0.0))
+
+
+@dataclass(frozen=True)
+class InteractionAt:
+    """The surrogate's view of one or more vehicle states."""
+
+    interaction: Interaction  # what the dynamics add (forces and weight)
+    forces: np.ndarray  # (n, 3) X_s, Y_s, N_s [N, N, N m], frame convention, unweighted
+    std: np.ndarray  # (n, 3) their standard deviations
+    in_domain: np.ndarray
+    constraints_ok: np.ndarray
+
+
+def geometry_outside(vehicle: Vehicle) -> str | None:
+    """Why the vehicle's hull is outside the surrogate's trained hulls (table 4.2), or None."""
+    inputs, _ = sg.to_inputs(0.0, 0.0, 0.0, 0.0, vehicle.length, vehicle.diameter)
+    lower, upper = sg.BOUNDS[GEOMETRY, 0], sg.BOUNDS[GEOMETRY, 1]
+    values = inputs[0, GEOMETRY]
+    if np.all((values >= lower) & (values <= upper)):
+        return None
+    names = sg.INPUT_NAMES[GEOMETRY]
+    parts = [f"{n} = {v:.3g} (trained {lo:g}-{hi:g})" for n, v, lo, hi in zip(names, values, lower, upper, strict=True)]
+    return (
+        f"vehicle {vehicle.name}: " + ", ".join(parts) + "; the surrogate is evaluated at the nearest trained "
+        "hull (the thesis's own small UUV, REMUS 100 at D_sub/D_uuv = 54.5, lies outside table 4.2 too)"
+    )
+
+
+def interaction_at(model: ForceModel, state: np.ndarray, vehicle: Vehicle, rho: float, mode: str) -> InteractionAt:
+    """Ask the force model about the state(s) (6,) or (n, 6) and build the dynamics' input. The
+    fields are (n, 3) and (n,) arrays; `interaction` has the shape of `state` ((3,) and () for one
+    vehicle), as the dynamics want.
+
+    The hull ratios are clipped to the trained range (`geometry_outside` says when, and the sim
+    reports it once): they are constants of the vehicle, so clipping them moves the whole mission
+    to the nearest trained hull instead of switching the interaction off everywhere."""
+    single = np.ndim(state) == 1
+    state = np.atleast_2d(state)
+    u, x, y, psi = state[:, U], state[:, X], state[:, Y], state[:, PSI]
+    raw, mirror = sg.to_inputs(x, y, u, psi, vehicle.length, vehicle.diameter)
+    inputs = raw.copy()
+    inputs[:, GEOMETRY] = np.clip(raw[:, GEOMETRY], sg.BOUNDS[GEOMETRY, 0], sg.BOUNDS[GEOMETRY, 1])
+    prediction = model.predict(inputs, return_std=True)
+    forces = sg.to_forces(prediction.mean, mirror, u, vehicle.length, rho)
+    std = np.abs(sg.to_forces(prediction.std, mirror, u, vehicle.length, rho))
+    weight = blend_weight(inputs)
+    safe = np.where(np.isfinite(forces), forces, 0.0)  # weight is 0 wherever they are not finite
+    interaction = Interaction(safe[0], weight[0], mode) if single else Interaction(safe, weight, mode)
+    return InteractionAt(interaction, forces, std, sg.in_domain(raw), sg.constraints_ok(raw))

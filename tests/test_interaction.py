@@ -1,0 +1,153 @@
+"""The sim and helm with the surrogate's interaction forces (thesis (5.20), chapter 6)."""
+
+import json
+import os
+import signal
+import time
+
+import numpy as np
+import pytest
+
+from conftest import ALPHA
+from helpers import log_path, per_topic
+from nearsub.common.cores import build_cores, run_mission
+from nearsub.common.dynamics import Interaction, body_forces
+from nearsub.common.interaction import blend_weight, interaction_at
+from nearsub.common.lifecycle import Schedule, run_inprocess
+from nearsub.common.messages import encode
+from nearsub.common.mission import load_mission
+from nearsub.common.surrogate import analytic_model, load_surrogate
+from nearsub.common.vehicles import SDV
+from nearsub.tools import registry
+
+pytestmark = pytest.mark.timeout(180)
+
+# An SDV holding station beside the submarine's afterbody, 5.9 m off its axis (R_lat = 0.066,
+# inside its feasible window of 5.55-6.24 m set by constraints (4.4) and (4.5)).
+BESIDE = [
+    "environment.submarine=true",
+    "environment.u_sub=1.5",
+    "vehicle=sdv",
+    "start.x=-30",
+    "start.y=5.9",
+    "start.psi_deg=0",
+    "start.speed=1.5",
+    "apps.helm.legs=[{points = [[60.0, 5.9]], speed = 1.5, lead = 15.9, lead_to_start = true}]",
+    "time_limit=20",
+]
+
+
+@pytest.fixture(scope="module")
+def model_file(tmp_path_factory):
+    path = tmp_path_factory.mktemp("model") / "analytic.npz"
+    analytic_model(path=path)
+    return path
+
+
+def test_no_force_jump_across_the_domain_boundary(model_file):
+    """Sweep the SDV outwards across its lateral limit, constraint (4.5) at y = 6.24 m (2 D_uuv off
+    the hull): the blend weight goes from 1 to 0 and the total force changes smoothly, with no step
+    larger than the blend's slope allows."""
+    surrogate = load_surrogate(model_file)
+    y = np.linspace(5.8, 6.8, 1001)  # 1 mm apart
+    states = np.column_stack(
+        [np.full_like(y, 1.5), np.zeros_like(y), np.zeros_like(y), np.full_like(y, -30.0), y, np.zeros_like(y)]
+    )
+    seen = interaction_at(surrogate, states, SDV, 1025.0, "replace")
+    total = body_forces(states, np.zeros((len(y), 2)), SDV, seen.interaction)
+    weight = seen.interaction.weight
+    assert weight[0] == 1.0 and weight[-1] == 0.0 and np.all(np.diff(weight) <= 0)
+    band = (weight > 0) & (weight < 1)
+    assert band.sum() > 40  # the blend spreads over about 5 cm
+    # Inside the band the force may move by (weight step) x (surrogate - (5.10) flow terms); away
+    # from it only by the smooth change of the forces themselves. Nothing more: no jump.
+    plain = body_forces(states, np.zeros((len(y), 2)), SDV)
+    full = Interaction(seen.interaction.forces, np.ones_like(weight))
+    gap = np.abs(body_forces(states, np.zeros((len(y), 2)), SDV, full) - plain)  # surrogate - flow terms
+    steps = np.abs(np.diff(total, axis=0))
+    dw = np.abs(np.diff(weight))[:, None]
+    smooth = np.abs(np.diff(plain, axis=0)) + np.abs(np.diff(seen.interaction.forces, axis=0))
+    assert np.all(steps <= dw * gap[1:] + smooth + 1e-9)
+    assert dw.max() <= 1.5 * (y[1] - y[0]) / (band.sum() * (y[1] - y[0])) * 1.1  # smoothstep's slope
+
+
+def test_blend_weight_is_zero_outside_bounds_and_constraints():
+    inside = np.array([0.0, 0.066, 3.0, 0.0, 20.0, 8.0])  # feasible: (4.4) 0.032, (4.5) 0.034
+    assert blend_weight(inside) == 1.0
+    for column, value in ((0, 0.75), (1, 0.12), (3, 2.5), (2, 1.0)):
+        outside = inside.copy()
+        outside[column] = value
+        assert blend_weight(outside) == 0.0
+    infeasible = np.array([0.0, 0.059, 3.0, 0.0, 5.0, 8.0])  # (4.4): the hulls would overlap
+    assert blend_weight(infeasible) == 0.0
+
+
+def test_a_hull_outside_the_trained_ratios_is_reported_and_clipped(model_file):
+    from nearsub.common.interaction import geometry_outside
+    from nearsub.common.vehicles import REMUS100
+
+    assert geometry_outside(SDV) is None
+    assert "d_ratio = 54.3" in geometry_outside(REMUS100)
+    surrogate = load_surrogate(model_file)
+    state = np.array([1.5, 0.0, 0.0, -30.0, 5.45, 0.0])  # in its 0.26 m window beside the hull
+    seen = interaction_at(surrogate, state, REMUS100, 1025.0, "replace")
+    assert seen.interaction.weight == 1.0 and not seen.in_domain[0]  # answered at d_ratio 50, flagged
+
+
+def test_sim_publishes_interaction_forces_every_step(model_file):
+    mission = load_mission(ALPHA, BESIDE)
+    result = run_mission(mission, load_surrogate(model_file))
+    forces = result.topic("forces")
+    assert [f.step for f in forces] == list(range(result.steps))
+    assert all(f.in_domain and f.constraints_ok and f.weight == 1.0 for f in forces[:50])
+    assert abs(forces[0].Y_s) > 0
+
+
+def test_compensation_offsets_the_desired_heading(model_file):
+    mission = load_mission(ALPHA, BESIDE + ["apps.helm.behaviour=nuv_compensation"])
+    result = run_mission(mission, load_surrogate(model_file))
+    progress = result.topic("helm")
+    assert all(p.behaviour == "nuv_compensation" for p in progress)
+    assert any(abs(p.delta_psi) > 1e-4 for p in progress)
+    assert all(p.n_s != 0.0 for p in progress[:5])
+
+
+def test_multi_process_with_the_surrogate_server_equals_in_process(launches, community, model_file):
+    settings = BESIDE + [f"surrogate.model={json.dumps(str(model_file))}", "apps.helm.behaviour=nuv_compensation"]
+    code, summary, err = launches.run(ALPHA, *sum((["--set", s] for s in settings), []), "--set", f"name={community}")
+    assert code == 0, err
+    mission = load_mission(ALPHA, settings + [f"name={community}"])
+    cores = build_cores(mission, load_surrogate(model_file))
+    reference = run_inprocess(cores, Schedule(mission.periods()), mission.dt, mission.max_steps)
+    logged = per_topic(log_path(summary))
+    for leaf in ("state", "desired", "input", "forces", "helm"):
+        assert logged[f"sdv/{leaf}"] == [encode(m) for m in reference.topic(leaf)], leaf
+
+
+def test_a_lost_surrogate_server_stops_the_mission_naming_it(launches, community, model_file):
+    settings = BESIDE + [f"surrogate.model={json.dumps(str(model_file))}", "time_limit=600"]
+    process = launches.start(
+        ALPHA, *sum((["--set", s] for s in settings), []), "--set", f"name={community}", "--warp", "5"
+    )
+    end = time.monotonic() + 30
+    while community not in registry.running() and time.monotonic() < end:
+        time.sleep(0.05)
+    pids = [int(p) for p in os.listdir("/proc") if p.isdigit() and _is_server(p, launches.log_dir)]
+    assert len(pids) == 1
+    os.kill(pids[0], signal.SIGSTOP)  # hung, not dead: only the query timeout can notice
+    out, err = process.communicate(timeout=120)
+    summary = json.loads(out.strip().splitlines()[-1])
+    try:
+        os.kill(pids[0], signal.SIGKILL)
+    except ProcessLookupError:
+        pass  # the launcher's stop ladder already did
+    assert process.returncode == 1
+    assert summary["outcome"] == "error" and "surrogate server" in summary["reason"]
+
+
+def _is_server(pid: str, log_dir) -> bool:
+    try:
+        argv = open(f"/proc/{pid}/cmdline").read().split("\0")
+    except OSError:
+        return False
+    return "nearsub.apps.surrogate" in argv and any(str(log_dir) in a for a in argv)
