@@ -173,17 +173,26 @@ def waypoints(
         return HelmDecision(0.0, psi, progress, None, tuple(captured))
     leg = legs[progress.leg]
     target = np.asarray(leg.points[progress.index], dtype=float)
-    aim, speed = target, leg.speed
-    if leg.lead is not None and progress.previous is not None:
+    if leg.lead is None or progress.previous is None:  # no track-line yet: head for the waypoint
+        speed, psi_d = leg.speed, np.arctan2(target[1] - y, target[0] - x)
+    else:
         previous = np.asarray(progress.previous)
-        if cross_flow is None:
-            aim = lead_point(previous, target, pos, leg.lead, leg.lead_damper)
-        else:
-            u_ot = leg.speed - cross_flow.u_sub
-            aim = modified_lead_point(previous, target, pos, leg.lead, u_ot, cross_flow.u_sub, cross_flow.alpha)
-            speed = float(speed_policy(previous, target, pos, cross_flow.u_sub, u_ot, cross_flow.uuv_length))
-    psi_d = float(np.arctan2(aim[1] - y, aim[0] - x))
-    return HelmDecision(speed, psi_d, progress, (float(target[0]), float(target[1])), tuple(captured))
+        speed, psi_d = steer(previous, target, pos, leg.speed, leg.lead, leg.lead_damper, cross_flow)
+    return HelmDecision(float(speed), float(psi_d), progress, (float(target[0]), float(target[1])), tuple(captured))
+
+
+def steer(prev_xy, next_xy, pos_xy, speed, lead, lead_damper=None, cross_flow: CrossFlow | None = None):
+    """Desired speed and heading on one track-line, element-wise over vehicles (the helm calls it
+    for one, the batch engine for many): at the lead point of section 5.7, or with `cross_flow` at
+    the modified lead point (6.2) with the speed policy (6.3), U_ot = speed - U_sub."""
+    if cross_flow is None:
+        aim = lead_point(prev_xy, next_xy, pos_xy, lead, lead_damper)
+    else:
+        u_ot = speed - cross_flow.u_sub
+        aim = modified_lead_point(prev_xy, next_xy, pos_xy, lead, u_ot, cross_flow.u_sub, cross_flow.alpha)
+        speed = speed_policy(prev_xy, next_xy, pos_xy, cross_flow.u_sub, u_ot, cross_flow.uuv_length)
+    psi_d = np.arctan2(aim[..., 1] - pos_xy[..., 1], aim[..., 0] - pos_xy[..., 0])
+    return speed, psi_d
 
 
 # --- Modified waypoints (thesis section 6.3.2) ------------------------------------------------

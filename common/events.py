@@ -124,12 +124,15 @@ def ahead_or_astern(x, y, diameter: float):
 
 
 def track_distance(x, y, start, end):
-    """Distance [m] from (x, y) to the track-line segment from `start` to `end` (each (x, y))."""
+    """Distance [m] from (x, y) to the track-line segment from `start` to `end`: points (2,), or
+    (N, 2) for one segment per position."""
     x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
-    ax, ay = start
-    dx, dy = end[0] - ax, end[1] - ay
+    start, end = np.asarray(start, dtype=float), np.asarray(end, dtype=float)
+    ax, ay = start[..., 0], start[..., 1]
+    dx, dy = end[..., 0] - ax, end[..., 1] - ay
     seg2 = dx * dx + dy * dy
-    t = np.clip(((x - ax) * dx + (y - ay) * dy) / seg2, 0.0, 1.0) if seg2 > 0 else 0.0
+    safe = np.where(seg2 > 0, seg2, 1.0)
+    t = np.where(seg2 > 0, np.clip(((x - ax) * dx + (y - ay) * dy) / safe, 0.0, 1.0), 0.0)
     return np.hypot(x - (ax + t * dx), y - (ay + t * dy))
 
 

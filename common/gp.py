@@ -45,6 +45,7 @@ _RANDOM_SIGNAL_VARIANCE = (0.1, 10.0)
 _RANDOM_NOISE_VARIANCE = (1e-6, 1.0)
 # Rows per block in batch prediction: bounds the (rows, n) temporaries.
 _BATCH_ROWS = 4096
+_ROW_CHUNK = 256  # rows per chunk in `_Predictor.rows`: (m, 256, n, d) temporaries stay small
 _LOG_2PI = math.log(2.0 * math.pi)
 
 
@@ -127,6 +128,7 @@ class _Predictor:
         self.Z = stack([gp._Z for gp in gps])  # (m, n, d) scaled training inputs
         self.ZZ = np.einsum("mnd,mnd->mn", self.Z, self.Z)  # (m, n)
         self.Zt2 = np.ascontiguousarray(-2.0 * self.Z.transpose(0, 2, 1))  # (m, d, n)
+        self.ZT = np.ascontiguousarray(self.Z.transpose(0, 2, 1))  # (m, d, n)
         self.s2 = np.array([gp.signal_variance for gp in gps])  # (m,)
         self.alpha_s = stack([gp._alpha * gp.signal_variance for gp in gps])  # (m, n)
         self.Linv_s = stack([gp._L_inv * gp.signal_variance for gp in gps])  # (m, n, n)
@@ -147,6 +149,35 @@ class _Predictor:
         v = np.matmul(self.Linv_s, e[:, :, None])
         var = self.s2 - np.einsum("mni,mni->m", v, v)  # thesis (2.7), diagonal
         return self.y_std * np.sqrt(np.maximum(var, 0.0))
+
+    def rows(self, X: np.ndarray, return_std: bool) -> tuple[np.ndarray, np.ndarray | None]:
+        """Mean and std (N, m) with per-row arithmetic that does not depend on how many rows are
+        asked together: one vehicle and a batch of vehicles get the same bits for the same point
+        (element-wise operations and last-axis sums only; the std uses BLAS and may differ in
+        the last digits). Squared distances are formed from differences, without the cancelling
+        |z|^2 + |z_i|^2 - 2 z.z_i expansion of `batch`."""
+        N, m = X.shape[0], self.s2.shape[0]
+        mean = np.empty((N, m))
+        std = np.empty((N, m)) if return_std else None
+        for start in range(0, N, _ROW_CHUNK):
+            Xb = X[start : start + _ROW_CHUNK]
+            zb = Xb[None, :, :] * self.A[:, None, :] + self.B[:, None, :]  # (m, a, d)
+            sq = np.zeros((m, len(Xb), self.Z.shape[1]))
+            for k in range(self.Z.shape[2]):  # one input at a time, always in the same order
+                diff = self.ZT[:, None, k, :] - zb[:, :, k, None]  # (m, a, n)
+                sq += diff * diff
+            e = np.exp(-sq)  # (m, a, n)
+            mean[start : start + _ROW_CHUNK] = (np.sum(e * self.alpha_s[:, None, :], axis=-1)).T  # thesis (2.6)
+            if std is not None:
+                for j in range(m):  # 2-D products: numpy's stacked matmul is far slower here
+                    v = e[j] @ self.LinvT_s[j]  # (a, n)
+                    var = self.s2[j] - np.einsum("an,an->a", v, v)  # thesis (2.7), diagonal
+                    std[start : start + _ROW_CHUNK, j] = np.sqrt(np.maximum(var, 0.0))
+        mean *= self.y_std
+        mean += self.y_mean
+        if std is not None:
+            std *= self.y_std
+        return mean, std
 
     def batch(self, X: np.ndarray, return_std: bool) -> tuple[np.ndarray, np.ndarray | None]:
         """Mean and std (N, m) at many points; BLAS matrix products on row blocks."""
@@ -537,6 +568,15 @@ class MultiOutputGP:
             std = std[None, :] if std is not None else None
         else:
             mean, std = self._predictor.batch(X, return_std)
+        return (mean, std) if return_std else mean
+
+    def predict_rows(self, X: Any, return_std: bool = False):
+        """Like `predict`, but each row's mean has the same bits whatever the batch size (see
+        `_Predictor.rows`): for simulations whose one-vehicle and many-vehicle runs must agree."""
+        if not self.gps:
+            raise RuntimeError("MultiOutputGP is not fitted")
+        X = _as_2d(X, self.gps[0].lower_.shape[0])
+        mean, std = self._predictor.rows(X, return_std)
         return (mean, std) if return_std else mean
 
     def predict_point(self, x: Any) -> tuple[np.ndarray, np.ndarray]:

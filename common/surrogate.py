@@ -263,10 +263,11 @@ class Surrogate:
         """GP mean (and std) of [X', Y', N'] at inputs (n, 6) or (6,), flagged (see `Prediction`).
         `in_domain` uses the model file's bounds (table 4.2 for models saved by `save_surrogate`)."""
         X = _as_inputs(inputs)
+        # Row-wise arithmetic: a vehicle asking alone and a sweep asking for 800 get the same bits.
         if return_std:
-            mean, std = self.model.predict(X, return_std=True)
+            mean, std = self.model.predict_rows(X, return_std=True)
         else:
-            mean, std = self.model.predict(X), None
+            mean, std = self.model.predict_rows(X), None
         inside = in_domain(X, self.bounds)
         if not inside.all():  # non-finite inputs are never inside: only then look for them
             finite = np.all(np.isfinite(X), axis=1)

@@ -180,7 +180,7 @@ def test_out_of_domain_points_are_answered_with_the_gp_value_and_flagged(surroga
     assert p.in_domain.tolist() == [True, False, True, False]
     assert p.constraints_ok.tolist() == [True, True, False, False]
     assert p.valid.tolist() == [True, False, False, False]
-    gp_mean, gp_std = surrogate.model.predict(X, return_std=True)
+    gp_mean, gp_std = surrogate.model.predict_rows(X, return_std=True)
     assert np.array_equal(p.mean[:3], gp_mean[:3]) and np.array_equal(p.std[:3], gp_std[:3])
     assert np.isnan(p.mean[3]).all() and np.isnan(p.std[3]).all()
     assert (p.std[1] > p.std[0]).all()  # far from the data the std grows

@@ -1,0 +1,130 @@
+"""The vectorised batch engine: N independent UUVs run in one process as numpy arrays.
+
+It calls the functions the apps' cores call, on arrays: `behaviours.steer` and
+`behaviours.nuv_heading_offset` (helm), `control.pid_step` (pid), `interaction.interaction_at`,
+`dynamics.step` and `events.classify` (sim), in the thesis order and with the same multi-rate
+schedule (the helm runs every `period` steps and the pid holds its last desired state). The
+surrogate is asked once per step for the whole batch, in-process. Nothing is re-implemented, so a
+cell run here and the same cell run as a mission through the launcher agree (tests check it).
+
+Each UUV follows one track-line from its start; it stops being integrated at a collision (its
+state is frozen there), as the sim ends a mission at a collision.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import behaviours, control, dynamics, events
+from .interaction import ForceModel, interaction_at
+from .mission import Mission
+
+OUTCOMES = ("safe", "large_stray", "close_call", "collision", "infeasible")  # codes 0..4
+
+
+@dataclass
+class BatchResult:
+    """Per UUV: outcome code (index into OUTCOMES), closest approach to the hull [m] (negative when
+    touching), largest distance from the track-line [m], final state (N, 6), steps integrated."""
+
+    outcome: np.ndarray
+    closest: np.ndarray
+    max_cross_track: np.ndarray
+    final: np.ndarray
+    steps: np.ndarray
+
+    def outcome_names(self) -> list[str]:
+        return [OUTCOMES[code] for code in self.outcome]
+
+
+def run_batch(
+    mission: Mission,
+    starts: np.ndarray,
+    track_ends: np.ndarray,
+    surrogate: ForceModel | None = None,
+    active: np.ndarray | None = None,
+) -> BatchResult:
+    """Fly N UUVs of `mission` (its vehicle, environment, helm, pid and sim settings and the speed
+    and lead of its first leg) from `starts` (N, 6 state) along the track-lines from their start
+    positions to `track_ends` (N, 2), for mission.max_steps steps. `active` masks cells to run."""
+    vehicle = mission.vehicle_model
+    helm, pid, sim = mission.apps.helm, mission.apps.pid, mission.apps.sim
+    leg = helm.legs[0]
+    env = mission.environment.dynamics()
+    dt = mission.dt
+    n = len(starts)
+    active = np.ones(n, dtype=bool) if active is None else active.copy()
+    x = np.array(starts, dtype=float)
+    track_start = x[:, [dynamics.X, dynamics.Y]].copy()
+    cross_flow = None
+    if helm.modified:
+        cross_flow = behaviours.CrossFlow(mission.environment.u_sub, helm.alpha, vehicle.length)
+    gamma = helm.gamma or float(behaviours.gamma_from_m11(vehicle.thesis_M11 or vehicle.M11))
+    use_surrogate = surrogate is not None and mission.environment.submarine
+    compensate = helm.compensated and use_surrogate
+    interact = use_surrogate and sim.interaction != "off"
+
+    memory = control.PidState.zeros((n,))
+    u_d = np.zeros(n)
+    psi_d = np.zeros(n)
+    collided = np.zeros(n, dtype=bool)
+    close_call = np.zeros(n, dtype=bool)
+    closest = np.full(n, np.inf)
+    max_cross = np.zeros(n)
+    steps = np.zeros(n, dtype=int)
+    limits_low = np.array([-vehicle.max_thrust, -vehicle.max_rudder])
+    limits_high = np.array([vehicle.max_thrust, vehicle.max_rudder])
+
+    for step in range(mission.max_steps):
+        running = active & ~collided
+        if not running.any():
+            break
+        t = step * dt
+        seen = (
+            interaction_at(surrogate, x, vehicle, mission.environment.rho, sim.interaction) if use_surrogate else None
+        )
+        if step % helm.period == 0:  # helm(x_k)
+            speed, heading = behaviours.steer(
+                track_start,
+                track_ends,
+                x[:, [dynamics.X, dynamics.Y]],
+                leg.speed,
+                leg.lead,
+                leg.lead_damper,
+                cross_flow,
+            )
+            if compensate:
+                n_s = seen.interaction.weight * seen.interaction.forces[:, 2]
+                heading = heading + behaviours.nuv_heading_offset(n_s, speed, vehicle.compensation_N_uv, gamma)
+            u_d = np.where(running, speed, u_d)
+            psi_d = np.where(running, heading, psi_d)
+        if step % pid.period == 0:  # pid
+            memory, out = control.pid_step(memory, u_d, psi_d, x, vehicle, vehicle.pid, dt * pid.period, pid.form)
+            command = np.clip(np.stack([out.thrust, out.rudder], axis=-1), limits_low, limits_high)
+        interaction = seen.interaction if interact else None  # sim: x_k -> x_{k+1}
+        stepped = dynamics.step(x, command, vehicle, env, dt * sim.period, sim.integrator, t, interaction)
+        x = np.where(running[:, None], stepped, x)
+        steps += running
+        found = events.classify(
+            x[:, dynamics.X], x[:, dynamics.Y], x[:, dynamics.PSI], vehicle.length, vehicle.diameter
+        )
+        collided |= running & found.collision
+        close_call |= running & found.close_call
+        clearance = events.hull_signed_distance(x[:, dynamics.X], x[:, dynamics.Y])
+        closest = np.where(running, np.minimum(closest, clearance), closest)
+        cross = events.track_distance(x[:, dynamics.X], x[:, dynamics.Y], track_start, track_ends)
+        max_cross = np.where(running, np.maximum(max_cross, cross), max_cross)
+
+    outcome = np.select(
+        [~active, collided, close_call, max_cross > events.STRAY_LIMIT],
+        [
+            OUTCOMES.index("infeasible"),
+            OUTCOMES.index("collision"),
+            OUTCOMES.index("close_call"),
+            OUTCOMES.index("large_stray"),
+        ],
+        OUTCOMES.index("safe"),
+    )
+    return BatchResult(outcome, closest, max_cross, x, steps)
