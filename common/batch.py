@@ -82,9 +82,9 @@ def run_batch(
         if not running.any():
             break
         t = step * dt
-        seen = (
-            interaction_at(surrogate, x, vehicle, mission.environment.rho, sim.interaction) if use_surrogate else None
-        )
+        seen = None
+        if use_surrogate:  # one query for the whole batch; sweeps need no std
+            seen = interaction_at(surrogate, x, vehicle, mission.environment.rho, sim.interaction, with_std=False)
         if step % helm.period == 0:  # helm(x_k)
             speed, heading = behaviours.steer(
                 track_start,

@@ -101,9 +101,7 @@ class HelmCore:
                 )
             )
         self.straying = straying
-        result.outputs.append(
-            ("desired", Desired(step=step, t=t, source=self.role, u_d=decision.u_d, psi_d=decision.psi_d))
-        )
+        result.outputs.append(("desired", Desired(step=step, t=t, source=self.role, u_d=decision.u_d, psi_d=psi_d)))
         result.outputs.append(
             (
                 "helm",

@@ -151,3 +151,11 @@ def _is_server(pid: str, log_dir) -> bool:
     except OSError:
         return False
     return "nearsub.apps.surrogate" in argv and any(str(log_dir) in a for a in argv)
+
+
+def test_compensated_heading_is_what_the_helm_publishes(model_file):
+    mission = load_mission(ALPHA, BESIDE + ["apps.helm.behaviour=nuv_compensation"])
+    result = run_mission(mission, load_surrogate(model_file))
+    for desired, progress in zip(result.topic("desired"), result.topic("helm"), strict=True):
+        assert desired.psi_d == progress.psi_d
+        assert (progress.delta_psi != 0.0) == (progress.n_s != 0.0)  # zero outside the domain only
