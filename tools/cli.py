@@ -55,6 +55,13 @@ def _router(args):
     return serve(args.listen or ["tcp/127.0.0.1:7447"], args.connect)
 
 
+def _bench_hydro(args):
+    from .hydro_bench import benchmark_fidelities
+
+    benchmark_fidelities()
+    return 0
+
+
 def _validate(args):
     from .validate import validate_command
 
@@ -166,6 +173,8 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--repeats", type=int, default=3)
     t.add_argument("--json", action="store_true")
     add_bench_parser(b)
+    t = b.add_parser("hydro", help="cost per evaluation of the low- and high-fidelity hydrodynamic models")
+    t.set_defaults(func=_bench_hydro)
     p.set_defaults(func=_bench)
     return parser
 
