@@ -34,7 +34,6 @@ from typing import Any
 import zenoh
 
 ENCODING = "application/msgpack"
-LOW_LATENCY = os.environ.get("NEARSUB_LOWLATENCY", "0") == "1"
 
 
 def free_tcp_port(host: str = "127.0.0.1") -> int:
@@ -56,9 +55,6 @@ def make_config(
     conf.insert_json5("scouting/multicast/enabled", json.dumps(multicast_scouting))
     conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
     conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
-    if LOW_LATENCY:
-        conf.insert_json5("transport/unicast/lowlatency", "true")
-        conf.insert_json5("transport/unicast/qos/enabled", "false")
     if mode != "router":
         # Wait for the router instead of failing at once, so start order does not matter.
         conf.insert_json5("connect/timeout_ms", json.dumps(10000))
