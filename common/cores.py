@@ -26,6 +26,10 @@ def state_message(values: np.ndarray, step: int, t: float, source: str) -> State
     return State(step=step, t=t, source=source, u=u, v=v, r=r, x=x, y=y, psi=psi)
 
 
+def event(role: str, step: int, t: float, kind: str, detail: str, data: dict | None = None) -> Event:
+    return Event(step=step, t=t, source=role, kind=kind, detail=detail, data=data or {})
+
+
 class HelmCore:
     """pHelmIvP: the waypoints behaviour (thesis 5.7) or the modified one (6.3.2), optionally with
     N_uv compensation (6.3.1, which asks the surrogate for N_s), turning x_k into x_d,k."""
@@ -75,13 +79,13 @@ class HelmCore:
         result = Iteration()
         for leg, index, point in decision.captured:
             result.events.append(
-                Event(
-                    step=step,
-                    t=t,
-                    source=self.role,
-                    kind="waypoint",
-                    detail=f"reached {self.legs[leg].name} point {index + 1} at ({point[0]:g}, {point[1]:g})",
-                    data={"leg": leg, "index": index, "x": s.x, "y": s.y},
+                event(
+                    self.role,
+                    step,
+                    t,
+                    "waypoint",
+                    f"reached {self.legs[leg].name} point {index + 1} at ({point[0]:g}, {point[1]:g})",
+                    {"leg": leg, "index": index, "x": s.x, "y": s.y},
                 )
             )
         progress = decision.progress
@@ -91,13 +95,13 @@ class HelmCore:
         straying = cross_track > events.STRAY_LIMIT
         if straying and not self.straying:
             result.events.append(
-                Event(
-                    step=step,
-                    t=t,
-                    source=self.role,
-                    kind="large_stray",
-                    detail=f"{cross_track:.2f} m from the track-line",
-                    data={"x": s.x, "y": s.y, "cross_track": cross_track},
+                event(
+                    self.role,
+                    step,
+                    t,
+                    "large_stray",
+                    f"{cross_track:.2f} m from the track-line",
+                    {"x": s.x, "y": s.y, "cross_track": cross_track},
                 )
             )
         self.straying = straying
@@ -174,15 +178,7 @@ class PidCore:
         saturated = (bool(out.thrust_saturated), bool(out.rudder_saturated))
         for name, now, before in zip(("thrust", "rudder"), saturated, self.saturated, strict=True):
             if now and not before:
-                result.events.append(
-                    Event(
-                        step=step,
-                        t=t,
-                        source=self.role,
-                        kind="saturation",
-                        detail=f"{name} saturated at the vehicle limit",
-                    )
-                )
+                result.events.append(event(self.role, step, t, "saturation", f"{name} saturated at the vehicle limit"))
         self.saturated = saturated
         return result
 
@@ -233,7 +229,7 @@ class SimCore:
         interaction = None
         if self.surrogate is not None:
             if step == 0 and (outside := geometry_outside(self.vehicle)):
-                result.events.append(Event(step=step, t=t, source=self.role, kind="info", detail=outside))
+                result.events.append(event(self.role, step, t, "info", outside))
             seen = interaction_at(self.surrogate, self.x, self.vehicle, self.rho, self.interaction_mode)
             interaction = seen.interaction
             (fx, fy, fn), (sx, sy, sn) = seen.forces[0].tolist(), seen.std[0].tolist()
@@ -263,7 +259,7 @@ class SimCore:
                 f"state diverged at t = {next_t:.2f} s (u = {self.x[dynamics.U]:.4g} m/s, "
                 f"limit {self.settings.divergence_speed:g} m/s)"
             )
-            result.events.append(Event(step=step, t=t, source=self.role, kind="error", detail=result.reason))
+            result.events.append(event(self.role, step, t, "error", result.reason))
             return result
         result.outputs.append(("state", state_message(self.x, next_step, next_t, self.role)))
         if self.submarine:
@@ -277,15 +273,8 @@ class SimCore:
         raw = np.array([self.inp.X_prop, self.inp.delta_r])
         command = np.clip(raw, [-v.max_thrust, -v.max_rudder], [v.max_thrust, v.max_rudder])
         if not np.array_equal(command, raw):
-            result.events.append(
-                Event(
-                    step=step,
-                    t=t,
-                    source=self.role,
-                    kind="saturation",
-                    detail=f"input {raw.tolist()} clipped at the vehicle limits",
-                )
-            )
+            detail = f"input {raw.tolist()} clipped at the vehicle limits"
+            result.events.append(event(self.role, step, t, "saturation", detail))
         return command
 
     def check_proximity(self, step: int, t: float, result: Iteration) -> None:
@@ -295,28 +284,12 @@ class SimCore:
         data = {"x": float(x), "y": float(y), "psi": float(psi)}
         if bool(found.collision):
             result.events.append(
-                Event(
-                    step=step,
-                    t=t,
-                    source=self.role,
-                    kind="collision",
-                    detail=f"UUV touched the submarine at ({x:.2f}, {y:.2f})",
-                    data=data,
-                )
+                event(self.role, step, t, "collision", f"UUV touched the submarine at ({x:.2f}, {y:.2f})", data)
             )
             result.end, result.reason = "collision", f"collision with the submarine at t = {t:.2f} s"
         close = bool(found.close_call)
         if close and not self.close:
-            result.events.append(
-                Event(
-                    step=step,
-                    t=t,
-                    source=self.role,
-                    kind="close_call",
-                    detail=f"close call at ({x:.2f}, {y:.2f})",
-                    data=data,
-                )
-            )
+            result.events.append(event(self.role, step, t, "close_call", f"close call at ({x:.2f}, {y:.2f})", data))
         self.close = close
 
     def progress(self) -> dict:

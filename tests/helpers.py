@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+import time
 from collections import defaultdict
 from pathlib import Path
 
@@ -24,3 +26,22 @@ def per_topic(path: Path, skip=WALL_CLOCK_TOPICS) -> dict[str, list[bytes]]:
         if not any(part in record.topic for part in skip):
             topics[record.topic.split("/", 2)[2]].append(record.data)
     return dict(topics)
+
+
+def wait_registered(community: str, timeout: float = 30.0) -> dict:
+    """Block until `nearsub launch` has registered the mission (its apps are all up)."""
+    from nearsub.tools import registry
+
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        running = registry.running()
+        if community in running:
+            return running[community]
+        time.sleep(0.05)
+    raise AssertionError(f"mission {community} did not register within {timeout:g} s")
+
+
+def finish(process, timeout: float = 120) -> tuple[int, dict, str]:
+    """Wait for a `nearsub launch --json` process: exit code, summary, stderr."""
+    out, err = process.communicate(timeout=timeout)
+    return process.returncode, json.loads(out.strip().splitlines()[-1]), err

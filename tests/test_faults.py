@@ -11,20 +11,12 @@ import msgpack
 import pytest
 
 from conftest import ALPHA, nearsub
-from helpers import log_path
+from helpers import finish, log_path, wait_registered
 from nearsub.common.logfile import LogWriter, read_log
-from nearsub.tools import registry
 
 pytestmark = pytest.mark.timeout(180)
 
 
-def wait_registered(community, timeout=30.0):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if community in registry.running():
-            return registry.running()[community]
-        time.sleep(0.05)
-    raise AssertionError(f"mission {community} did not register")
 
 
 def app_pid(log_dir, instance):
@@ -45,9 +37,6 @@ def no_processes_left(log_dir):
     return out.strip() == ""
 
 
-def summary_of(process, timeout=60):
-    out, err = process.communicate(timeout=timeout)
-    return process.returncode, json.loads(out.strip().splitlines()[-1]), err
 
 
 def test_malformed_messages_are_rejected_and_logged(launches, community):
@@ -59,7 +48,7 @@ def test_malformed_messages_are_rejected_and_logged(launches, community):
     refused = nearsub("tap", "pub", key, json.dumps({"u": float("inf")}))
     assert raw.returncode == 0 and bad.returncode == 0
     assert refused.returncode == 2 and "'u'" in refused.stderr  # tap pub validates by default
-    code, summary, err = summary_of(process)
+    code, summary, err = finish(process)
     assert code == 0 and summary["outcome"] == "time_limit", err
     records = read_log(log_path(summary)).records
     errors = [r.value()["detail"] for r in records if "/events/" in r.topic and r.value()["kind"] == "error"]
@@ -79,7 +68,7 @@ def test_killed_app_is_reported_and_the_log_is_closed(launches, community):
     time.sleep(1.0)
     os.kill(app_pid(launches.log_dir, "sim-1"), signal.SIGKILL)
     killed_at = time.monotonic()
-    code, summary, err = summary_of(process)
+    code, summary, err = finish(process)
     assert code != 0
     assert "app sim-1 exited with code -9 at step" in err
     assert summary["outcome"] == "error" and summary["failed_app"] == "sim-1"
@@ -107,7 +96,7 @@ def test_stalled_app_is_named_by_the_clock(launches, community):
     )
     wait_registered(community)
     os.kill(app_pid(launches.log_dir, "pid-1"), signal.SIGSTOP)
-    code, summary, err = summary_of(process)
+    code, summary, err = finish(process)
     assert code == 1
     assert summary["outcome"] == "stalled"
     assert "app 'pid' did not finish step" in summary["reason"] and "within 2 s" in summary["reason"]
@@ -120,7 +109,7 @@ def test_ctrl_c_stops_everything_and_closes_the_log(launches, community):
     process = launches.start(ALPHA, "--set", f"name={community}", "--warp", "5", "--until", "120")
     wait_registered(community)
     process.send_signal(signal.SIGINT)
-    code, summary, err = summary_of(process)
+    code, summary, err = finish(process)
     assert code == 130 and summary["outcome"] == "interrupted"
     assert not read_log(log_path(summary)).recovered
     time.sleep(0.5)
@@ -141,7 +130,7 @@ def test_two_communities_on_one_router_do_not_cross_talk(launches, tmp_path):
         a = launches.start(ALPHA, "--set", "name=alpha_one", "--set", connect, "--until", "30")
         b = launches.start(ALPHA, "--set", "name=alpha_two", "--set", connect, "--until", "30")
         for process, name in ((a, "alpha_one"), (b, "alpha_two")):
-            code, summary, err = summary_of(process, timeout=120)
+            code, summary, err = finish(process, timeout=120)
             assert code == 0 and summary["outcome"] == "time_limit", err
             topics = read_log(log_path(summary)).topics()
             assert topics and all(topic.startswith(f"nearsub/{name}/") for topic in topics)

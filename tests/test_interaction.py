@@ -3,13 +3,12 @@
 import json
 import os
 import signal
-import time
 
 import numpy as np
 import pytest
 
 from conftest import ALPHA
-from helpers import log_path, per_topic
+from helpers import finish, log_path, per_topic, wait_registered
 from nearsub.common.cores import build_cores, run_mission
 from nearsub.common.dynamics import Interaction, body_forces
 from nearsub.common.interaction import blend_weight, interaction_at
@@ -18,7 +17,6 @@ from nearsub.common.messages import encode
 from nearsub.common.mission import load_mission
 from nearsub.common.surrogate import analytic_model, load_surrogate
 from nearsub.common.vehicles import SDV
-from nearsub.tools import registry
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -129,19 +127,16 @@ def test_a_lost_surrogate_server_stops_the_mission_naming_it(launches, community
     process = launches.start(
         ALPHA, *sum((["--set", s] for s in settings), []), "--set", f"name={community}", "--warp", "5"
     )
-    end = time.monotonic() + 30
-    while community not in registry.running() and time.monotonic() < end:
-        time.sleep(0.05)
+    wait_registered(community)
     pids = [int(p) for p in os.listdir("/proc") if p.isdigit() and _is_server(p, launches.log_dir)]
     assert len(pids) == 1
     os.kill(pids[0], signal.SIGSTOP)  # hung, not dead: only the query timeout can notice
-    out, err = process.communicate(timeout=120)
-    summary = json.loads(out.strip().splitlines()[-1])
+    code, summary, err = finish(process)
     try:
         os.kill(pids[0], signal.SIGKILL)
     except ProcessLookupError:
         pass  # the launcher's stop ladder already did
-    assert process.returncode == 1
+    assert code == 1
     assert summary["outcome"] == "error" and "surrogate server" in summary["reason"]
 
 

@@ -6,29 +6,18 @@ import time
 import pytest
 
 from conftest import ALPHA, nearsub
-from helpers import log_path, per_topic
+from helpers import finish, log_path, per_topic, wait_registered
 from nearsub.common.cores import build_cores
 from nearsub.common.lifecycle import Schedule, run_inprocess
 from nearsub.common.logfile import read_log
 from nearsub.common.messages import encode
 from nearsub.common.mission import load_mission
-from nearsub.tools import registry
 
 pytestmark = pytest.mark.timeout(180)
 
 
-def wait_registered(community, timeout=30.0):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if community in registry.running():
-            return
-        time.sleep(0.1)
-    raise AssertionError(f"mission {community} did not register")
 
 
-def finish(process, timeout=120):
-    out, err = process.communicate(timeout=timeout)
-    return process.returncode, json.loads(out.strip().splitlines()[-1]), err
 
 
 def test_tap_echo_and_hz_on_a_running_mission(launches, community):
