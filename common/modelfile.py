@@ -13,6 +13,10 @@ can inspect it. Entries:
 * ``model/seed`` and ``model/gp<j>/<key>``: each output's `GaussianProcess.get_state()` minus
   its X/y copies, including the precomputed alpha and L^-1, so predictions after loading are
   bit-identical to the saved model's, without refitting.
+* A multi-fidelity model (metadata ``kind = "multi-fidelity"``, thesis (2.10)-(2.15)) stores two
+  such GP sets with their own data, ``lf/...`` and ``delta/...``, and ``rho``; ``X``/``Y`` are then
+  the high-fidelity sample points and the discrepancy targets y_HF - rho y_LF (2.15). It loads
+  as a `MultiFidelitySurrogate`: y = rho y_LF + y_delta, sigma = sigma_delta.
 
 The zip CRC-32 of every entry is checked on reading, so truncation and bit rot are detected.
 """
@@ -51,12 +55,46 @@ class ModelFileError(Exception):
     """A model file cannot be used: unreadable, corrupt, foreign or of an unknown version."""
 
 
+class MultiFidelitySurrogate:
+    """A trained multi-fidelity model for prediction: y_MF = rho y_LF + y_delta (2.11) and
+    sigma_MF = sigma_delta (2.14), with the prediction methods of `MultiOutputGP`."""
+
+    def __init__(self, lf: MultiOutputGP, delta: MultiOutputGP, rho: np.ndarray):
+        self.lf, self.delta, self.rho = lf, delta, np.asarray(rho, dtype=float)
+
+    @property
+    def gps(self):
+        """The discrepancy GPs: they carry the high-fidelity information and the std."""
+        return self.delta.gps
+
+    @property
+    def all_gps(self):
+        return self.lf.gps + self.delta.gps
+
+    def predict(self, X: Any, return_std: bool = False):
+        return self._combine(self.lf.predict(X), self.delta.predict(X, return_std=return_std), return_std)
+
+    def predict_rows(self, X: Any, return_std: bool = False):
+        return self._combine(self.lf.predict_rows(X), self.delta.predict_rows(X, return_std=return_std), return_std)
+
+    def predict_point(self, x: Any) -> tuple[np.ndarray, np.ndarray]:
+        lf_mean, _ = self.lf.predict_point(x)
+        delta_mean, delta_std = self.delta.predict_point(x)
+        return self.rho * lf_mean + delta_mean, delta_std
+
+    def _combine(self, y_lf, delta, return_std):
+        if return_std:
+            mean, std = delta
+            return self.rho * y_lf + mean, std
+        return self.rho * y_lf + delta
+
+
 @dataclass(frozen=True)
 class LoadedModel:
     """A surrogate read from a model file, with everything needed to use it responsibly."""
 
     path: Path
-    model: MultiOutputGP
+    model: MultiOutputGP | MultiFidelitySurrogate
     input_names: tuple[str, ...]
     output_names: tuple[str, ...]
     units: dict[str, str]
@@ -88,8 +126,12 @@ def save_model(
     JSON-serialisable. Raises ValueError if the metadata does not fit the model.
     """
     path = Path(path)
-    state = model.get_state()
+    multi = hasattr(model, "delta")  # a MultiFidelityGP (common/mfgp.py) or MultiFidelitySurrogate
+    parts = {"lf": model.lf.get_state(), "delta": model.delta.get_state()} if multi else {"": model.get_state()}
+    state = parts["delta"] if multi else parts[""]
     X, Y = state["X"], state["Y"]
+    if multi:
+        rho = np.asarray(getattr(model, "rho_", getattr(model, "rho", 1.0)), dtype=float) * np.ones(Y.shape[1])
     d, m = X.shape[1], Y.shape[1]
     input_names, output_names = [str(s) for s in input_names], [str(s) for s in output_names]
     if len(input_names) != d or len(output_names) != m:
@@ -123,6 +165,7 @@ def save_model(
             "scipy": scipy.__version__,
         },
         "n_outputs": m,
+        "kind": "multi-fidelity" if multi else "gp",
     }
     try:
         meta_json = json.dumps(meta, allow_nan=False, sort_keys=True)
@@ -134,11 +177,17 @@ def save_model(
         "bounds": bounds,
         "X": X,
         "Y": Y,
-        "model/seed": np.asarray(state["seed"]),
     }
-    for j, gp_state in enumerate(state["outputs"]):
-        for key, value in gp_state.items():
-            arrays[f"model/gp{j}/{key}"] = np.asarray(value)
+    for prefix, part in parts.items():
+        base = f"{prefix}/" if prefix else ""
+        if prefix:
+            arrays[f"{base}X"], arrays[f"{base}Y"] = part["X"], part["Y"]
+        arrays[f"{base}model/seed"] = np.asarray(part["seed"])
+        for j, gp_state in enumerate(part["outputs"]):
+            for key, value in gp_state.items():
+                arrays[f"{base}model/gp{j}/{key}"] = np.asarray(value)
+    if multi:
+        arrays["rho"] = rho
 
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     try:
@@ -193,19 +242,24 @@ def load_model(path: str | os.PathLike) -> LoadedModel:
 
     try:
         m = int(meta["n_outputs"])
-        outputs: list[dict[str, Any]] = [{} for _ in range(m)]
-        for name, value in entries.items():
-            if name.startswith("model/gp"):
-                j, key = name[len("model/gp") :].split("/", 1)
-                outputs[int(j)][key] = _scalar_or_array(value)
-        model = MultiOutputGP.from_state(
-            {
-                "X": entries["X"],
-                "Y": entries["Y"],
-                "seed": _scalar_or_array(entries["model/seed"]),
-                "outputs": outputs,
-            }
-        )
+
+        def gp_set(prefix: str) -> MultiOutputGP:
+            outputs: list[dict[str, Any]] = [{} for _ in range(m)]
+            for name, value in entries.items():
+                if name.startswith(f"{prefix}model/gp"):
+                    j, key = name[len(f"{prefix}model/gp") :].split("/", 1)
+                    outputs[int(j)][key] = _scalar_or_array(value)
+            seed = _scalar_or_array(entries[f"{prefix}model/seed"])
+            data = {"X": entries[f"{prefix}X"], "Y": entries[f"{prefix}Y"], "seed": seed, "outputs": outputs}
+            return MultiOutputGP.from_state(data)
+
+        kind = meta.get("kind", "gp")
+        if kind == "multi-fidelity":
+            model = MultiFidelitySurrogate(gp_set("lf/"), gp_set("delta/"), entries["rho"])
+        elif kind == "gp":
+            model = gp_set("")
+        else:
+            raise ValueError(f"unknown model kind {kind!r}")
         loaded = LoadedModel(
             path=path,
             model=model,

@@ -237,7 +237,7 @@ def _model_id(model: MultiOutputGP) -> str:
     """A short content hash of a fitted model (data and hyperparameters): names a model in replies
     independently of where its file lives."""
     digest = hashlib.sha256()
-    for gp in model.gps:
+    for gp in getattr(model, "all_gps", model.gps):
         for array in (gp.X_train_, gp.y_train_, gp.lower_, gp.width_, gp.theta_):
             digest.update(np.ascontiguousarray(array, dtype=float).tobytes())
     return digest.hexdigest()[:16]
