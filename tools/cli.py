@@ -158,11 +158,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--connect", action="append", default=[], help="other routers to join")
     p.set_defaults(func=_router)
 
-    from . import train
+    from . import albench, train
     from .surrogate_cli import add_bench_parser, add_parser
 
     add_parser(sub)
     train.add_parser(sub)
+    albench.add_parser(sub)
 
     p = sub.add_parser("validate", help="physics validation cases (thesis 5.10) and scenario checks")
     p.add_argument("--json", action="store_true")
