@@ -156,11 +156,13 @@ class Clock:
                     self.mission.max_steps, "time_limit", f"reached the time limit of {self.mission.time_limit:g} s"
                 )
                 return 0
-            if self.pause_before is not None and completed == self.pause_before - 1 and not self.paused:
+            if self.pause_before is not None and completed == self.pause_before - 1:
                 self.paused = True
-                for request in self.pause_requests:
+            if self.paused:  # answer the requests due now, also those that came after the pause began
+                due = [r for r in self.pause_requests if int(r.args.get("at", self.step)) <= self.step]
+                for request in due:
                     self.reply(request, step=self.step)
-                self.pause_requests.clear()
+                    self.pause_requests.remove(request)
             if not self.paused:
                 self.grant(completed, now)
             if self.granted > completed and now - last_progress > timeout:

@@ -49,10 +49,24 @@ def test_tap_echo_and_hz_on_a_running_mission(launches, community):
     assert code == 0 and summary["outcome"] == "time_limit", err
 
 
-def test_swap_at_a_fixed_step_keeps_the_trajectory(launches, community):
-    """Swapping the helm for an identical one mid-mission must not change a single bit."""
+def wait_paused(community, timeout=30.0) -> dict:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        status = json.loads(nearsub("clock", community, "status").stdout)
+        if status["paused"]:
+            return status
+        time.sleep(0.2)
+    raise AssertionError(f"the clock of {community} did not pause")
+
+
+@pytest.mark.parametrize("wait_for_the_pause", [False, True])
+def test_swap_at_a_fixed_step_keeps_the_trajectory(launches, community, wait_for_the_pause):
+    """Swapping the helm for an identical one mid-mission must not change a single bit, whether
+    the swap request reaches the clock before or after it has paused at the step."""
     process = launches.start(ALPHA, "--set", f"name={community}", "--set", "pause_at_step=1000", "--until", "150")
     wait_registered(community)
+    if wait_for_the_pause:
+        assert wait_paused(community) == {"step": 1000, "paused": True}
     swap = nearsub("swap", community, "helm", "--at-step", "1000", "--with", "behaviour=waypoints", "--json")
     assert swap.returncode == 0, swap.stderr
     result = json.loads(swap.stdout)
@@ -83,13 +97,7 @@ def test_swap_rejects_a_bad_setting_and_the_mission_goes_on(launches, community)
 def test_clock_pause_and_resume(launches, community):
     process = launches.start(ALPHA, "--set", f"name={community}", "--set", "pause_at_step=200", "--until", "20")
     wait_registered(community)
-    deadline = time.monotonic() + 30
-    while time.monotonic() < deadline:
-        status = json.loads(nearsub("clock", community, "status").stdout)
-        if status["paused"]:
-            break
-        time.sleep(0.2)
-    assert status == {"step": 200, "paused": True}
+    assert wait_paused(community) == {"step": 200, "paused": True}
     assert process.poll() is None
     resumed = nearsub("clock", community, "resume")
     assert resumed.returncode == 0, resumed.stderr
