@@ -102,7 +102,3 @@ class GrantPolicy:
         if end is not None:
             grant = min(grant, end.step)
         return grant
-
-    def next_release(self, granted: int) -> float:
-        """Wall time at which step granted + 1 becomes due (warp > 0)."""
-        return self.wall0 + (granted + 1) * self.dt / self.warp

@@ -20,10 +20,6 @@ def ack(community: str, app: str) -> str:
     return f"{ROOT}/{community}/clock/ack/{app}"
 
 
-def acks(community: str) -> str:
-    return f"{ROOT}/{community}/clock/ack/*"
-
-
 def mission_end(community: str) -> str:
     return f"{ROOT}/{community}/clock/end"
 

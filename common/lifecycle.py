@@ -76,11 +76,6 @@ class Schedule:
     def runners(self, step: int) -> list[str]:
         return [role for role in ORDER if self.runs(role, step)]
 
-    def done_label(self, role: str, step: int) -> int:
-        """Label of `role`'s done-topic output when it has finished `step`."""
-        topic = DONE_TOPIC[role]
-        return step + self.periods[role] if topic in NEXT_STEP_TOPICS else step
-
     def expected_label(self, topic: str, step: int) -> int:
         period = self.periods[PRODUCER[topic]]
         return (step // period) * period
@@ -141,9 +136,6 @@ class Inbox:
                 mail[leaf] = message
                 self.delivered[leaf] = message.step
         return mail
-
-    def snapshot(self) -> dict:
-        return {"held": dict(self.held), "delivered": dict(self.delivered)}
 
 
 @dataclass

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -117,9 +116,6 @@ class LogContents:
     metadata: dict[str, dict[str, str]]
     recovered: bool  # True when the file had no valid summary and was read as a stream
 
-    def topic(self, topic: str) -> list[LogRecord]:
-        return [r for r in self.records if r.topic == topic]
-
     def topics(self) -> list[str]:
         return sorted({r.topic for r in self.records})
 
@@ -160,9 +156,3 @@ def _recover(path: Path) -> LogContents:
         except Exception:
             pass  # the torn tail of a crashed log: keep everything read before it
     return LogContents(records, metadata, recovered=True)
-
-
-def iter_values(contents: LogContents, topic_filter=None) -> Iterator[tuple[LogRecord, dict]]:
-    for record in contents.records:
-        if topic_filter is None or topic_filter(record.topic):
-            yield record, record.value()

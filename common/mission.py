@@ -18,7 +18,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from . import dynamics
 from .behaviours import Leg
 from .messages import describe_validation_error
-from .vehicles import LIBRARY, Vehicle, get_vehicle
+from .vehicles import Vehicle, get_vehicle
 
 COMMUNITY_PATTERN = re.compile(r"^[A-Za-z0-9_\-]+$")
 
@@ -234,9 +234,6 @@ def mission_from_dict(data: dict, where: str = "mission") -> Mission:
     except ValidationError as exc:
         raise MissionError(describe_validation_error(exc, where)) from None
 
-
-def vehicle_names() -> list[str]:
-    return sorted(LIBRARY)
 
 
 class RunConfig(Strict):
