@@ -154,7 +154,8 @@ def tap_pub(args) -> int:
                 return 2
     bus, _ = open_bus(args, args.key)
     with bus:
-        time.sleep(0.2)  # let the router learn of this client before publishing
-        bus.put(args.key, payload)
-        time.sleep(0.1)
+        # A fresh session drops data put before it knows a subscriber (zenoh-notes.md P8).
+        if not bus.put_when_matched(args.key, payload, wait=5.0):
+            print(f"nearsub tap pub: nobody subscribes to {args.key}; published anyway", file=sys.stderr)
+        time.sleep(0.1)  # let the session flush before it closes
     return 0
