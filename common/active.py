@@ -343,7 +343,7 @@ class Campaign:
             self._pick_hf_by_gap(self._model.condition_lf(X, Y))
         elif phase == "hf" and s.method == "hf-us":
             self._refit(warm_start=True)
-        elif phase == "hf":  # LF run at the HF point for (2.15); myopic adds one LF US point
+        elif phase == "hf":  # LF run at the HF point for (2.15); myopic adds its LF US picks
             batch = X
             if s.method == "myopic":
                 batch = np.vstack([X, self._greedy_lf(X, s.myopic_lf_picks)])
