@@ -281,22 +281,21 @@ def _mass_rows() -> list[Row]:
     ]
 
 
+def _step_rows(label: str, t, psi, settle: float, overshoot_note: str, settle_note: str) -> list[Row]:
+    """Overshoot and late error of a 90 deg heading step, each against its bound."""
+    overshoot, late = step_metrics(t, psi, 90.0, settle)
+    return [
+        _bound_row(f"{label}: overshoot", overshoot, MAX_OVERSHOOT_PCT, "%", overshoot_note),
+        _bound_row(f"{label}: max abs error after {settle:g} s", late, SETTLE_BAND_DEG, "deg", settle_note),
+    ]
+
+
 def _heading_rows() -> list[Row]:
     rows = []
     for vehicle, speed, settle in HEADING_CASES:
         t, psi, _, _ = heading_step(vehicle, speed, 1.5 * settle)
-        overshoot, late = step_metrics(t, psi, 90.0, settle)
         label = f"{vehicle.name} 90 deg heading step at {speed} m/s"
-        rows.append(_bound_row(f"{label}: overshoot", overshoot, MAX_OVERSHOOT_PCT, "%", "positional PID"))
-        rows.append(
-            _bound_row(
-                f"{label}: max abs error after {settle:g} s",
-                late,
-                SETTLE_BAND_DEG,
-                "deg",
-                "settling",
-            )
-        )
+        rows += _step_rows(label, t, psi, settle, "positional PID", "settling")
         lo, hi = CRUISE_SPEEDS[vehicle.name]
         worst = max(
             float(np.max(closed_loop_poles(vehicle, u, vehicle.pid.heading).real)) for u in np.linspace(lo, hi, 8)
@@ -317,18 +316,8 @@ def _heading_rows() -> list[Row]:
             continue
         tuning = incremental_tuning(vehicle, *INCREMENTAL_EQUIVALENT[vehicle.name], INCREMENTAL_DT)
         t, psi, _, _ = heading_step(vehicle, speed, 1.5 * settle, tuning=tuning, form="incremental", dt=INCREMENTAL_DT)
-        overshoot, late = step_metrics(t, psi, 90.0, settle)
         label = f"{vehicle.name} 90 deg step, incremental (5.21), dt={INCREMENTAL_DT}"
-        rows.append(_bound_row(f"{label}: overshoot", overshoot, MAX_OVERSHOOT_PCT, "%", "optional form"))
-        rows.append(
-            _bound_row(
-                f"{label}: max abs error after {settle:g} s",
-                late,
-                SETTLE_BAND_DEG,
-                "deg",
-                "optional form",
-            )
-        )
+        rows += _step_rows(label, t, psi, settle, "optional form", "optional form")
     return rows
 
 
