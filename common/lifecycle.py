@@ -149,8 +149,20 @@ class InProcessResult:
         return [m for _, t, m in self.messages if t == leaf]
 
 
-def run_inprocess(cores: dict[str, Core], schedule: Schedule, dt: float, max_steps: int) -> InProcessResult:
-    """Run the lock-stepped cores in one process, exactly as the clock and shells would."""
+def run_inprocess(
+    cores: dict[str, Core],
+    schedule: Schedule,
+    dt: float,
+    max_steps: int,
+    swaps: dict[int, dict[str, Core]] | None = None,
+) -> InProcessResult:
+    """Run the lock-stepped cores in one process, exactly as the clock and shells would.
+
+    `swaps` maps a step to replacement cores ({role: core}), swapped in before that step as
+    `nearsub swap --at-step` does: the new core takes over the old one's progress and inbox.
+    """
+    cores = dict(cores)
+    swaps = swaps or {}
     inboxes = {role: Inbox(cores[role].inputs, schedule) for role in ORDER}
     messages: list[tuple[str, str, Message]] = []
 
@@ -170,6 +182,9 @@ def run_inprocess(cores: dict[str, Core], schedule: Schedule, dt: float, max_ste
     step = 0
     while step < max_steps:
         t = step * dt
+        for role, replacement in swaps.get(step, {}).items():
+            replacement.restore(cores[role].progress())
+            cores[role] = replacement
         for role in schedule.runners(step):
             missing = inboxes[role].waiting_for(step)
             if missing:
