@@ -1,4 +1,4 @@
-"""`nearsub surrogate info|predict` (inspect and query a surrogate model file) and
+"""`nearsub surrogate info|predict|validate` (inspect, query and validate a surrogate model file) and
 `nearsub bench surrogate` (prediction, query and fit timings against their targets).
 
 Without a MODEL argument both commands use the shipped model, or, until one ships, the analytic
@@ -7,6 +7,8 @@ test fixture (with a warning on stderr; common/surrogate.py).
 
 from __future__ import annotations
 
+import csv
+import functools
 import json
 import math
 import os
@@ -21,6 +23,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
 from nearsub.common import keys
 from nearsub.common.bus import Bus, Endpoints, free_tcp_port
@@ -38,6 +41,12 @@ from nearsub.common.surrogate import (
     load_surrogate,
     sample_feasible,
     surrogate_key,
+)
+from nearsub.common.surrogate_validation import (
+    THESIS_TEST_POINTS,
+    evaluate_rows,
+    latin_hypercube_feasible,
+    validation_summary,
 )
 
 # Child processes (router, server, fixture fit) use one BLAS thread: on a busy 2-core machine
@@ -245,6 +254,128 @@ def predict_command(args) -> int:
     return 0
 
 
+# ------------------------------------------------------------------------------ validate
+PANEL_SPECS = ("coarse", "medium", "fine")  # hydro_hf.COARSE, MEDIUM, FINE
+_EQUIVALENT_LABELS = ("{:.2f} % X_prop", "d_eq,Y = {:.2f} deg", "d_eq,N = {:.2f} deg")
+
+
+def _write_validation(path: Path, result: dict) -> None:
+    """The result as JSON (summary and every point) or CSV (one row per test point)."""
+    if path.suffix == ".json":
+        path.write_text(json.dumps(result, indent=1) + "\n")
+        return
+    names = result["summary"]["outputs"]
+    columns = [*INPUT_NAMES, *(f"{n}_hf" for n in names), *(f"{n}_pred" for n in names), *(f"{n}_std" for n in names)]
+    with open(path, "w", newline="") as fh:
+        writer = csv.writer(fh)
+        writer.writerow([*columns, "hf_seconds"])
+        for row in result["rows"]:
+            writer.writerow([*(row[c] for c in columns), row["hf_seconds"]])
+
+
+def format_validation(result: dict) -> str:
+    """The MAE table in the form of thesis table 4.3, next to the thesis's numbers."""
+    s = result["summary"]
+    cost = result["hf_seconds_per_point"]
+    lines = [
+        f"surrogate validation: {result['model']} (model id {result['model_id']})",
+        f"test set: {s['points']} Latin-hypercube points within (4.4)-(4.7), seed {result['seed']}"
+        + ("" if s["evaluated"] == s["points"] else f"; HF failed at {s['points'] - s['evaluated']} (left out)"),
+        f"high fidelity: hydro_hf {result['panels'].upper()} panels, {cost['mean']:.2f} s a point "
+        f"(median {cost['median']:.2f}, max {cost['max']:.2f}; {result['jobs']} job(s), "
+        f"{result['wall_seconds']:.0f} s wall)",
+        "",
+        f"{'output':<7} {'MAE':>10}   {'equivalent (REMUS 100)':<24} {'thesis MAE':>10}   thesis equivalent",
+    ]
+    for k, name in enumerate(("X'", "Y'", "N'")):
+        ours = _EQUIVALENT_LABELS[k].format(s["equivalents"][k])
+        theirs = _EQUIVALENT_LABELS[k].format(s["thesis_equivalents"][k])
+        lines.append(f"{name:<7} {s['mae'][k]:>10.3e}   {ours:<24} {s['thesis_mae'][k]:>10.3e}   {theirs}")
+    through = s["thesis_mae_through_this_conversion"]
+    lines += [
+        "",
+        "equivalents: force = coefficient x 0.5 rho u^2 L^2 (L^3 for N) (section 5.2) over the REMUS 100's rudder",
+        "  force Y_uu_dr u^2, moment N_uu_dr u^2 and steady thrust -X_u|u| u^2 ((5.11), Prestero); u cancels.",
+        f"  The thesis's MAEs through the same conversion: {through[0]:.1f} % X_prop, {through[1]:.2f} deg, "
+        f"{through[2]:.2f} deg (its conversion is unstated).",
+        "context (mean |HF value|, largest error, share of errors within 2 predicted std):",
+        *(
+            f"  {name:<5} {m:>10.2e} {e:>10.2e} {100 * w:>5.0f} %"
+            for name, m, e, w in zip(
+                ("X'", "Y'", "N'"), s["mean_abs_hf"], s["max_abs_error"], s["fraction_within_2_std"], strict=True
+            )
+        ),
+    ]
+    return "\n".join(lines)
+
+
+def validate_command(args) -> int:
+    out = Path(args.out) if args.out else None
+    if out is not None and out.suffix not in (".json", ".csv"):
+        print(f"nearsub surrogate validate: --out {out}: expected a .json or .csv file", file=sys.stderr)
+        return 2
+    if args.points < 1 or args.jobs < 1:
+        print(
+            f"nearsub surrogate validate: --points and --jobs must be >= 1, got {args.points}, {args.jobs}",
+            file=sys.stderr,
+        )
+        return 2
+    surrogate = _load_or_report(args.model)
+    if surrogate is None:
+        return 2
+    X = latin_hypercube_feasible(args.points, args.seed)
+    from nearsub.common import hydro_hf  # imported here: the panel code is not needed to build the parser
+
+    hf = functools.partial(hydro_hf.hf_coefficients, panels=getattr(hydro_hf, args.panels.upper()))
+    started = time.perf_counter()
+    with Progress(
+        TextColumn("[bold]HF test points"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeRemainingColumn(),
+        disable=not sys.stderr.isatty(),
+    ) as progress:
+        task = progress.add_task("validate", total=len(X))
+        Y_hf, seconds = evaluate_rows(hf, X, args.jobs, on_row=lambda _: progress.advance(task))
+    wall = time.perf_counter() - started
+    p = surrogate.predict(X)
+    names = list(surrogate.output_names)
+    result = {
+        "model": surrogate.source,
+        "model_id": surrogate.model_id,
+        "panels": args.panels,
+        "seed": args.seed,
+        "jobs": args.jobs,
+        "wall_seconds": wall,
+        "hf_seconds_per_point": {
+            "mean": float(np.mean(seconds)),
+            "median": float(np.median(seconds)),
+            "max": float(np.max(seconds)),
+        },
+        "summary": validation_summary(X, Y_hf, p.mean, p.std),
+        "rows": [
+            {
+                **dict(zip(INPUT_NAMES, x.tolist(), strict=True)),
+                **{f"{n}_hf": float(v) for n, v in zip(names, y, strict=True)},
+                **{f"{n}_pred": float(v) for n, v in zip(names, m, strict=True)},
+                **{f"{n}_std": float(v) for n, v in zip(names, e, strict=True)},
+                "hf_seconds": float(t),
+            }
+            for x, y, m, e, t in zip(X, Y_hf, p.mean, p.std, seconds, strict=True)
+        ],
+    }
+    if out is not None:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        _write_validation(out, result)
+    if args.json:
+        print(json.dumps({k: v for k, v in result.items() if k != "rows"}))
+    else:
+        print(format_validation(result))
+        if out is not None:
+            print(f"wrote {out}")
+    return 0
+
+
 # --------------------------------------------------------------------------------- bench
 def _times(call: Callable[[], object], repeats: int) -> np.ndarray:
     """Wall seconds of each of `repeats` calls."""
@@ -316,7 +447,7 @@ def bench_surrogate(args) -> int:
 
 # ------------------------------------------------------------------------------- parsers
 def add_parser(subparsers) -> None:
-    """Register `surrogate info` and `surrogate predict` on the `nearsub` command line."""
+    """Register `surrogate info`, `predict` and `validate` on the `nearsub` command line."""
     p = subparsers.add_parser("surrogate", help="inspect and query a surrogate model file")
     sub = p.add_subparsers(dest="surrogate_command", required=True)
     t = sub.add_parser("info", help="inputs, bounds, training size, hyperparameters and provenance")
@@ -333,6 +464,21 @@ def add_parser(subparsers) -> None:
     )
     t.add_argument("--json", action="store_true")
     t.set_defaults(func=predict_command)
+    t = sub.add_parser(
+        "validate",
+        help="MAE against the high fidelity on Latin-hypercube test points (thesis table 4.3)",
+        description="Evaluate the HF physics at Latin-hypercube points within (4.4)-(4.7) and print the MAE of "
+        "X', Y', N' with REMUS 100 error equivalents next to thesis table 4.3. Compare with the panels the "
+        "model was trained on (the shipped model: medium), or the MAE includes the mesh difference.",
+    )
+    t.add_argument("model", nargs="?", help="model file (default: the shipped model)")
+    t.add_argument("--points", type=int, default=THESIS_TEST_POINTS, help="test points (default 500, as the thesis)")
+    t.add_argument("--panels", choices=PANEL_SPECS, default="medium", help="HF panel spec (default medium)")
+    t.add_argument("--seed", type=int, default=0, help="seed of the Latin hypercube (default 0)")
+    t.add_argument("--jobs", type=int, default=1, help="HF processes (default 1)")
+    t.add_argument("--out", help="write the result: .json (summary and points) or .csv (points)")
+    t.add_argument("--json", action="store_true", help="print the summary as JSON")
+    t.set_defaults(func=validate_command)
 
 
 def add_bench_parser(bench_subparsers) -> None:
