@@ -13,7 +13,7 @@ state is frozen there), as the sim ends a mission at a collision.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -39,6 +39,11 @@ class BatchResult:
         return [OUTCOMES[code] for code in self.outcome]
 
 
+def _keep(memory: control.PidState, keep: np.ndarray) -> control.PidState:
+    """The controller memory of the UUVs still flying."""
+    return control.PidState(*(np.asarray(getattr(memory, f.name))[keep] for f in fields(memory)))
+
+
 def run_batch(
     mission: Mission,
     starts: np.ndarray,
@@ -48,16 +53,19 @@ def run_batch(
 ) -> BatchResult:
     """Fly N UUVs of `mission` (its vehicle, environment, helm, pid and sim settings and the speed
     and lead of its first leg) from `starts` (N, 6 state) along the track-lines from their start
-    positions to `track_ends` (N, 2), for mission.max_steps steps. `active` masks cells to run."""
+    positions to `track_ends` (N, 2), for mission.max_steps steps. `active` masks cells to run.
+
+    Only the UUVs still flying are computed: the arrays shrink when some collide. Every function
+    works row by row (the surrogate's `predict_rows` too), so a UUV's numbers do not depend on
+    which others fly with it."""
     vehicle = mission.vehicle_model
     helm, pid, sim = mission.apps.helm, mission.apps.pid, mission.apps.sim
     leg = helm.legs[0]
     env = mission.environment.dynamics()
     dt = mission.dt
     n = len(starts)
-    active = np.ones(n, dtype=bool) if active is None else active.copy()
-    x = np.array(starts, dtype=float)
-    track_start = x[:, [dynamics.X, dynamics.Y]].copy()
+    active = np.ones(n, dtype=bool) if active is None else np.asarray(active, dtype=bool).copy()
+    final = np.array(starts, dtype=float)
     cross_flow = None
     if helm.modified:
         cross_flow = behaviours.CrossFlow(mission.environment.u_sub, helm.alpha, vehicle.length)
@@ -66,9 +74,6 @@ def run_batch(
     compensate = helm.compensated and use_surrogate
     interact = use_surrogate and sim.interaction != "off"
 
-    memory = control.PidState.zeros((n,))
-    u_d = np.zeros(n)
-    psi_d = np.zeros(n)
     collided = np.zeros(n, dtype=bool)
     close_call = np.zeros(n, dtype=bool)
     closest = np.full(n, np.inf)
@@ -77,18 +82,28 @@ def run_batch(
     limits_low = np.array([-vehicle.max_thrust, -vehicle.max_rudder])
     limits_high = np.array([vehicle.max_thrust, vehicle.max_rudder])
 
+    flying = np.flatnonzero(active)  # indices of the UUVs still integrated, in order
+    x = final[flying]
+    track_start = x[:, [dynamics.X, dynamics.Y]].copy()
+    track_end = np.asarray(track_ends, dtype=float)[flying]
+    memory = control.PidState.zeros((len(flying),))
+    u_d = np.zeros(len(flying))
+    psi_d = np.zeros(len(flying))
+    command = np.zeros((len(flying), 2))
     for step in range(mission.max_steps):
-        running = active & ~collided
-        if not running.any():
+        if flying.size == 0:
             break
         t = step * dt
+        helm_runs = step % helm.period == 0
         seen = None
-        if use_surrogate:  # one query for the whole batch; sweeps need no std
-            seen = interaction_at(surrogate, x, vehicle, mission.environment.rho, sim.interaction, with_std=False)
-        if step % helm.period == 0:  # helm(x_k)
+        if interact or (compensate and helm_runs):  # one query for the whole batch; sweeps need no std
+            seen = interaction_at(
+                surrogate, x, vehicle, mission.environment.rho, sim.interaction, with_std=False, weighted_only=True
+            )
+        if helm_runs:  # helm(x_k)
             speed, heading = behaviours.steer(
                 track_start,
-                track_ends,
+                track_end,
                 x[:, [dynamics.X, dynamics.Y]],
                 leg.speed,
                 leg.lead,
@@ -98,24 +113,28 @@ def run_batch(
             if compensate:
                 n_s = seen.interaction.weight * seen.interaction.forces[:, 2]
                 heading = heading + behaviours.nuv_heading_offset(n_s, speed, vehicle.compensation_N_uv, gamma)
-            u_d = np.where(running, speed, u_d)
-            psi_d = np.where(running, heading, psi_d)
+            u_d = np.broadcast_to(np.asarray(speed, dtype=float), heading.shape).copy()
+            psi_d = heading
         if step % pid.period == 0:  # pid
             memory, out = control.pid_step(memory, u_d, psi_d, x, vehicle, vehicle.pid, dt * pid.period, pid.form)
             command = np.clip(np.stack([out.thrust, out.rudder], axis=-1), limits_low, limits_high)
         interaction = seen.interaction if interact else None  # sim: x_k -> x_{k+1}
-        stepped = dynamics.step(x, command, vehicle, env, dt * sim.period, sim.integrator, t, interaction)
-        x = np.where(running[:, None], stepped, x)
-        steps += running
+        x = dynamics.step(x, command, vehicle, env, dt * sim.period, sim.integrator, t, interaction)
+        steps[flying] += 1
         found = events.classify(
             x[:, dynamics.X], x[:, dynamics.Y], x[:, dynamics.PSI], vehicle.length, vehicle.diameter
         )
-        collided |= running & found.collision
-        close_call |= running & found.close_call
-        clearance = events.hull_signed_distance(x[:, dynamics.X], x[:, dynamics.Y])
-        closest = np.where(running, np.minimum(closest, clearance), closest)
-        cross = events.track_distance(x[:, dynamics.X], x[:, dynamics.Y], track_start, track_ends)
-        max_cross = np.where(running, np.maximum(max_cross, cross), max_cross)
+        close_call[flying] |= found.close_call
+        closest[flying] = np.minimum(closest[flying], found.centre_clearance)
+        cross = events.track_distance(x[:, dynamics.X], x[:, dynamics.Y], track_start, track_end)
+        max_cross[flying] = np.maximum(max_cross[flying], cross)
+        if found.collision.any():  # the sim ends a mission at a collision: freeze those UUVs there
+            final[flying] = x
+            collided[flying[found.collision]] = True
+            keep = ~found.collision
+            flying, x, track_start, track_end = flying[keep], x[keep], track_start[keep], track_end[keep]
+            memory, u_d, psi_d, command = _keep(memory, keep), u_d[keep], psi_d[keep], command[keep]
+    final[flying] = x
 
     outcome = np.select(
         [~active, collided, close_call, max_cross > events.STRAY_LIMIT],
@@ -127,4 +146,4 @@ def run_batch(
         ],
         OUTCOMES.index("safe"),
     )
-    return BatchResult(outcome, closest, max_cross, x, steps)
+    return BatchResult(outcome, closest, max_cross, final, steps)

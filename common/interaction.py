@@ -86,7 +86,13 @@ def geometry_outside(vehicle: Vehicle) -> str | None:
 
 
 def interaction_at(
-    model: ForceModel, state: np.ndarray, vehicle: Vehicle, rho: float, mode: str, with_std: bool = True
+    model: ForceModel,
+    state: np.ndarray,
+    vehicle: Vehicle,
+    rho: float,
+    mode: str,
+    with_std: bool = True,
+    weighted_only: bool = False,
 ) -> InteractionAt:
     """Ask the force model about the state(s) (6,) or (n, 6) and build the dynamics' input. The
     fields are (n, 3) and (n,) arrays; `interaction` has the shape of `state` ((3,) and () for one
@@ -95,21 +101,26 @@ def interaction_at(
     The hull ratios are clipped to the trained range (`geometry_outside` says when, and the sim
     reports it once): they are constants of the vehicle, so clipping them moves the whole mission
     to the nearest trained hull instead of switching the interaction off everywhere. Without
-    `with_std` the std is NaN (sweeps do not need it; the mean is the same either way)."""
+    `with_std` the std is NaN (sweeps do not need it; the mean is the same either way). With
+    `weighted_only` the model is asked only about the states whose blend weight is above zero, and
+    the others get zero forces: the dynamics multiply them by that zero weight, so the motion is
+    the same (to the sign of a zero), and a sweep where most UUVs are outside the domain is cheap."""
     single = np.ndim(state) == 1
     state = np.atleast_2d(state)
     u, x, y, psi = state[:, U], state[:, X], state[:, Y], state[:, PSI]
     raw, mirror = sg.to_inputs(x, y, u, psi, vehicle.length, vehicle.diameter)
     inputs = raw.copy()
     inputs[:, GEOMETRY] = np.clip(raw[:, GEOMETRY], sg.BOUNDS[GEOMETRY, 0], sg.BOUNDS[GEOMETRY, 1])
-    prediction = model.predict(inputs, return_std=with_std)
-    forces = sg.to_forces(prediction.mean, mirror, u, vehicle.length, rho)
-    std = (
-        np.abs(sg.to_forces(prediction.std, mirror, u, vehicle.length, rho))
-        if with_std
-        else np.full_like(forces, np.nan)
-    )
     weight = blend_weight(inputs)
+    asked = weight > 0.0 if weighted_only else np.ones(len(inputs), dtype=bool)
+    mean, spread = np.zeros((len(inputs), 3)), np.full((len(inputs), 3), np.nan)
+    if asked.any():
+        prediction = model.predict(inputs[asked], return_std=with_std)
+        mean[asked] = prediction.mean
+        if with_std:
+            spread[asked] = prediction.std
+    forces = sg.to_forces(mean, mirror, u, vehicle.length, rho)
+    std = np.abs(sg.to_forces(spread, mirror, u, vehicle.length, rho))
     safe = np.where(np.isfinite(forces), forces, 0.0)  # weight is 0 wherever they are not finite
     interaction = Interaction(safe[0], weight[0], mode) if single else Interaction(safe, weight, mode)
     return InteractionAt(interaction, forces, std, sg.in_domain(raw), sg.constraints_ok(raw))

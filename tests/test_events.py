@@ -50,12 +50,44 @@ def test_hull_signed_distance_simple_points():
 
 
 def test_hull_signed_distance_matches_brute_force():
+    """The grids' error, by distance from the hull: under 1 mm within 1 m (where collisions and
+    close calls are decided), 5 mm within 5 m, a few cm beyond; exact inside and at contact."""
     tree = _dense_hull()
     rng = np.random.default_rng(7)
-    q = np.column_stack([rng.uniform(-55, 48, 3000), rng.uniform(0, 12, 3000)])
+    x_near = rng.uniform(hull.SUB_STERN_X - 1.5, hull.SUB_BOW_X + 1.5, 6000)
+    q = np.vstack(
+        [
+            np.column_stack([rng.uniform(-55, 48, 3000), rng.uniform(0, 12, 3000)]),
+            np.column_stack([x_near, np.abs(hull.submarine_half_width(x_near) + rng.uniform(-0.3, 1.2, 6000))]),
+            np.column_stack([rng.uniform(-110, 100, 3000), rng.uniform(0, 45, 3000)]),
+        ]
+    )
     expected = tree.query(q)[0]
-    expected = np.where(q[:, 1] < hull.submarine_half_width(q[:, 0]), -expected, expected)
-    np.testing.assert_allclose(events.hull_signed_distance(q[:, 0], q[:, 1]), expected, atol=3e-4)
+    inside = q[:, 1] < hull.submarine_half_width(q[:, 0])
+    expected = np.where(inside, -expected, expected)
+    got = events.hull_signed_distance(q[:, 0], q[:, 1])
+    for low, high, tolerance in ((-np.inf, 0.01, 3e-4), (0.01, 1.0, 1e-3), (1.0, 5.0, 5e-3), (5.0, np.inf, 6e-2)):
+        band = (expected >= low) & (expected < high)
+        assert band.sum() > 100
+        np.testing.assert_allclose(got[band], expected[band], atol=tolerance, err_msg=f"distances {low}..{high} m")
+    # The reference the grids are built from is the exact polyline distance itself.
+    np.testing.assert_allclose(events._exact_signed_distance(q[:, 0], q[:, 1]), expected, atol=3e-4)
+
+
+def test_grids_agree_with_the_exact_distance_where_events_are_decided():
+    """Contact and close-call decisions read the exact distance or the finest grid: over the poses
+    of many UUVs near the hull, classify matches the exact polyline distance."""
+    rng = np.random.default_rng(5)
+    x = rng.uniform(hull.SUB_STERN_X - 2, hull.SUB_BOW_X + 2, 3000)
+    y = hull.submarine_half_width(x) + rng.uniform(-0.2, 1.0, 3000)
+    psi = rng.uniform(-0.5, 0.5, 3000)
+    ox, oy = hull.uuv_outline(x, y, psi, REMUS_L, REMUS_D)
+    exact = events._exact_signed_distance(ox.ravel(), np.abs(oy.ravel())).reshape(ox.shape).min(axis=-1)
+    found = events.classify(x, y, psi, REMUS_L, REMUS_D)
+    assert found.collision.tolist() == (exact <= 0).tolist()
+    undecided = np.abs(exact - REMUS_D) < 1e-3  # within the finest grid's error of the threshold
+    expected = (exact > 0) & ((exact <= REMUS_D) | events.ahead_or_astern(x, y, REMUS_D))
+    assert found.close_call[~undecided].tolist() == expected[~undecided].tolist()
 
 
 def test_parallel_uuv_beside_the_middle_body():
