@@ -211,6 +211,12 @@ def to_forces(coeffs: Any, mirror: Any, u: Any, uuv_length: Any, rho: float = RH
     return coeffs * _force_scales(u, uuv_length, rho) * signs
 
 
+def to_coefficients(forces: Any, u: Any, uuv_length: Any, rho: float = RHO_SEA) -> np.ndarray:
+    """Dimensional [X N, Y N, N N m] (n, 3) in the mirrored frame of the inputs -> [X', Y', N'] (n, 3):
+    the inverse of `to_forces` with mirror = +1 (for answers of external simulations)."""
+    return np.atleast_2d(np.asarray(forces, dtype=float)) / _force_scales(u, uuv_length, rho)
+
+
 # ------------------------------------------------------------------------------- prediction
 @dataclass(frozen=True)
 class Prediction:

@@ -164,6 +164,10 @@ def build_parser() -> argparse.ArgumentParser:
     add_parser(sub)
     train.add_parser(sub)
     albench.add_parser(sub)
+    from . import campaign, maps
+
+    maps.add_parser(sub)
+    campaign.add_parser(sub)
 
     p = sub.add_parser("validate", help="physics validation cases (thesis 5.10) and scenario checks")
     p.add_argument("--json", action="store_true")
