@@ -150,7 +150,9 @@ def _report(campaign, state: Path, as_json: bool) -> None:
 
 
 def start_command(args) -> int:
-    from nearsub.common.active import Campaign, CampaignSettings
+    from nearsub.common.active import Campaign
+
+    from .train import nmmf_settings
 
     state = Path(args.state)
     if state.exists() and not args.restart:
@@ -158,14 +160,7 @@ def start_command(args) -> int:
     state.parent.mkdir(parents=True, exist_ok=True)
     _answers_path(state).unlink(missing_ok=True)
     try:
-        settings = CampaignSettings(
-            method="nmmf",
-            hf_budget=args.budget,
-            selection="max-variance",
-            seed=args.seed,
-            n_lf0=args.n_lf0,
-            n_hf0=args.n_hf0,
-        )
+        settings = nmmf_settings(args)
     except ValueError as exc:
         raise CampaignError(f"settings: {exc}") from None
     campaign = Campaign(_problem(), settings, path=state)
@@ -256,6 +251,8 @@ def campaign_command(args) -> int:
 
 
 def add_parser(subparsers) -> None:
+    from .train import add_design_arguments
+
     p = subparsers.add_parser("campaign", help="NMMF training with your own CFD as the high fidelity")
     sub = p.add_subparsers(dest="campaign_command", required=True)
 
@@ -264,10 +261,7 @@ def add_parser(subparsers) -> None:
         return t
 
     t = with_state(sub.add_parser("start", help="start a campaign and print its first HF cases"))
-    t.add_argument("--budget", type=int, default=100, help="HF samples in all (default 100, as the thesis)")
-    t.add_argument("--seed", type=int, default=0)
-    t.add_argument("--n-lf0", type=int, default=30, help="initial low-fidelity design")
-    t.add_argument("--n-hf0", type=int, default=10, help="initial HF design (nested in the LF one)")
+    add_design_arguments(t)
     t.add_argument("--restart", action="store_true", help="replace an existing campaign file")
     t.add_argument("--json", action="store_true")
     t = with_state(sub.add_parser("next", help="print the pending HF case(s) as dimensional geometry"))

@@ -62,6 +62,27 @@ def write_samples(path: Path, X: np.ndarray, Y: np.ndarray) -> None:
         writer.writerows(np.column_stack([X, Y]).tolist())
 
 
+def nmmf_settings(args) -> CampaignSettings:
+    """The thesis's training settings (NMMF, maximum-variance selection (2.31)) with the design
+    options of `add_design_arguments`. Raises ValueError for inconsistent sizes."""
+    return CampaignSettings(
+        method="nmmf",
+        hf_budget=args.budget,
+        selection="max-variance",
+        seed=args.seed,
+        n_lf0=args.n_lf0,
+        n_hf0=args.n_hf0,
+    )
+
+
+def add_design_arguments(p) -> None:
+    """--budget, --seed, --n-lf0, --n-hf0: the options `nmmf_settings` reads."""
+    p.add_argument("--budget", type=int, default=100, help="high-fidelity samples (default 100, as the thesis)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--n-lf0", type=int, default=30, help="initial low-fidelity design")
+    p.add_argument("--n-hf0", type=int, default=10, help="initial high-fidelity design (nested in the LF one)")
+
+
 def train_command(args) -> int:
     if getattr(args, "data", None):
         return data_command(args)
@@ -81,15 +102,7 @@ def train_command(args) -> int:
             print(f"nearsub train: {state} exists; pass --resume to continue it or --restart", file=sys.stderr)
             return 2
         state.parent.mkdir(parents=True, exist_ok=True)
-        settings = CampaignSettings(
-            method="nmmf",
-            hf_budget=args.budget,
-            selection="max-variance",
-            seed=args.seed,
-            n_lf0=args.n_lf0,
-            n_hf0=args.n_hf0,
-        )
-        campaign = Campaign(problem, settings, path=state)
+        campaign = Campaign(problem, nmmf_settings(args), path=state)
     started = time.perf_counter()
     hf_seconds = 0.0
     columns = (
@@ -269,7 +282,7 @@ def data_command(args) -> int:
 
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("train", help="train the interaction surrogate with NMMF (LF + HF physics)")
-    p.add_argument("--budget", type=int, default=100, help="high-fidelity samples (default 100, as the thesis)")
+    add_design_arguments(p)
     p.add_argument("--state", default=str(DEFAULT_STATE), help="campaign file, saved after every sample")
     p.add_argument("--resume", action="store_true", help="continue the campaign in --state")
     p.add_argument("--restart", action="store_true", help="start over even if --state exists")
@@ -280,8 +293,5 @@ def add_parser(subparsers) -> None:
         help="fit a GP to your own table instead of training: columns as the shipped samples CSV "
         f"({', '.join((*sg.INPUT_NAMES, *sg.OUTPUT_NAMES))})",
     )
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--n-lf0", type=int, default=30, help="initial low-fidelity design")
-    p.add_argument("--n-hf0", type=int, default=10, help="initial high-fidelity design (nested in the LF one)")
     p.add_argument("--progress", action="store_true", help="show the progress bar even when not on a terminal")
     p.set_defaults(func=train_command)
