@@ -13,6 +13,7 @@ state is frozen there), as the sim ends a mission at a collision.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -26,8 +27,9 @@ OUTCOMES = ("safe", "large_stray", "close_call", "collision", "infeasible")  # c
 
 @dataclass
 class BatchResult:
-    """Per UUV: outcome code (index into OUTCOMES), closest approach to the hull [m] (negative when
-    touching), largest distance from the track-line [m], final state (N, 6), steps integrated."""
+    """Per UUV: outcome code (index into OUTCOMES), closest approach of its CB to the hull [m]
+    (negative inside), largest distance from the track-line [m], final state (N, 6), steps
+    integrated."""
 
     outcome: np.ndarray
     closest: np.ndarray
@@ -50,10 +52,16 @@ def run_batch(
     track_ends: np.ndarray,
     surrogate: ForceModel | None = None,
     active: np.ndarray | None = None,
+    on_step: Callable[[int, int], None] | None = None,
 ) -> BatchResult:
     """Fly N UUVs of `mission` (its vehicle, environment, helm, pid and sim settings and the speed
     and lead of its first leg) from `starts` (N, 6 state) along the track-lines from their start
-    positions to `track_ends` (N, 2), for mission.max_steps steps. `active` masks cells to run.
+    positions to `track_ends` (N, 2), for mission.max_steps steps. `active` masks cells to run;
+    `on_step(done, total)` follows the progress (a progress bar).
+
+    The largest cross-track error is measured from the track-line through the start and the end,
+    extended both ways: a UUV that drops back behind its start is on its line, not straying
+    (`behaviours.track_geometry`, the helm's own geometry).
 
     Only the UUVs still flying are computed: the arrays shrink when some collide. Every function
     works row by row (the surrogate's `predict_rows` too), so a UUV's numbers do not depend on
@@ -126,7 +134,7 @@ def run_batch(
         )
         close_call[flying] |= found.close_call
         closest[flying] = np.minimum(closest[flying], found.centre_clearance)
-        cross = events.track_distance(x[:, dynamics.X], x[:, dynamics.Y], track_start, track_end)
+        cross = np.abs(behaviours.track_geometry(track_start, track_end, x[:, [dynamics.X, dynamics.Y]])[3])
         max_cross[flying] = np.maximum(max_cross[flying], cross)
         if found.collision.any():  # the sim ends a mission at a collision: freeze those UUVs there
             final[flying] = x
@@ -134,6 +142,8 @@ def run_batch(
             keep = ~found.collision
             flying, x, track_start, track_end = flying[keep], x[keep], track_start[keep], track_end[keep]
             memory, u_d, psi_d, command = _keep(memory, keep), u_d[keep], psi_d[keep], command[keep]
+        if on_step is not None:
+            on_step(step + 1, mission.max_steps)
     final[flying] = x
 
     outcome = np.select(

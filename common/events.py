@@ -26,7 +26,6 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-from scipy.ndimage import maximum_filter1d, minimum_filter1d
 from scipy.spatial import cKDTree
 
 from .hull import (
@@ -144,6 +143,13 @@ class _DistanceGrid:
         return np.where(covered, low + ty * (high - low), np.nan)
 
 
+def _running(reduce, values: np.ndarray, reach: float, h: float) -> np.ndarray:
+    """max or min of `values` (spaced h) within `reach` either side; zero beyond the ends."""
+    cells = int(np.ceil(reach / h))
+    padded = np.pad(values, cells)
+    return reduce(np.lib.stride_tricks.sliding_window_view(padded, 2 * cells + 1), axis=1)
+
+
 def _build_grid(h: float, trusted_from: float, band: float) -> _DistanceGrid:
     """Exact signed distances at the nodes within about `band` outside and 2 h inside the bow and
     stern curves. Nodes are chosen from the half-width alone: a point within `band` of the hull lies
@@ -154,9 +160,7 @@ def _build_grid(h: float, trusted_from: float, band: float) -> _DistanceGrid:
     nx, ny = int(np.ceil((SUB_BOW_X + reach - x0) / h)) + 1, int(np.ceil((R_SUB + reach) / h)) + 1
     xs, ys = x0 + h * np.arange(nx), h * np.arange(ny)
     width = submarine_half_width(xs)
-    window = lambda cells: 2 * int(np.ceil(cells / h)) + 1  # noqa: E731
-    highest = maximum_filter1d(width, window(band), mode="constant")
-    lowest = minimum_filter1d(width, window(2.0 * h), mode="constant")
+    highest, lowest = _running(np.max, width, band, h), _running(np.min, width, 2.0 * h, h)
     curved = (xs > x_bow_joint - 2.0 * h) | (xs < x_aft_joint + 2.0 * h)  # beside the middle body: closed form
     wanted = curved[:, None] & (ys <= highest[:, None] + reach) & (ys >= lowest[:, None] - 2.0 * h)
     values = np.full((nx, ny), np.nan)

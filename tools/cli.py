@@ -168,6 +168,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     maps.add_parser(sub)
     campaign.add_parser(sub)
+    from . import envelope
+
+    envelope.add_parser(sub)
 
     p = sub.add_parser("validate", help="physics validation cases (thesis 5.10) and scenario checks")
     p.add_argument("--json", action="store_true")

@@ -1,0 +1,396 @@
+"""`nearsub envelope`: safe operating envelopes (thesis sections 5.11 and 6.4) as PNG, CSV and JSON.
+
+    nearsub envelope --vehicle sdv --behaviour nuv_compensation --sea-state 5
+    nearsub envelope --vehicle small medium large --sea-state 0 6 --workers 2    # a sweep
+    nearsub envelope --compare A.json B.json -o compare.png
+    nearsub envelope --thesis-figures [--scheduler tcp://HOST:8786]
+
+Every option that describes the conditions takes several values; their combinations make a sweep,
+one Dask task per configuration with `--workers N` (a local cluster on loopback) or `--scheduler`
+(a running cluster). The computation is `common/envelope.py`; this module parses, draws and writes.
+"""
+
+from __future__ import annotations
+
+import csv
+import itertools
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from nearsub.common.mission import BEHAVIOURS
+
+# Imported when a command runs, so that `nearsub --help` stays fast: matplotlib, rich and the
+# envelope core (which loads scipy).
+# Outcome colours (OUTCOMES order): safe green, large stray yellow, close call orange, collision
+# red, infeasible (starts in the hull) light grey; the traffic-light reading of the thesis figures.
+COLOURS = ("#4daf4a", "#ffd92f", "#ff7f00", "#e41a1c", "#d9d9d9")
+LABELS = ("safe", "large stray", "close call", "collision", "starts in the hull")
+HULL_COLOUR = "#4d4d4d"
+THESIS_OUT = Path("docs") / "envelopes"
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser(
+        "envelope",
+        help="safe operating envelopes around the submarine (PNG, CSV, JSON); sweeps on Dask",
+        description="Fly one UUV per grid cell for --duration seconds and colour each cell by its outcome "
+        "(collision > close call > large stray > safe). Options describing conditions take several values; "
+        "their combinations form a sweep.",
+    )
+    p.add_argument("--vehicle", nargs="+", default=["remus100"], help="remus100|nps_auv_ii|sdv or small|medium|large")
+    p.add_argument(
+        "--behaviour", nargs="+", default=["waypoints"], choices=BEHAVIOURS, metavar="NAME", help=", ".join(BEHAVIOURS)
+    )
+    p.add_argument(
+        "--d-lead", nargs="+", default=["3"], metavar="D", help="lead distance in UUV lengths (3 or 3L) or metres (4m)"
+    )
+    p.add_argument("--gamma", nargs="+", type=float, default=[None], help="N_uv compensation gain (default (6.4))")
+    p.add_argument("--sea-state", nargs="+", type=int, default=[0], help="thesis table 5.1 (0 = no waves)")
+    p.add_argument("--depth", nargs="+", type=float, default=[50.0], help="operating depth [m]")
+    p.add_argument("--u-sub", nargs="+", type=float, default=[1.5], help="submarine speed [m/s]")
+    p.add_argument("--u-ot", nargs="+", type=float, default=[0.0], help="overtaking speed [m/s]")
+    p.add_argument("--grid", default=None, metavar="NxM", help="cells along R_long x R_lat (default 40x20)")
+    p.add_argument("--r-long", default=None, metavar="LO,HI", help="R_long range (default -0.8,0.8)")
+    p.add_argument("--r-lat", default=None, metavar="LO,HI", help="R_lat range (default 0.05,0.12)")
+    p.add_argument("--duration", type=float, default=None, help="simulated seconds per cell (default 120)")
+    p.add_argument("--dt", type=float, default=None, help="base step [s] (default 0.1)")
+    p.add_argument("--model", default="", help="surrogate model file (default: the shipped model)")
+    p.add_argument(
+        "-o", "--out", default=None, help="output folder, or FILE.png for one envelope (default: envelopes/)"
+    )
+    p.add_argument("--compare", nargs=2, metavar=("A.json", "B.json"), help="draw two envelopes side by side")
+    p.add_argument("--thesis-figures", action="store_true", help="figures 5-10..5-14 and 6-7..6-11 into docs/envelopes")
+    p.add_argument("--scheduler", metavar="ADDRESS", help="run the sweep on this Dask scheduler (tcp://host:8786)")
+    p.add_argument("--workers", type=int, metavar="N", help="run the sweep on a local Dask cluster of N processes")
+    p.add_argument("--json", action="store_true", help="print the summaries (fractions) as JSON lines")
+    p.set_defaults(func=envelope_command)
+
+
+# --------------------------------------------------------------------------------- options
+def _pair(text: str | None, name: str) -> tuple[float, float] | None:
+    if text is None:
+        return None
+    try:
+        low, high = (float(v) for v in text.split(","))
+    except ValueError:
+        raise SystemExit(f"nearsub envelope: {name} wants LO,HI, got {text!r}") from None
+    return low, high
+
+
+def _grid(text: str | None) -> tuple[int, int] | None:
+    if text is None:
+        return None
+    try:
+        n_long, n_lat = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise SystemExit(f"nearsub envelope: --grid wants NxM (e.g. 40x20), got {text!r}") from None
+    return n_long, n_lat
+
+
+def d_lead_lengths(text: str, vehicle: str) -> float:
+    """'3' or '3L' -> 3 UUV lengths; '4m' -> 4 m in UUV lengths."""
+    from nearsub.common.vehicles import get_vehicle
+
+    text = text.strip()
+    if text.lower().endswith("m"):
+        return float(text[:-1]) / get_vehicle(vehicle).length
+    return float(text[:-1] if text.upper().endswith("L") else text)
+
+
+def shared_settings(args) -> dict:
+    """Grid, duration, step and model: the same for every configuration of a run."""
+    settings = {
+        "grid": _grid(args.grid),
+        "r_long": _pair(args.r_long, "--r-long"),
+        "r_lat": _pair(args.r_lat, "--r-lat"),
+        "duration": args.duration,
+        "dt": args.dt,
+        "model": args.model or None,
+    }
+    return {k: v for k, v in settings.items() if v is not None}
+
+
+def configs_from_args(args) -> list:
+    """The cartesian product of the condition options (EnvelopeConfig each)."""
+    from nearsub.common import envelope as env
+    from nearsub.common.vehicles import get_vehicle
+
+    shared = shared_settings(args)
+    configs = []
+    for vehicle, behaviour, d_lead, gamma, sea_state, depth, u_sub, u_ot in itertools.product(
+        args.vehicle, args.behaviour, args.d_lead, args.gamma, args.sea_state, args.depth, args.u_sub, args.u_ot
+    ):
+        configs.append(
+            env.EnvelopeConfig(
+                vehicle=get_vehicle(vehicle).name,
+                behaviour=behaviour,
+                d_lead=d_lead_lengths(d_lead, vehicle),
+                gamma=gamma,
+                sea_state=sea_state,
+                depth=depth,
+                u_sub=u_sub,
+                u_ot=u_ot,
+                **shared,
+            )
+        )
+    return list(dict.fromkeys(configs))
+
+
+# --------------------------------------------------------------------------------- drawing
+def surrogate_window(vehicle: str) -> tuple[float, float]:
+    """R_lat range where the vehicle feels the submarine: table 4.2 cut by (4.4) and (4.5), at the
+    hull ratios the interaction uses (clipped to the trained range, `interaction_at`)."""
+    from nearsub.common import surrogate as sg
+    from nearsub.common.hull import D_SUB
+    from nearsub.common.vehicles import get_vehicle
+
+    v = get_vehicle(vehicle)
+    d_ratio = float(np.clip(D_SUB / v.diameter, *sg.BOUNDS[4]))
+    ld_ratio = float(np.clip(v.length / v.diameter, *sg.BOUNDS[5]))
+    low = (0.5048 + 0.5 / d_ratio + 9.425e-3 * ld_ratio / d_ratio) / 8.575  # (4.4), SPEC errata 3
+    high = (0.5 + 2.0 / d_ratio) / 8.575  # (4.5)
+    return max(low, sg.BOUNDS[1, 0]), min(high, sg.BOUNDS[1, 1])
+
+
+def _edges(centres: np.ndarray) -> np.ndarray:
+    if len(centres) == 1:
+        return np.array([centres[0] - 0.005, centres[0] + 0.005])
+    mid = 0.5 * (centres[1:] + centres[:-1])
+    return np.concatenate([[2 * centres[0] - mid[0]], mid, [2 * centres[-1] - mid[-1]]])
+
+
+def draw_envelope(ax, summary: dict, title: str | None = None) -> None:
+    """Cells coloured by outcome over the submarine's outline, in R_long, R_lat, with the window
+    where the surrogate's interaction acts drawn dashed."""
+    from matplotlib.colors import BoundaryNorm, ListedColormap
+
+    from nearsub.common import surrogate as sg
+    from nearsub.common.batch import OUTCOMES
+    from nearsub.common.hull import L_SUB, submarine_outline
+
+    r_long, r_lat = np.asarray(summary["r_long"]), np.asarray(summary["r_lat"])
+    outcome = np.asarray(summary["outcome"])
+    ax.pcolormesh(
+        _edges(r_long),
+        _edges(r_lat),
+        outcome.T,
+        cmap=ListedColormap(COLOURS),
+        norm=BoundaryNorm(np.arange(len(OUTCOMES) + 1) - 0.5, len(OUTCOMES)),
+        edgecolors="white",
+        linewidth=0.3,
+    )
+    hx, hy = submarine_outline()
+    ax.fill(hx / L_SUB, hy / L_SUB, color=HULL_COLOUR, zorder=3)
+    low, high = surrogate_window(summary["config"]["vehicle"])
+    (x_lo, x_hi) = sg.BOUNDS[0]
+    ax.plot([x_lo, x_hi, x_hi, x_lo, x_lo], [low, low, high, high, low], "k--", linewidth=0.8, zorder=4)
+    ax.set_xlim(_edges(r_long)[[0, -1]])
+    ax.set_ylim(_edges(r_lat)[[0, -1]])
+    ax.set_xlabel("R_long = x / L_sub  (bow to the right)")
+    ax.set_ylabel("R_lat = y / L_sub")
+    fractions = summary["fractions"]
+    text = ", ".join(f"{LABELS[k]} {100 * fractions[name]:.0f}%" for k, name in enumerate(OUTCOMES[:-1]))
+    ax.set_title((title or summary["label"]) + f"\n{text}", fontsize=9)
+
+
+def legend_handles() -> list:
+    from matplotlib.patches import Patch
+
+    handles = [Patch(facecolor=c, edgecolor="grey", label=label) for c, label in zip(COLOURS, LABELS, strict=True)]
+    handles.append(Patch(facecolor=HULL_COLOUR, label="submarine (SUBOFF, D = 10.4 m)"))
+    handles.append(
+        Patch(facecolor="none", edgecolor="black", linestyle="--", label="surrogate acts (table 4.2, 4.4-4.5)")
+    )
+    return handles
+
+
+def draw_panels(panels: list[tuple[str, dict]], columns: int, suptitle: str, path: Path) -> Path:
+    """Panels (caption, summary) in rows of `columns`, one legend below."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = int(np.ceil(len(panels) / columns))
+    legend_height = 0.55  # [in]
+    height = 2.9 * rows + 0.4 + legend_height
+    fig, axes = plt.subplots(rows, columns, figsize=(7.0 * columns, height), squeeze=False)
+    for ax, (caption, summary) in zip(axes.ravel(), panels, strict=False):
+        draw_envelope(ax, summary, caption)
+    for ax in axes.ravel()[len(panels) :]:
+        ax.set_visible(False)
+    fig.suptitle(suptitle, fontsize=11)
+    fig.legend(handles=legend_handles(), loc="lower center", ncol=4, fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, legend_height / height, 1, 1))
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+# --------------------------------------------------------------------------------- writing
+def write_cells_csv(envelope, path: Path) -> Path:
+    rows = envelope.cell_rows()
+    with path.open("w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    return path
+
+
+def write_envelope(envelope, stem: Path) -> list[Path]:
+    """STEM.png, STEM.csv and STEM.json."""
+    from nearsub.common import envelope as env
+
+    stem.parent.mkdir(parents=True, exist_ok=True)
+    summary = envelope.summary()
+    return [
+        draw_panels([(summary["label"], summary)], 1, "Operating envelope", stem.with_suffix(".png")),
+        write_cells_csv(envelope, stem.with_suffix(".csv")),
+        env.save_summary(summary, stem.with_suffix(".json")),
+    ]
+
+
+def _progress():
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
+    return Progress(*columns, console=None, disable=not sys.stderr.isatty(), transient=False)
+
+
+def run_configs(configs: list, args) -> list:
+    """One envelope in this process with a bar over its steps; several as a sweep with a bar over
+    configurations (on Dask with --workers or --scheduler)."""
+    from nearsub.common import envelope as env
+
+    with _progress() as progress:
+        if len(configs) == 1 and not (args.workers or args.scheduler):
+            n_long, n_lat = configs[0].grid
+            task = progress.add_task(f"{n_long * n_lat} cells, steps", total=None)
+
+            def on_step(done: int, total: int) -> None:
+                progress.update(task, completed=done, total=total)
+
+            return [env.compute_envelope(configs[0], on_step=on_step)]
+        task = progress.add_task("envelopes", total=len(configs))
+        return env.sweep(configs, args.scheduler, args.workers, on_done=lambda *_: progress.advance(task))
+
+
+def fractions_line(summary: dict) -> str:
+    f = summary["fractions"]
+    return (
+        f"{summary['label']}: safe {100 * f['safe']:.1f}%, large stray {100 * f['large_stray']:.1f}%, "
+        f"close call {100 * f['close_call']:.1f}%, collision {100 * f['collision']:.1f}% "
+        f"({summary['feasible_cells']} feasible cells, {summary['wall_time']:.1f} s)"
+    )
+
+
+def envelope_command(args) -> int:
+    if args.compare:
+        return compare_command(args)
+    if args.thesis_figures:
+        return thesis_command(args)
+    configs = configs_from_args(args)
+    out = Path(args.out or "envelopes")
+    single_file = len(configs) == 1 and out.suffix.lower() in (".png", ".json", ".csv")
+    started = time.perf_counter()
+    envelopes = run_configs(configs, args)
+    for envelope in envelopes:
+        stem = out.with_suffix("") if single_file else out / envelope.config.slug()
+        paths = write_envelope(envelope, stem)
+        summary = envelope.summary()
+        if args.json:
+            print(json.dumps({k: summary[k] for k in ("config", "label", "cells", "counts", "fractions", "wall_time")}))
+        else:
+            print(fractions_line(summary))
+            print("  wrote " + ", ".join(str(p) for p in paths))
+    if not args.json and len(envelopes) > 1:
+        print(f"{len(envelopes)} envelopes in {time.perf_counter() - started:.1f} s")
+    return 0
+
+
+def compare_command(args) -> int:
+    from nearsub.common import envelope as env
+
+    try:
+        first, second = (env.load_summary(path) for path in args.compare)
+    except (OSError, ValueError) as exc:
+        print(f"nearsub envelope --compare: {exc}", file=sys.stderr)
+        return 2
+    out = Path(args.out or "envelope-compare.png")
+    if out.suffix.lower() != ".png":
+        out = out / "compare.png"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    draw_panels([(first["label"], first), (second["label"], second)], 2, "Operating envelopes compared", out)
+    print(fractions_line(first))
+    print(fractions_line(second))
+    print(f"wrote {out}")
+    return 0
+
+
+# --------------------------------------------------------------------------------- thesis figures
+def thesis_command(args) -> int:
+    """Every envelope figure of chapters 5 and 6: one JSON per configuration in OUT/data, one PNG
+    per figure, and the fractions table (fractions.md, fractions.csv)."""
+    from nearsub.common import envelope as env
+
+    out = Path(args.out or THESIS_OUT)
+    (out / "data").mkdir(parents=True, exist_ok=True)
+    overrides = shared_settings(args)
+    figures = env.thesis_figures()
+    configs = env.unique_configs(figures, **overrides)
+    started = time.perf_counter()
+    envelopes = run_configs(configs, args)
+    total = time.perf_counter() - started
+    summaries = {}
+    for envelope in envelopes:
+        summary = envelope.summary()
+        summaries[envelope.config] = summary
+        env.save_summary(summary, out / "data" / f"{envelope.config.slug()}.json")
+    rows = []
+    for figure in figures:
+        panels = []
+        for caption, config in figure.panels:
+            summary = summaries[config.model_copy(update=overrides) if overrides else config]
+            panels.append((caption, summary))
+            rows.append((figure.number, caption, summary))
+        path = draw_panels(
+            panels, figure.columns, f"Figure {figure.number}: {figure.title}", out / f"figure-{figure.number}.png"
+        )
+        print(f"wrote {path}")
+    write_fractions(rows, out)
+    steps = sum(s["vehicle_steps"] for s in summaries.values())
+    timing = {
+        "configurations": len(configs),
+        "wall_time": round(total, 1),
+        "vehicle_steps": steps,
+        "vehicle_steps_per_second": round(steps / total),
+        "scheduler": args.scheduler or (f"local cluster, {args.workers} workers" if args.workers else "this process"),
+    }
+    (out / "timing.json").write_text(json.dumps(timing, indent=1) + "\n")
+    print(f"{len(configs)} envelopes in {total:.1f} s ({timing['vehicle_steps_per_second']} vehicle-steps/s)")
+    return 0
+
+
+def write_fractions(rows: list[tuple[str, str, dict]], out: Path) -> None:
+    """The safe / stray / close-call / collision fractions of every panel, as CSV and Markdown."""
+    from nearsub.common import envelope as env
+    from nearsub.common.batch import OUTCOMES
+
+    names = OUTCOMES[:-1]
+    with (out / "fractions.csv").open("w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(["figure", "panel", "configuration", *names, "feasible_cells"])
+        for number, caption, s in rows:
+            fractions = [f"{s['fractions'][n]:.3f}" for n in names]
+            writer.writerow(
+                [number, caption, env.EnvelopeConfig(**s["config"]).slug(), *fractions, s["feasible_cells"]]
+            )
+    lines = ["| figure | panel | safe | large stray | close call | collision |", "|---|---|---:|---:|---:|---:|"]
+    for number, caption, s in rows:
+        cells = " | ".join(f"{100 * s['fractions'][n]:.0f}%" for n in names)
+        lines.append(f"| {number} | {caption} | {cells} |")
+    (out / "fractions.md").write_text("\n".join(lines) + "\n")
