@@ -11,11 +11,13 @@ same numbers.
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
 
+from . import free_stream as fs
 from . import surrogate as sg
 from .dynamics import PSI, Interaction, U, X, Y
 from .vehicles import Vehicle
@@ -34,6 +36,10 @@ GEOMETRY = slice(4, 6)  # D_sub/D_uuv and L/D_uuv: fixed for a vehicle
 
 class ServiceError(RuntimeError):
     """A service the mission depends on (the surrogate server) is missing or failed."""
+
+
+class IncrementError(ServiceError):
+    """The "increment" mode has no free-stream table made for the surrogate it is given."""
 
 
 class ForceModel(Protocol):
@@ -64,7 +70,7 @@ class InteractionAt:
     """The surrogate's view of one or more vehicle states."""
 
     interaction: Interaction  # what the dynamics add (forces and weight)
-    forces: np.ndarray  # (n, 3) X_s, Y_s, N_s [N, N, N m], frame convention, unweighted
+    forces: np.ndarray  # (n, 3) X_s, Y_s, N_s [N, N, N m], frame convention, unweighted; "increment": the increment
     std: np.ndarray  # (n, 3) their standard deviations
     in_domain: np.ndarray
     constraints_ok: np.ndarray
@@ -85,6 +91,52 @@ def geometry_outside(vehicle: Vehicle) -> str | None:
     )
 
 
+_TABLES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # force model -> its free-stream table
+
+
+def _served_model_id(model: ForceModel) -> str | None:
+    """The content hash of the model behind `model`: `Surrogate.model_id`, or, for the surrogate
+    server (apps.services.RemoteSurrogate, which does not keep it), the model_id of one reply."""
+    if getattr(model, "model_id", None) is not None or not hasattr(model, "_querier"):
+        return getattr(model, "model_id", None)
+    try:
+        payload = model._querier.ask(sg.encode_query(sg.BOUNDS.mean(axis=1)))
+        return sg.decode_reply(payload).model_id
+    except (RuntimeError, ValueError) as exc:  # bus.ReplyError, messages.MessageError (no Zenoh import here)
+        raise ServiceError(f"surrogate server: {exc}") from None
+
+
+def increment_table(model: ForceModel) -> fs.FreeStreamTable:
+    """The free-stream table made for this model (cached per model object); raises IncrementError,
+    naming the mission field and the model file, when there is none: adding the surrogate's total
+    forces (which hold the UUV's own drag and Munk moment) on top of (5.11) would count them twice."""
+    try:
+        return _TABLES[model]
+    except (KeyError, TypeError):
+        pass
+    model_id = _served_model_id(model)
+    loaded = getattr(model, "loaded", None)
+    path = getattr(loaded, "path", None)
+    try:
+        table, searched = fs.find_table(model_id, path)
+    except fs.FreeStreamFileError as exc:
+        raise IncrementError(f'apps.sim.interaction = "increment": {exc}') from None
+    if table is None:
+        source = getattr(model, "source", None) or path or "the surrogate server's model (surrogate.model)"
+        raise IncrementError(
+            f'apps.sim.interaction = "increment" needs the free-stream value of the hydrodynamic model that '
+            f"the surrogate {source} (model id {model_id}) was trained on, and no free-stream table matches "
+            f"that model (looked at {', '.join(str(p) for p in searched)}). Use the shipped model "
+            "(surrogate.model empty), build the table of a model trained on common/hydro_hf.py with "
+            '"python -m nearsub.tools.free_stream MODEL", or set apps.sim.interaction = "replace".'
+        )
+    try:
+        _TABLES[model] = table
+    except TypeError:  # a model object without weak references: look it up every call
+        pass
+    return table
+
+
 def interaction_at(
     model: ForceModel,
     state: np.ndarray,
@@ -93,6 +145,7 @@ def interaction_at(
     mode: str,
     with_std: bool = True,
     weighted_only: bool = False,
+    free_stream: fs.FreeStreamTable | None = None,
 ) -> InteractionAt:
     """Ask the force model about the state(s) (6,) or (n, 6) and build the dynamics' input. The
     fields are (n, 3) and (n,) arrays; `interaction` has the shape of `state` ((3,) and () for one
@@ -104,7 +157,14 @@ def interaction_at(
     `with_std` the std is NaN (sweeps do not need it; the mean is the same either way). With
     `weighted_only` the model is asked only about the states whose blend weight is above zero, and
     the others get zero forces: the dynamics multiply them by that zero weight, so the motion is
-    the same (to the sign of a zero), and a sweep where most UUVs are outside the domain is cheap."""
+    the same (to the sign of a zero), and a sweep where most UUVs are outside the domain is cheap.
+
+    In "increment" mode the forces are the prediction minus the free-stream value (`free_stream`,
+    or the table made for the model, `increment_table`) at the same clipped inputs, so they tend to
+    zero away from the submarine (SPEC section 5); the std is the prediction's."""
+    table = None
+    if mode == "increment":
+        table = free_stream if free_stream is not None else increment_table(model)
     single = np.ndim(state) == 1
     state = np.atleast_2d(state)
     u, x, y, psi = state[:, U], state[:, X], state[:, Y], state[:, PSI]
@@ -117,6 +177,8 @@ def interaction_at(
     if asked.any():
         prediction = model.predict(inputs[asked], return_std=with_std)
         mean[asked] = prediction.mean
+        if table is not None:
+            mean[asked] -= table.coefficients(inputs[asked])
         if with_std:
             spread[asked] = prediction.std
     forces = sg.to_forces(mean, mirror, u, vehicle.length, rho)
