@@ -198,3 +198,25 @@ def test_workers_option_starts_and_closes_a_local_cluster():
     assert sorted(seen) == [0, 1] and [r.config for r in results] == SWEEP[:2]
     np.testing.assert_array_equal(results[1].result.final, env.compute_envelope(SWEEP[1]).result.final)
     assert "distributed" in sys.modules
+
+
+def test_thesis_figures_subset_and_unknown_figure(tmp_path):
+    done = nearsub(
+        "envelope", "--thesis-figures", "--figure", "5-11", "--grid", "3x2", "--duration", "1", "-o", str(tmp_path)
+    )
+    assert done.returncode == 0, done.stderr
+    assert [p.name for p in tmp_path.glob("figure-*.png")] == ["figure-5-11.png"]
+    assert len(list((tmp_path / "data").glob("*.json"))) == 3
+    bad = nearsub("envelope", "--thesis-figures", "--figure", "5-99", "-o", str(tmp_path))
+    assert bad.returncode == 2 and "5-99" in bad.stderr
+
+
+def test_bench_envelope_prints_its_figures():
+    done = nearsub(
+        "bench", "envelope", "--grid", "4x2", "--duration", "2", "--repeats", "1", "--sample", "2", "--skip-thesis",
+        "--json", timeout=120,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    result = json.loads(done.stdout)
+    assert result["cells"] == 8 and result["vehicle_steps"] > 0 and result["vehicle_steps_per_second"] > 0
+    assert result["speed_up"] > 0 and result["one_by_one_sample_cells"] == 2 and "thesis_figures" not in result

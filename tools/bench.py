@@ -2,6 +2,9 @@
 
 `pipeline` runs a mission (alpha by default) at warp 0 through the multi-process launcher and
 in one process, and reports lock-stepped steps per second and their ratio.
+
+`envelope` times one operating envelope in the batch engine (vehicle-steps per second), the same
+cells flown one by one in-process (a sample, extrapolated) and the whole `--thesis-figures` set.
 """
 
 from __future__ import annotations
@@ -67,5 +70,99 @@ def bench_pipeline(args) -> int:
     return 0
 
 
+def add_envelope_bench_parser(bench_subparsers) -> None:
+    """Register `bench envelope`."""
+    t = bench_subparsers.add_parser("envelope", help="envelope wall time, vehicle-steps/s, speed-up, thesis set")
+    t.add_argument("--vehicle", default="remus100", help="vehicle of the timed envelope (default remus100)")
+    t.add_argument("--grid", default="40x20", metavar="NxM", help="cells (default 40x20 = 800)")
+    t.add_argument("--duration", type=float, default=120.0, help="simulated seconds per cell (default 120)")
+    t.add_argument("--repeats", type=int, default=3, help="timed envelopes (default 3)")
+    t.add_argument("--sample", type=int, default=10, help="cells flown one by one in-process (default 10)")
+    t.add_argument("--skip-thesis", action="store_true", help="do not time the --thesis-figures set")
+    t.add_argument("--workers", type=int, help="time the thesis set on a local Dask cluster of N workers")
+    t.add_argument("--json", action="store_true")
+    t.set_defaults(func=bench_envelope)
+
+
+def bench_envelope(args) -> int:
+    """Wall time of one envelope, the batch engine's speed-up over single in-process missions (from
+    an evenly spread sample of feasible cells) and the time of the thesis figure set."""
+    import os
+
+    import numpy as np
+
+    from nearsub.common import envelope as env
+    from nearsub.common.batch import OUTCOMES
+    from nearsub.common.cores import run_mission
+
+    n_long, n_lat = (int(v) for v in args.grid.lower().split("x"))
+    config = env.EnvelopeConfig(vehicle=args.vehicle, grid=(n_long, n_lat), duration=args.duration)
+    surrogate = env.cached_surrogate(config.model)
+    env.compute_envelope(config.model_copy(update={"grid": (2, 2), "duration": 1.0}), surrogate)  # warm caches
+    load_before = os.getloadavg()[0]
+    times, found = [], None
+    for _ in range(args.repeats):
+        found = env.compute_envelope(config, surrogate)
+        times.append(found.wall_time)
+    vehicle_steps = int(found.result.steps.sum())
+    x, y = env.cell_positions(config)
+    feasible = np.flatnonzero(found.result.outcome != OUTCOMES.index("infeasible"))
+    sample = feasible[np.linspace(0, len(feasible) - 1, min(args.sample, len(feasible))).astype(int)]
+    began = time.perf_counter()
+    sample_steps = 0
+    for k in sample:
+        sample_steps += run_mission(env.cell_mission(config, x[k], y[k]), surrogate).steps
+    per_step_single = (time.perf_counter() - began) / sample_steps
+    one_by_one = per_step_single * vehicle_steps  # the same cells, one mission after another
+    median = statistics.median(times)
+    result = {
+        "cells": n_long * n_lat,
+        "feasible_cells": len(feasible),
+        "duration_s": config.duration,
+        "dt": config.dt,
+        "vehicle": config.vehicle,
+        "envelope_wall_s": {"median": round(median, 2), "min": round(min(times), 2), "max": round(max(times), 2)},
+        "vehicle_steps": vehicle_steps,
+        "vehicle_steps_per_second": round(vehicle_steps / median),
+        "one_by_one_in_process_s": round(one_by_one, 1),
+        "one_by_one_sample_cells": len(sample),
+        "speed_up": round(one_by_one / median, 1),
+        "load_average_before": round(load_before, 2),
+        "target_envelope_s": 10.0,
+    }
+    if not args.skip_thesis:
+        figures = env.thesis_figures()
+        configs = env.unique_configs(figures)
+        began = time.perf_counter()
+        done = env.sweep(configs, workers=args.workers)
+        result["thesis_figures"] = {
+            "configurations": len(configs),
+            "wall_s": round(time.perf_counter() - began, 1),
+            "vehicle_steps": int(sum(e.result.steps.sum() for e in done)),
+            "workers": args.workers or "this process",
+            "target_s": 600.0,
+        }
+    result["load_average_after"] = round(os.getloadavg()[0], 2)
+    if args.json:
+        print(json.dumps(result))
+        return 0
+    wall = result["envelope_wall_s"]
+    print(
+        f"envelope ({result['cells']} cells, {len(feasible)} feasible, {config.duration:g} s at dt {config.dt:g}, "
+        f"{config.vehicle}): median {wall['median']:.2f} s (min {wall['min']:.2f}, max {wall['max']:.2f}) "
+        f"over {args.repeats} runs   (target: <= 10 s)"
+    )
+    print(f"  {vehicle_steps} vehicle-steps, {result['vehicle_steps_per_second']} vehicle-steps/s")
+    print(
+        f"  the same cells one by one in-process: ~{one_by_one:.0f} s (from {len(sample)} cells), "
+        f"speed-up {result['speed_up']:.0f}x"
+    )
+    if "thesis_figures" in result:
+        t = result["thesis_figures"]
+        print(f"--thesis-figures set: {t['configurations']} envelopes in {t['wall_s']:.0f} s   (target: <= 600 s)")
+    print(f"  load average {result['load_average_before']} before, {result['load_average_after']} after (2 cores)")
+    return 0
+
+
 def bench_command(args) -> int:
-    return {"pipeline": bench_pipeline}[args.bench_command](args)
+    return {"pipeline": bench_pipeline, "envelope": bench_envelope}[args.bench_command](args)

@@ -183,6 +183,9 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--repeats", type=int, default=3)
     t.add_argument("--json", action="store_true")
     add_bench_parser(b)
+    from .bench import add_envelope_bench_parser
+
+    add_envelope_bench_parser(b)
     t = b.add_parser("hydro", help="cost per evaluation of the low- and high-fidelity hydrodynamic models")
     t.set_defaults(func=_bench_hydro)
     p.set_defaults(func=_bench)

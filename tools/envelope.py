@@ -64,6 +64,7 @@ def add_parser(sub) -> None:
     )
     p.add_argument("--compare", nargs=2, metavar=("A.json", "B.json"), help="draw two envelopes side by side")
     p.add_argument("--thesis-figures", action="store_true", help="figures 5-10..5-14 and 6-7..6-11 into docs/envelopes")
+    p.add_argument("--figure", nargs="+", metavar="N", help="with --thesis-figures: only these (e.g. 5-10 6-7)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="run the sweep on this Dask scheduler (tcp://host:8786)")
     p.add_argument("--workers", type=int, metavar="N", help="run the sweep on a local Dask cluster of N processes")
     p.add_argument("--json", action="store_true", help="print the summaries (fractions) as JSON lines")
@@ -341,6 +342,12 @@ def thesis_command(args) -> int:
     (out / "data").mkdir(parents=True, exist_ok=True)
     overrides = shared_settings(args)
     figures = env.thesis_figures()
+    unknown = set(args.figure or ()) - {f.number for f in figures}
+    if unknown:
+        known = ", ".join(f.number for f in figures)
+        print(f"nearsub envelope: no thesis figure {', '.join(sorted(unknown))} (known: {known})", file=sys.stderr)
+        return 2
+    figures = [f for f in figures if not args.figure or f.number in args.figure]
     configs = env.unique_configs(figures, **overrides)
     started = time.perf_counter()
     envelopes = run_configs(configs, args)
