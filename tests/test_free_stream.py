@@ -7,6 +7,7 @@ from dataclasses import asdict
 
 import numpy as np
 import pytest
+from test_interaction import BESIDE
 
 from conftest import ALPHA, ROOT
 from helpers import log_path, per_topic
@@ -170,26 +171,15 @@ def test_queries_outside_the_grid_are_clamped_and_finite(table):
     np.testing.assert_array_equal(values[1], table.coefficients([[0.0, 0.07, 3.0, 2.0, 20.0, 8.0]])[0])
 
 
-# An SDV holding station beside the submarine's afterbody, in its lateral window (as test_interaction).
-BESIDE = [
-    "environment.submarine=true",
-    "environment.u_sub=1.5",
-    "vehicle=sdv",
-    "start.x=-30",
-    "start.y=5.9",
-    "start.psi_deg=0",
-    "start.speed=1.5",
-    "apps.helm.legs=[{points = [[60.0, 5.9]], speed = 1.5, lead = 15.9, lead_to_start = true}]",
-    "time_limit=10",
-    "apps.sim.interaction=increment",
-]
+# test_interaction's SDV holding station beside the afterbody, in its lateral window, in increment mode.
+INCREMENT = [*BESIDE, "time_limit=10", "apps.sim.interaction=increment"]
 
 
 def test_multi_process_increment_equals_in_process(launches, community):
     """The sim app asks the surrogate server which model it serves, and finds the shipped table."""
-    code, summary, err = launches.run(ALPHA, *sum((["--set", s] for s in BESIDE), []), "--set", f"name={community}")
+    code, summary, err = launches.run(ALPHA, *sum((["--set", s] for s in INCREMENT), []), "--set", f"name={community}")
     assert code == 0, err
-    mission = load_mission(ALPHA, BESIDE + [f"name={community}"])
+    mission = load_mission(ALPHA, INCREMENT + [f"name={community}"])
     reference = run_inprocess(
         build_cores(mission, load_surrogate()), Schedule(mission.periods()), mission.dt, mission.max_steps
     )
@@ -199,7 +189,7 @@ def test_multi_process_increment_equals_in_process(launches, community):
 
 
 def test_multi_process_increment_without_a_table_ends_naming_the_field(launches, community, model_file):
-    settings = BESIDE + [f"surrogate.model={json.dumps(str(model_file))}"]
+    settings = INCREMENT + [f"surrogate.model={json.dumps(str(model_file))}"]
     code, summary, err = launches.run(ALPHA, *sum((["--set", s] for s in settings), []), "--set", f"name={community}")
     assert code == 1
     assert summary["outcome"] == "error" and "apps.sim.interaction" in summary["reason"], summary
