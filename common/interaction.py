@@ -74,6 +74,9 @@ class InteractionAt:
     std: np.ndarray  # (n, 3) their standard deviations
     in_domain: np.ndarray
     constraints_ok: np.ndarray
+    # (n, 3) the prediction's own forces, non-finite as 0: bit for bit `interaction.forces` of the
+    # "replace" mode, whatever the mode (what the helm's N_uv compensation reads N_s from).
+    total: np.ndarray
 
 
 def geometry_outside(vehicle: Vehicle) -> str | None:
@@ -174,15 +177,18 @@ def interaction_at(
     weight = blend_weight(inputs)
     asked = weight > 0.0 if weighted_only else np.ones(len(inputs), dtype=bool)
     mean, spread = np.zeros((len(inputs), 3)), np.full((len(inputs), 3), np.nan)
+    free = np.zeros((len(inputs), 3))
     if asked.any():
         prediction = model.predict(inputs[asked], return_std=with_std)
         mean[asked] = prediction.mean
         if table is not None:
-            mean[asked] -= table.coefficients(inputs[asked])
+            free[asked] = table.coefficients(inputs[asked])
         if with_std:
             spread[asked] = prediction.std
-    forces = sg.to_forces(mean, mirror, u, vehicle.length, rho)
+    total = sg.to_forces(mean, mirror, u, vehicle.length, rho)
+    forces = total if table is None else sg.to_forces(mean - free, mirror, u, vehicle.length, rho)
     std = np.abs(sg.to_forces(spread, mirror, u, vehicle.length, rho))
     safe = np.where(np.isfinite(forces), forces, 0.0)  # weight is 0 wherever they are not finite
     interaction = Interaction(safe[0], weight[0], mode) if single else Interaction(safe, weight, mode)
-    return InteractionAt(interaction, forces, std, sg.in_domain(raw), sg.constraints_ok(raw))
+    total = safe if table is None else np.where(np.isfinite(total), total, 0.0)
+    return InteractionAt(interaction, forces, std, sg.in_domain(raw), sg.constraints_ok(raw), total)
