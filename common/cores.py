@@ -49,6 +49,9 @@ class HelmCore:
         # gamma from (6.4) at the M11 the thesis quotes for library vehicles (5.21, 1.30, 1.03).
         self.gamma = self.settings.gamma or float(behaviours.gamma_from_m11(v.thesis_M11 or v.M11))
         self.legs = self.settings.legs
+        # N_s is the yaw moment the interaction adds to the vehicle's own model, as the sim applies
+        # it: the interaction increment in "increment" mode, the surrogate's total otherwise.
+        self.interaction_mode = "increment" if mission.apps.sim.interaction == "increment" else "replace"
         self.cross_flow = None
         if self.settings.modified:
             u_sub = mission.environment.u_sub
@@ -70,7 +73,7 @@ class HelmCore:
         self.progress_state = decision.progress
         psi_d, delta_psi, n_s = decision.psi_d, 0.0, 0.0
         if self.surrogate is not None and not decision.progress.complete:
-            seen = interaction_at(self.surrogate, state_array(s), self.vehicle, self.rho, "replace")
+            seen = interaction_at(self.surrogate, state_array(s), self.vehicle, self.rho, self.interaction_mode)
             n_s = float(seen.interaction.weight * seen.interaction.forces[2])
             delta_psi = float(
                 behaviours.nuv_heading_offset(n_s, decision.u_d, self.vehicle.compensation_N_uv, self.gamma)
