@@ -32,6 +32,7 @@ BESIDE = [
     "start.speed=1.5",
     "apps.helm.legs=[{points = [[60.0, 5.9]], speed = 1.5, lead = 15.9, lead_to_start = true}]",
     "time_limit=20",
+    "apps.sim.interaction=replace",  # the analytic fixture is no hydrodynamic model: no free stream
 ]
 
 
