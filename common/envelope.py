@@ -196,24 +196,31 @@ class Envelope:
     result: BatchResult
     wall_time: float
 
-    @property
-    def outcome_grid(self) -> np.ndarray:
-        """(n_long, n_lat) outcome codes (indices into OUTCOMES)."""
-        return self.result.outcome.reshape(len(self.r_long), len(self.r_lat))
-
-    def counts(self) -> dict[str, int]:
-        found = np.bincount(self.result.outcome, minlength=len(OUTCOMES))
-        return {name: int(found[code]) for code, name in enumerate(OUTCOMES)}
-
     def summary(self) -> dict:
-        """JSON-able: the configuration, the grid, every cell's outcome, counts and fractions."""
-        return envelope_summary(
-            self.config, self.r_long, self.r_lat, self.result.outcome, self.wall_time, int(self.result.steps.sum())
-        )
+        """JSON-able: the configuration, the grid, every cell's outcome, counts and fractions (of
+        the feasible cells: the infeasible ones start in the hull)."""
+        outcome = self.result.outcome
+        found = np.bincount(outcome, minlength=len(OUTCOMES))
+        counts = {name: int(found[code]) for code, name in enumerate(OUTCOMES)}
+        feasible = len(outcome) - counts["infeasible"]
+        return {
+            "config": self.config.model_dump(mode="json"),
+            "label": self.config.label(),
+            "cells": len(outcome),
+            "feasible_cells": feasible,
+            "counts": counts,
+            "fractions": {name: counts[name] / feasible if feasible else 0.0 for name in OUTCOMES[:-1]},
+            "r_long": self.r_long.tolist(),
+            "r_lat": self.r_lat.tolist(),
+            "outcome_names": list(OUTCOMES),
+            "outcome": outcome.reshape(len(self.r_long), len(self.r_lat)).tolist(),
+            "wall_time": round(self.wall_time, 3),
+            "vehicle_steps": int(self.result.steps.sum()),
+        }
 
     def cell_rows(self) -> list[dict]:
-        """One row per cell: indices, start, outcome, closest approach, largest cross-track error,
-        final state and steps."""
+        """One row per cell: indices, start, outcome, closest approach of the UUV's centre to the
+        hull (empty for an infeasible cell), largest cross-track error, final state and steps."""
         x, y = cell_positions(self.config)
         rows = []
         n_lat = len(self.r_lat)
@@ -242,29 +249,6 @@ class Envelope:
                 }
             )
         return rows
-
-
-def envelope_summary(
-    config: EnvelopeConfig, r_long, r_lat, outcome: np.ndarray, wall_time: float, vehicle_steps: int
-) -> dict:
-    found = np.bincount(outcome, minlength=len(OUTCOMES))
-    counts = {name: int(found[code]) for code, name in enumerate(OUTCOMES)}
-    feasible = len(outcome) - counts["infeasible"]
-    return {
-        "config": config.model_dump(mode="json"),
-        "label": config.label(),
-        "cells": len(outcome),
-        "feasible_cells": feasible,
-        "counts": counts,
-        # fractions of the feasible cells (the infeasible ones start in the hull)
-        "fractions": {name: counts[name] / feasible if feasible else 0.0 for name in OUTCOMES[:-1]},
-        "r_long": [float(v) for v in r_long],
-        "r_lat": [float(v) for v in r_lat],
-        "outcome_names": list(OUTCOMES),
-        "outcome": np.asarray(outcome).reshape(len(r_long), len(r_lat)).tolist(),
-        "wall_time": round(float(wall_time), 3),
-        "vehicle_steps": int(vehicle_steps),
-    }
 
 
 def compute_envelope(

@@ -220,3 +220,11 @@ def test_bench_envelope_prints_its_figures():
     result = json.loads(done.stdout)
     assert result["cells"] == 8 and result["vehicle_steps"] > 0 and result["vehicle_steps_per_second"] > 0
     assert result["speed_up"] > 0 and result["one_by_one_sample_cells"] == 2 and "thesis_figures" not in result
+
+
+def test_cell_mission_option_writes_a_launchable_mission(tmp_path):
+    path = tmp_path / "cell.toml"
+    done = nearsub("envelope", "--vehicle", "sdv", "--sea-state", "5", "--cell-mission=-0.3,0.065", "-o", str(path))
+    assert done.returncode == 0, done.stderr
+    config = env.EnvelopeConfig(vehicle="sdv", sea_state=5)
+    assert load_mission(path) == env.cell_mission(config, -0.3 * L_SUB, 0.065 * L_SUB, name="envelope_cell")

@@ -3,6 +3,7 @@
     nearsub envelope --vehicle sdv --behaviour nuv_compensation --sea-state 5
     nearsub envelope --vehicle small medium large --sea-state 0 6 --workers 2    # a sweep
     nearsub envelope --compare A.json B.json -o compare.png
+    nearsub envelope --vehicle sdv --cell-mission=-0.3,0.065 -o cell.toml   # replay one cell
     nearsub envelope --thesis-figures [--scheduler tcp://HOST:8786]
 
 Every option that describes the conditions takes several values; their combinations make a sweep,
@@ -64,6 +65,11 @@ def add_parser(sub) -> None:
     )
     p.add_argument("--compare", nargs=2, metavar=("A.json", "B.json"), help="draw two envelopes side by side")
     p.add_argument("--thesis-figures", action="store_true", help="figures 5-10..5-14 and 6-7..6-11 into docs/envelopes")
+    p.add_argument(
+        "--cell-mission",
+        metavar="R_LONG,R_LAT",
+        help="write the mission file of the cell starting there (to replay it with nearsub launch) and stop",
+    )
     p.add_argument("--figure", nargs="+", metavar="N", help="with --thesis-figures: only these (e.g. 5-10 6-7)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="run the sweep on this Dask scheduler (tcp://host:8786)")
     p.add_argument("--workers", type=int, metavar="N", help="run the sweep on a local Dask cluster of N processes")
@@ -295,6 +301,8 @@ def envelope_command(args) -> int:
     if args.thesis_figures:
         return thesis_command(args)
     configs = configs_from_args(args)
+    if args.cell_mission:
+        return cell_mission_command(configs, args)
     out = Path(args.out or "envelopes")
     single_file = len(configs) == 1 and out.suffix.lower() in (".png", ".json", ".csv")
     started = time.perf_counter()
@@ -310,6 +318,22 @@ def envelope_command(args) -> int:
             print("  wrote " + ", ".join(str(p) for p in paths))
     if not args.json and len(envelopes) > 1:
         print(f"{len(envelopes)} envelopes in {time.perf_counter() - started:.1f} s")
+    return 0
+
+
+def cell_mission_command(configs: list, args) -> int:
+    """One TOML mission per configuration: the cell whose UUV starts at (R_long, R_lat)."""
+    from nearsub.common import envelope as env
+    from nearsub.common.hull import L_SUB
+
+    r_long, r_lat = _pair(args.cell_mission, "--cell-mission")
+    out = Path(args.out or "envelopes")
+    for config in configs:
+        path = out if out.suffix == ".toml" and len(configs) == 1 else out / f"{config.slug()}_cell.toml"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        data = env.mission_data(config, r_long * L_SUB, r_lat * L_SUB, name="envelope_cell")
+        path.write_text(env.mission_toml(data))
+        print(f"wrote {path}   (nearsub launch {path})")
     return 0
 
 
