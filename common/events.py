@@ -50,7 +50,7 @@ _HULL_SPACING = 0.01  # arc-length spacing of the hull polyline [m]
 # tip of the stern cap, >= 2.65 m on the bow) and d the distance: < 1 mm within 1 m of the hull,
 # where collisions and close calls are decided; < 5 mm within 5 m, where the near pre-check reads
 # it; a few cm beyond (tests/test_events.py measures it). Fine spacing is only paid for near the
-# hull, which keeps the build to about 0.15 s (every sim process builds it once).
+# hull, which keeps the build to about 0.1 s (every sim process builds it once).
 _GRID_LEVELS = ((0.04, 0.01, 1.0), (0.2, 0.9, 5.0), (1.0, 4.5, 40.0))
 # Below the finest grid's smallest distance (0.01 m, far above its error) the exact polyline
 # distance is used, so contact (collision) decisions and every point inside the hull are exact.
@@ -171,7 +171,7 @@ def _build_grid(h: float, trusted_from: float, band: float) -> _DistanceGrid:
 
 @lru_cache(maxsize=1)
 def _distance_grids() -> tuple[_DistanceGrid, ...]:
-    """The graded grids, finest first, built on first use (about 0.15 s)."""
+    """The graded grids, finest first, built on first use (about 0.1 s)."""
     return tuple(_build_grid(*level) for level in _GRID_LEVELS)
 
 
