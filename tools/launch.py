@@ -44,6 +44,7 @@ from .connect import Caller
 LADDER = (signal.SIGINT, signal.SIGTERM, signal.SIGKILL)
 LADDER_WAIT = 5.0
 NORMAL_OUTCOMES = ("completed", "time_limit", "collision")
+EXIT_GRACE = 2.0  # wall seconds to wait for the mission end after an app left with code 0
 
 
 class LaunchError(RuntimeError):
@@ -160,12 +161,22 @@ class Launcher:
         self.instance_counter[role] += 1
         return f"{role}-{self.instance_counter[role]}"
 
+    def ended_clock(self, instance: str) -> bool:
+        """A clock that exited with code 0 has published the mission end (an app can end the
+        mission at step 0, before the clock's token is seen): supervise() reads it."""
+        child = self.children.get(instance)
+        return child is not None and child.role == "clock" and child.process.poll() == 0
+
     def wait_alive(self, bus: Bus, wanted: list[tuple[str, str]], timeout: float) -> None:
         """Wait for the liveliness tokens of (role, instance) pairs; fail naming the missing ones."""
         deadline = time.monotonic() + timeout
         while True:
             alive = set(bus.alive(keys.all_alive(self.community), timeout=0.5))
-            missing = [inst for role, inst in wanted if keys.alive(self.community, role, inst) not in alive]
+            missing = [
+                inst
+                for role, inst in wanted
+                if keys.alive(self.community, role, inst) not in alive and not self.ended_clock(inst)
+            ]
             if not missing:
                 return
             for inst in missing:
@@ -304,12 +315,24 @@ class Launcher:
             for child in self.children.values():
                 code = child.process.poll()
                 if code is not None and not child.retiring and child.role != "logger":
-                    if child.role == "clock" and code == 0:
-                        continue  # the clock leaves after publishing the mission end
+                    if self.ended_clock(child.instance):
+                        continue
+                    # Apps leave when the mission ends; the end may still be on its way to us.
+                    if self.mission_end_within(EXIT_GRACE if code == 0 else 0.2):
+                        return
                     step = self.current_step()
                     raise LaunchError(
                         f"app {child.instance} exited with code {code} at step {step}\n{child.tail()}",
                     )
+
+    def mission_end_within(self, seconds: float) -> bool:
+        """Handle mail for up to `seconds`; True as soon as the mission end is among it."""
+        deadline = time.monotonic() + seconds
+        while (left := deadline - time.monotonic()) > 0:
+            mail = self.mailbox.get(timeout=min(left, 0.05))
+            if mail is not None and self.handle(mail):
+                return True
+        return False
 
     def handle(self, mail) -> bool:
         """One mailbox item; True when the mission is over."""
