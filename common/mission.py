@@ -94,7 +94,7 @@ class PidSettings(AppSettings):
 class SimSettings(AppSettings):
     integrator: Literal["euler", "rk4"] = "euler"
     interaction: Literal["replace", "increment", "thesis", "off"] = Field(
-        default="replace",
+        default="increment",
         description="how the surrogate's forces enter the dynamics near the submarine (dynamics.Interaction)",
     )
     divergence_speed: float = Field(default=50.0, gt=0, description="|u| beyond this ends the mission [m/s]")

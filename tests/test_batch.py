@@ -16,6 +16,9 @@ CELLS = [(-40.0, 5.9), (-20.0, 5.7), (25.0, 6.0), (10.0, 8.0), (0.0, 5.3)]  # (x
 
 
 def cell_mission(x, y, model_file, behaviour="waypoints", seconds=20):
+    """One cell's mission. model_file None is the shipped model, in the default increment mode;
+    the analytic fixture, which is no hydrodynamic model and has no free stream, runs in replace mode."""
+    model = ["apps.sim.interaction=replace", f"surrogate.model={json.dumps(str(model_file))}"] if model_file else []
     return load_mission(
         ALPHA,
         [
@@ -30,7 +33,7 @@ def cell_mission(x, y, model_file, behaviour="waypoints", seconds=20):
             "start.speed=1.5",
             f"apps.helm.behaviour={behaviour}",
             f"apps.helm.legs=[{{points = [[{x + 1000.0}, {y}]], speed = 1.5, lead = 15.9, lead_to_start = true}}]",
-            f"surrogate.model={json.dumps(str(model_file))}",
+            *model,
         ],
     )
 
@@ -42,8 +45,10 @@ def model_file(tmp_path_factory):
     return path
 
 
+@pytest.mark.parametrize("shipped", [False, True], ids=["analytic-replace", "shipped-increment"])
 @pytest.mark.parametrize("behaviour", ["waypoints", "nuv_compensation"])
-def test_batch_equals_single_missions(model_file, behaviour):
+def test_batch_equals_single_missions(model_file, behaviour, shipped):
+    model_file = None if shipped else model_file
     surrogate = load_surrogate(model_file)
     template = cell_mission(0.0, 0.0, model_file, behaviour)
     starts = np.array([[1.5, 0.0, 0.0, x, y, 0.0] for x, y in CELLS])
