@@ -228,3 +228,26 @@ def test_cell_mission_option_writes_a_launchable_mission(tmp_path):
     assert done.returncode == 0, done.stderr
     config = env.EnvelopeConfig(vehicle="sdv", sea_state=5)
     assert load_mission(path) == env.cell_mission(config, -0.3 * L_SUB, 0.065 * L_SUB, name="envelope_cell")
+
+
+@pytest.mark.parametrize("vehicle", ["remus100", "nps_auv_ii", "sdv"])
+def test_drawn_surrogate_window_is_where_the_blend_weight_is_positive(vehicle):
+    """The dashed box of the figures is where the interaction acts; no box for a hull that fails
+    (4.6) or (4.7) (the NPS AUV II fails (4.6), so the surrogate never acts on it)."""
+    from nearsub.common.interaction import interaction_at
+    from nearsub.tools.envelope import surrogate_window
+
+    r_lat = np.linspace(0.05, 0.12, 701)
+    states = np.zeros((len(r_lat), 6))
+    states[:, 0], states[:, 4] = 1.5, r_lat * L_SUB  # heading 0 at R_long 0, U_sub 1.5 m/s
+    weight = interaction_at(
+        env.cached_surrogate(""), states, get_vehicle(vehicle), 1025.0, "replace"
+    ).interaction.weight
+    window = surrogate_window(vehicle)
+    if vehicle == "nps_auv_ii":
+        assert window is None and not weight.any()
+        return
+    low, high = window
+    acting = r_lat[weight > 0]
+    assert acting.size and low <= acting.min() and acting.max() <= high
+    assert acting.min() - low < 0.002 and high - acting.max() < 0.002  # the ramps are about 5 cm (0.0006)

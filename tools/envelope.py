@@ -148,9 +148,11 @@ def configs_from_args(args) -> list:
 
 
 # --------------------------------------------------------------------------------- drawing
-def surrogate_window(vehicle: str) -> tuple[float, float]:
+def surrogate_window(vehicle: str) -> tuple[float, float] | None:
     """R_lat range where the vehicle feels the submarine: table 4.2 cut by (4.4) and (4.5), at the
-    hull ratios the interaction uses (clipped to the trained range, `interaction_at`)."""
+    hull ratios the interaction uses (clipped to the trained range, `interaction_at`). None when
+    the hull fails (4.6) or (4.7) (the NPS AUV II fails (4.6)): the blend weight is then zero at
+    every position, and the surrogate never acts on that vehicle."""
     from nearsub.common import surrogate as sg
     from nearsub.common.hull import D_SUB
     from nearsub.common.vehicles import get_vehicle
@@ -158,6 +160,9 @@ def surrogate_window(vehicle: str) -> tuple[float, float]:
     v = get_vehicle(vehicle)
     d_ratio = float(np.clip(D_SUB / v.diameter, *sg.BOUNDS[4]))
     ld_ratio = float(np.clip(v.length / v.diameter, *sg.BOUNDS[5]))
+    hull_only = sg.constraint_values(np.array([[0.0, 0.08, 3.0, 0.0, d_ratio, ld_ratio]]))[0, 2:]
+    if (hull_only < 0.0).any():  # (4.6), (4.7): no R_lat term
+        return None
     low = (0.5048 + 0.5 / d_ratio + 9.425e-3 * ld_ratio / d_ratio) / 8.575  # (4.4), SPEC errata 3
     high = (0.5 + 2.0 / d_ratio) / 8.575  # (4.5)
     return max(low, sg.BOUNDS[1, 0]), min(high, sg.BOUNDS[1, 1])
@@ -192,9 +197,24 @@ def draw_envelope(ax, summary: dict, title: str | None = None) -> None:
     )
     hx, hy = submarine_outline()
     ax.fill(hx / L_SUB, hy / L_SUB, color=HULL_COLOUR, zorder=3)
-    low, high = surrogate_window(summary["config"]["vehicle"])
-    (x_lo, x_hi) = sg.BOUNDS[0]
-    ax.plot([x_lo, x_hi, x_hi, x_lo, x_lo], [low, low, high, high, low], "k--", linewidth=0.8, zorder=4)
+    window = surrogate_window(summary["config"]["vehicle"])
+    if window is None:
+        note = "the surrogate never acts on this hull: it fails constraint (4.6) or (4.7)"
+        ax.text(
+            0.5,
+            0.96,
+            note,
+            transform=ax.transAxes,
+            ha="center",
+            va="top",
+            fontsize=8,
+            zorder=5,
+            bbox={"facecolor": "white", "edgecolor": "black", "linestyle": "--", "linewidth": 0.8},
+        )
+    else:
+        low, high = window
+        (x_lo, x_hi) = sg.BOUNDS[0]
+        ax.plot([x_lo, x_hi, x_hi, x_lo, x_lo], [low, low, high, high, low], "k--", linewidth=0.8, zorder=4)
     ax.set_xlim(_edges(r_long)[[0, -1]])
     ax.set_ylim(_edges(r_lat)[[0, -1]])
     ax.set_xlabel("R_long = x / L_sub  (bow to the right)")
