@@ -50,8 +50,8 @@ class Interaction:
 
     forces: (..., 3) X_s, Y_s, N_s [N, N, N m] in the frame's sign convention; weight: (...,) in
     [0, 1], 1 well inside the surrogate's domain and 0 outside, smooth across the boundary, so no
-    force jumps. mode:
-    - "replace" (default): the surrogate stands for the u- and v-dependent hydrodynamic terms
+    force jumps. mode (missions default to "increment", mission.SimSettings):
+    - "replace": the surrogate stands for the u- and v-dependent hydrodynamic terms
       X_u|u| u|u|, Y_v|v| v|v| + Y_uv u v, N_v|v| v|v| + N_uv u v; the rate, rigid-body and control
       terms stay (the surrogate is quasi-static, it has no yaw-rate input);
     - "thesis": (5.20) as printed, the surrogate replaces every hydrodynamic and rigid-body term;

@@ -74,15 +74,26 @@ class InteractionAt:
     std: np.ndarray  # (n, 3) their standard deviations
     in_domain: np.ndarray
     constraints_ok: np.ndarray
-    # (n, 3) the prediction's own forces, non-finite as 0: bit for bit `interaction.forces` of the
-    # "replace" mode, whatever the mode (what the helm's N_uv compensation reads N_s from).
-    total: np.ndarray
+
+
+HULL_SHAPE_CONSTRAINTS = [2, 3]  # (4.6) and (4.7): functions of the hull ratios alone
 
 
 def geometry_outside(vehicle: Vehicle) -> str | None:
-    """Why the vehicle's hull is outside the surrogate's trained hulls (table 4.2), or None."""
+    """Why the vehicle's hull is outside the surrogate's trained hulls (table 4.2, or the hull-shape
+    constraints (4.6)/(4.7), which switch the interaction off everywhere), or None."""
     inputs, _ = sg.to_inputs(0.0, 0.0, 0.0, 0.0, vehicle.length, vehicle.diameter)
     lower, upper = sg.BOUNDS[GEOMETRY, 0], sg.BOUNDS[GEOMETRY, 1]
+    inputs[:, GEOMETRY] = np.clip(inputs[:, GEOMETRY], lower, upper)  # as interaction_at evaluates it
+    shape = sg.constraint_values(inputs)[0, HULL_SHAPE_CONSTRAINTS]
+    if np.any(shape < 0):
+        names = [sg.CONSTRAINT_NAMES[i] for i in HULL_SHAPE_CONSTRAINTS]
+        failed = ", ".join(f"{n} = {v:.3g} < 0" for n, v in zip(names, shape, strict=True) if v < 0)
+        return (
+            f"vehicle {vehicle.name}: hull outside the surrogate's constraints ({failed}); the interaction "
+            "forces are zero everywhere for this vehicle"
+        )
+    inputs, _ = sg.to_inputs(0.0, 0.0, 0.0, 0.0, vehicle.length, vehicle.diameter)
     values = inputs[0, GEOMETRY]
     if np.all((values >= lower) & (values <= upper)):
         return None
@@ -185,10 +196,8 @@ def interaction_at(
             free[asked] = table.coefficients(inputs[asked])
         if with_std:
             spread[asked] = prediction.std
-    total = sg.to_forces(mean, mirror, u, vehicle.length, rho)
-    forces = total if table is None else sg.to_forces(mean - free, mirror, u, vehicle.length, rho)
+    forces = sg.to_forces(mean if table is None else mean - free, mirror, u, vehicle.length, rho)
     std = np.abs(sg.to_forces(spread, mirror, u, vehicle.length, rho))
     safe = np.where(np.isfinite(forces), forces, 0.0)  # weight is 0 wherever they are not finite
     interaction = Interaction(safe[0], weight[0], mode) if single else Interaction(safe, weight, mode)
-    total = safe if table is None else np.where(np.isfinite(total), total, 0.0)
-    return InteractionAt(interaction, forces, std, sg.in_domain(raw), sg.constraints_ok(raw), total)
+    return InteractionAt(interaction, forces, std, sg.in_domain(raw), sg.constraints_ok(raw))

@@ -155,3 +155,13 @@ def test_compensated_heading_is_what_the_helm_publishes(model_file):
     for desired, progress in zip(result.topic("desired"), result.topic("helm"), strict=True):
         assert desired.psi_d == progress.psi_d
         assert (progress.delta_psi != 0.0) == (progress.n_s != 0.0)  # zero outside the domain only
+
+
+def test_a_hull_outside_the_shape_constraints_is_reported_as_getting_no_interaction():
+    """The NPS AUV II (L/D 5.31 at D_sub/D_uuv 24.7) fails (4.6), "not too short": no interaction."""
+    from nearsub.common.interaction import geometry_outside
+    from nearsub.common.vehicles import NPS_AUV_II
+
+    reason = geometry_outside(NPS_AUV_II)
+    assert reason is not None and "(4.6)" in reason and "zero everywhere" in reason
+    assert geometry_outside(SDV) is None
