@@ -235,7 +235,6 @@ def mission_from_dict(data: dict, where: str = "mission") -> Mission:
         raise MissionError(describe_validation_error(exc, where)) from None
 
 
-
 class RunConfig(Strict):
     """What the launcher hands every app it starts: the resolved mission and where to connect."""
 

@@ -17,8 +17,6 @@ from nearsub.common.logfile import LogWriter, read_log
 pytestmark = pytest.mark.timeout(180)
 
 
-
-
 def app_pid(log_dir, instance):
     for entry in os.listdir("/proc"):
         if not entry.isdigit():
@@ -35,8 +33,6 @@ def app_pid(log_dir, instance):
 def no_processes_left(log_dir):
     out = subprocess.run(["pgrep", "-f", str(log_dir)], capture_output=True, text=True).stdout
     return out.strip() == ""
-
-
 
 
 def test_malformed_messages_are_rejected_and_logged(launches, community):

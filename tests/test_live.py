@@ -16,10 +16,6 @@ from nearsub.common.mission import load_mission
 pytestmark = pytest.mark.timeout(180)
 
 
-
-
-
-
 def test_tap_echo_and_hz_on_a_running_mission(launches, community):
     process = launches.start(ALPHA, "--set", f"name={community}", "--warp", "5", "--until", "60")
     wait_registered(community)
