@@ -4,6 +4,11 @@ and a teardown that kills every process group they started."""
 from __future__ import annotations
 
 import os
+
+# One BLAS thread, as the `nearsub` command sets for its tools and apps (tools/cli.py): results that
+# pass through a dense solve then agree to the last bit between this process and those it starts.
+# Set before anything imports numpy.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import signal
 import subprocess
 import sys
