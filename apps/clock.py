@@ -19,11 +19,12 @@ import sys
 import time
 
 from nearsub.apps.shell import prepare_process
-from nearsub.common import keys
-from nearsub.common.bus import Bus, Endpoints, signal_self
-from nearsub.common.clock import GrantPolicy, Progress
-from nearsub.common.lifecycle import DONE_TOPIC, ORDER, Schedule
-from nearsub.common.messages import (
+from nearsub.common.mission.schema import RunConfig
+from nearsub.common.runtime import keys
+from nearsub.common.runtime.bus import Bus, Endpoints, signal_self
+from nearsub.common.runtime.clock import GrantPolicy, Progress
+from nearsub.common.runtime.lifecycle import DONE_TOPIC, ORDER, Schedule
+from nearsub.common.runtime.messages import (
     VEHICLE_TOPICS,
     Ack,
     Control,
@@ -34,7 +35,6 @@ from nearsub.common.messages import (
     decode,
     encode,
 )
-from nearsub.common.mission import RunConfig
 
 POLL = 0.002  # seconds between stream polls while the apps work (the grant window covers it)
 IDLE_POLL = 0.01  # while paused or waiting for the warp's release time

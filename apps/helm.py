@@ -1,7 +1,7 @@
 """The helm app: a thin process shell around `common.cores.HelmCore`."""
 
 from nearsub.apps.shell import main_for
-from nearsub.common.cores import HelmCore
+from nearsub.common.mission.cores import HelmCore
 
 
 def main(argv=None) -> int:

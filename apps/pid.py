@@ -1,7 +1,7 @@
 """The pid app: a thin process shell around `common.cores.PidCore`."""
 
 from nearsub.apps.shell import main_for
-from nearsub.common.cores import PidCore
+from nearsub.common.mission.cores import PidCore
 
 
 def main(argv=None) -> int:

@@ -12,7 +12,7 @@ import sys
 import threading
 
 from nearsub.apps.shell import prepare_process
-from nearsub.common.bus import Bus, make_config
+from nearsub.common.runtime.bus import Bus, make_config
 
 
 def serve(listen: list[str], connect: list[str] = (), with_parent: bool = False) -> int:

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from nearsub.common import surrogate as sg
-from nearsub.common.bus import Bus, ReplyError
-from nearsub.common.interaction import ServiceError
-from nearsub.common.messages import MessageError
+from nearsub.common.runtime.bus import Bus, ReplyError
+from nearsub.common.runtime.messages import MessageError
+from nearsub.common.surrogate import model as sg
+from nearsub.common.surrogate.interaction import ServiceError
 
 
 class RemoteSurrogate:

@@ -29,11 +29,11 @@ from collections.abc import Callable
 import msgpack
 
 from nearsub.apps.services import RemoteSurrogate
-from nearsub.common import keys
-from nearsub.common.bus import Bus, DeadlineExceeded, Endpoints, deadline, signal_self
-from nearsub.common.interaction import ServiceError
-from nearsub.common.lifecycle import DONE_TOPIC, Core, Inbox, Iteration, Schedule
-from nearsub.common.messages import (
+from nearsub.common.mission.schema import MissionError, RunConfig, apply_overrides, mission_from_dict
+from nearsub.common.runtime import keys
+from nearsub.common.runtime.bus import Bus, DeadlineExceeded, Endpoints, deadline, signal_self
+from nearsub.common.runtime.lifecycle import DONE_TOPIC, Core, Inbox, Iteration, Schedule
+from nearsub.common.runtime.messages import (
     VEHICLE_TOPICS,
     Ack,
     AppStatus,
@@ -46,7 +46,7 @@ from nearsub.common.messages import (
     decode,
     encode,
 )
-from nearsub.common.mission import MissionError, RunConfig, apply_overrides, mission_from_dict
+from nearsub.common.surrogate.interaction import ServiceError
 
 HANDOVER_TIMEOUT = 30.0
 

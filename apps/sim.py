@@ -1,7 +1,7 @@
 """The sim app: a thin process shell around `common.cores.SimCore`."""
 
 from nearsub.apps.shell import main_for
-from nearsub.common.cores import SimCore
+from nearsub.common.mission.cores import SimCore
 
 
 def main(argv=None) -> int:

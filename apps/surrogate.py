@@ -17,12 +17,12 @@ import sys
 from typing import NoReturn
 
 from nearsub.apps.shell import prepare_process
-from nearsub.common import keys
-from nearsub.common.bus import Bus, Endpoints, signal_self
-from nearsub.common.messages import MessageError
-from nearsub.common.mission import MissionError, RunConfig
-from nearsub.common.modelfile import ModelFileError
-from nearsub.common.surrogate import Surrogate, answer_query, load_surrogate, surrogate_key
+from nearsub.common.mission.schema import MissionError, RunConfig
+from nearsub.common.runtime import keys
+from nearsub.common.runtime.bus import Bus, Endpoints, signal_self
+from nearsub.common.runtime.messages import MessageError
+from nearsub.common.surrogate.model import Surrogate, answer_query, load_surrogate, surrogate_key
+from nearsub.common.surrogate.modelfile import ModelFileError
 
 # Error replies are cut to this many characters: a 100,000-point batch of NaNs would otherwise
 # name every value (a nearsub choice; the first errors say what is wrong).

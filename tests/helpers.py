@@ -7,7 +7,7 @@ import time
 from collections import defaultdict
 from pathlib import Path
 
-from nearsub.common.logfile import read_log
+from nearsub.common.runtime.logfile import read_log
 
 
 def log_path(summary: dict) -> Path:

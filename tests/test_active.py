@@ -3,14 +3,14 @@
 import numpy as np
 import pytest
 
-from nearsub.common.active import (
+from nearsub.common.learning.active import (
     Campaign,
     CampaignSettings,
     candidate_set,
     run_campaign,
     select_point,
 )
-from nearsub.common.testproblems import Problem, get_problem
+from nearsub.common.learning.testproblems import Problem, get_problem
 from nearsub.tools.albench import run_benchmark, summarise
 
 PARK = get_problem("park")

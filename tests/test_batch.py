@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from conftest import ALPHA
-from nearsub.common.batch import OUTCOMES, run_batch
-from nearsub.common.cores import run_mission
-from nearsub.common.mission import load_mission
-from nearsub.common.surrogate import analytic_model, load_surrogate
+from nearsub.common.analysis.batch import OUTCOMES, run_batch
+from nearsub.common.mission.cores import run_mission
+from nearsub.common.mission.schema import load_mission
+from nearsub.common.surrogate.model import analytic_model, load_surrogate
 
 CELLS = [(-40.0, 5.9), (-20.0, 5.7), (25.0, 6.0), (10.0, 8.0), (0.0, 5.3)]  # (x, y); the last one touches
 

@@ -5,14 +5,14 @@ import math
 import numpy as np
 import pytest
 
-from nearsub.common.behaviours import (
+from nearsub.common.autonomy.behaviours import (
     gamma_from_m11,
     lead_point,
     modified_lead_point,
     nuv_heading_offset,
     speed_policy,
 )
-from nearsub.common.vehicles import REMUS100
+from nearsub.common.physics.vehicles import REMUS100
 
 
 def test_lead_point_is_ahead_of_the_foot_and_clamped_at_the_waypoint():

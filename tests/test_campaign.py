@@ -7,12 +7,12 @@ import json
 import numpy as np
 import pytest
 
-from nearsub.common import hydro_hf
-from nearsub.common.campaign_cases import case_geometry
-from nearsub.common.events import closest_distance
-from nearsub.common.hull import D_SUB, L_SUB, SUB_CB_FROM_NOSE
-from nearsub.common.modelfile import MultiFidelitySurrogate, load_model
-from nearsub.common.surrogate import KNOT, to_coefficients, to_forces
+from nearsub.common.hydro import high_fidelity as hydro_hf
+from nearsub.common.physics.hull import D_SUB, L_SUB, SUB_CB_FROM_NOSE
+from nearsub.common.physics.proximity import closest_distance
+from nearsub.common.surrogate.campaign_cases import case_geometry
+from nearsub.common.surrogate.domain import KNOT, to_coefficients, to_forces
+from nearsub.common.surrogate.modelfile import MultiFidelitySurrogate, load_model
 from nearsub.tools.cli import main
 
 pytestmark = pytest.mark.timeout(300)

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from nearsub.common.dynamics import Environment, step
-from nearsub.common.vehicles import NPS_AUV_II, REMUS100, SDV
+from nearsub.common.physics.dynamics import Environment, step
+from nearsub.common.physics.vehicles import NPS_AUV_II, REMUS100, SDV
 
 
 @pytest.mark.parametrize("vehicle", [REMUS100, NPS_AUV_II, SDV], ids=lambda v: v.name)
@@ -38,8 +38,8 @@ def test_batch_step_equals_single_steps_bitwise(vehicle, method, u_sub):
 
 
 def test_interaction_forces_replace_only_the_flow_terms():
-    from nearsub.common.dynamics import Interaction, body_forces
-    from nearsub.common.vehicles import REMUS100 as v
+    from nearsub.common.physics.dynamics import Interaction, body_forces
+    from nearsub.common.physics.vehicles import REMUS100 as v
 
     state = np.array([1.5, 0.1, 0.05, 0.0, 0.0, 0.0])
     inp = np.array([3.0, 0.1])

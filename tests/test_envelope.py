@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 
 from conftest import nearsub
-from nearsub.common import envelope as env
-from nearsub.common import events
-from nearsub.common.batch import OUTCOMES
-from nearsub.common.cores import run_mission
-from nearsub.common.hull import L_SUB, R_SUB
-from nearsub.common.mission import load_mission
-from nearsub.common.vehicles import get_vehicle
+from nearsub.common.analysis import envelope as env
+from nearsub.common.analysis.batch import OUTCOMES
+from nearsub.common.mission.cores import run_mission
+from nearsub.common.mission.schema import load_mission
+from nearsub.common.physics import proximity as events
+from nearsub.common.physics.hull import L_SUB, R_SUB
+from nearsub.common.physics.vehicles import get_vehicle
 
 SMALL = env.EnvelopeConfig(vehicle="sdv", grid=(6, 4), r_long=(-0.5, 0.5), r_lat=(0.05, 0.075), duration=8.0)
 
@@ -234,7 +234,7 @@ def test_cell_mission_option_writes_a_launchable_mission(tmp_path):
 def test_drawn_surrogate_window_is_where_the_blend_weight_is_positive(vehicle):
     """The dashed box of the figures is where the interaction acts; no box for a hull that fails
     (4.6) or (4.7) (the NPS AUV II fails (4.6), so the surrogate never acts on it)."""
-    from nearsub.common.interaction import interaction_at
+    from nearsub.common.surrogate.interaction import interaction_at
     from nearsub.tools.envelope import surrogate_window
 
     r_lat = np.linspace(0.05, 0.12, 701)

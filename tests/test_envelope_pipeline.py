@@ -5,11 +5,11 @@ forces outside the surrogate's domain may differ in the sign of a zero)."""
 import numpy as np
 import pytest
 
-from nearsub.common import envelope as env
-from nearsub.common.batch import OUTCOMES
-from nearsub.common.behaviours import track_geometry
-from nearsub.common.events import STRAY_LIMIT
-from nearsub.common.logfile import read_log
+from nearsub.common.analysis import envelope as env
+from nearsub.common.analysis.batch import OUTCOMES
+from nearsub.common.autonomy.behaviours import track_geometry
+from nearsub.common.physics.proximity import STRAY_LIMIT
+from nearsub.common.runtime.logfile import read_log
 
 pytestmark = pytest.mark.timeout(600)
 

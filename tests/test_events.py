@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from nearsub.common import events, hull
+from nearsub.common.physics import hull
+from nearsub.common.physics import proximity as events
 
 REMUS_L, REMUS_D = 1.33, 0.191  # vehicles.md section 1
 R = hull.R_SUB

@@ -12,7 +12,7 @@ import pytest
 
 from conftest import ALPHA, nearsub
 from helpers import finish, log_path, wait_registered
-from nearsub.common.logfile import LogWriter, read_log
+from nearsub.common.runtime.logfile import LogWriter, read_log
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -114,7 +114,7 @@ def test_ctrl_c_stops_everything_and_closes_the_log(launches, community):
 
 def test_two_communities_on_one_router_do_not_cross_talk(launches, tmp_path):
     port = subprocess.run(
-        [sys.executable, "-c", "from nearsub.common.bus import free_tcp_port; print(free_tcp_port())"],
+        [sys.executable, "-c", "from nearsub.common.runtime.bus import free_tcp_port; print(free_tcp_port())"],
         capture_output=True,
         text=True,
     ).stdout.strip()

@@ -11,16 +11,16 @@ from test_interaction import BESIDE
 
 from conftest import ALPHA, ROOT
 from helpers import log_path, per_topic
-from nearsub.common import free_stream as fs
-from nearsub.common import hydro_hf
-from nearsub.common import surrogate as sg
-from nearsub.common.cores import build_cores, run_mission
-from nearsub.common.interaction import GEOMETRY, IncrementError, interaction_at
-from nearsub.common.lifecycle import Schedule, run_inprocess
-from nearsub.common.messages import encode
-from nearsub.common.mission import load_mission
-from nearsub.common.surrogate import analytic_model, load_surrogate
-from nearsub.common.vehicles import REMUS100, SDV
+from nearsub.common.hydro import free_stream as fs
+from nearsub.common.hydro import high_fidelity as hydro_hf
+from nearsub.common.mission.cores import build_cores, run_mission
+from nearsub.common.mission.schema import load_mission
+from nearsub.common.physics.vehicles import REMUS100, SDV
+from nearsub.common.runtime.lifecycle import Schedule, run_inprocess
+from nearsub.common.runtime.messages import encode
+from nearsub.common.surrogate import domain
+from nearsub.common.surrogate.interaction import GEOMETRY, IncrementError, interaction_at
+from nearsub.common.surrogate.model import analytic_model, load_surrogate
 from nearsub.tools import free_stream as free_stream_tool
 
 pytestmark = pytest.mark.timeout(180)
@@ -49,8 +49,10 @@ def model_file(tmp_path_factory):
 
 
 def clipped_inputs(states, vehicle):
-    raw, mirror = sg.to_inputs(states[:, 3], states[:, 4], states[:, 0], states[:, 5], vehicle.length, vehicle.diameter)
-    raw[:, GEOMETRY] = np.clip(raw[:, GEOMETRY], sg.BOUNDS[GEOMETRY, 0], sg.BOUNDS[GEOMETRY, 1])
+    raw, mirror = domain.to_inputs(
+        states[:, 3], states[:, 4], states[:, 0], states[:, 5], vehicle.length, vehicle.diameter
+    )
+    raw[:, GEOMETRY] = np.clip(raw[:, GEOMETRY], domain.BOUNDS[GEOMETRY, 0], domain.BOUNDS[GEOMETRY, 1])
     return raw, mirror
 
 
@@ -84,14 +86,14 @@ def test_increment_is_the_prediction_minus_the_free_stream_at_the_same_clipped_i
         replace = interaction_at(shipped, states, vehicle, RHO, "replace")
         increment = interaction_at(shipped, states, vehicle, RHO, "increment")
         inputs, mirror = clipped_inputs(states, vehicle)
-        free = sg.to_forces(table.coefficients(inputs), mirror, states[:, 0], vehicle.length, RHO)
+        free = domain.to_forces(table.coefficients(inputs), mirror, states[:, 0], vehicle.length, RHO)
         np.testing.assert_allclose(increment.forces, replace.forces - free, rtol=1e-12, atol=1e-9)
         np.testing.assert_array_equal(increment.interaction.forces, increment.forces)
         np.testing.assert_array_equal(increment.interaction.weight, replace.interaction.weight)
         np.testing.assert_array_equal(increment.std, replace.std)
         assert increment.interaction.mode == "increment" and np.all(replace.interaction.weight > 0)
-        direct = sg.to_forces(hydro_hf.hf_free_stream(inputs), mirror, states[:, 0], vehicle.length, RHO)
-        scale = sg.to_forces(np.tile(TOLERANCE, (len(states), 1)), 1.0, states[:, 0], vehicle.length, RHO)
+        direct = domain.to_forces(hydro_hf.hf_free_stream(inputs), mirror, states[:, 0], vehicle.length, RHO)
+        scale = domain.to_forces(np.tile(TOLERANCE, (len(states), 1)), 1.0, states[:, 0], vehicle.length, RHO)
         assert np.all(np.abs(replace.forces - increment.forces - direct) <= scale)
         assert np.all(np.abs(direct[:, 2]) > 0.0) and np.all(np.sign(direct[:, 2]) == np.sign(states[:, 5]))
 
@@ -151,7 +153,7 @@ def test_a_table_next_to_the_model_file_is_used_and_round_trips(model_file):
     increment = interaction_at(surrogate, states, SDV, RHO, "increment")
     replace = interaction_at(surrogate, states, SDV, RHO, "replace")
     inputs, mirror = clipped_inputs(states, SDV)
-    free = sg.to_forces(loaded.coefficients(inputs), mirror, states[:, 0], SDV.length, RHO)
+    free = domain.to_forces(loaded.coefficients(inputs), mirror, states[:, 0], SDV.length, RHO)
     np.testing.assert_allclose(increment.forces, replace.forces - free, rtol=1e-12, atol=1e-9)
     path.unlink()
     with pytest.raises(IncrementError):  # another model object: looked up again, and gone

@@ -8,8 +8,8 @@ from sklearn.gaussian_process import GaussianProcessRegressor
 from sklearn.gaussian_process.kernels import RBF, WhiteKernel
 from sklearn.gaussian_process.kernels import ConstantKernel as C
 
-from nearsub.common import gp as gpmod
-from nearsub.common.gp import GaussianProcess, MultiOutputGP
+from nearsub.common.learning import gp as gpmod
+from nearsub.common.learning.gp import GaussianProcess, MultiOutputGP
 
 BOUNDS = np.array([[-2.0, 3.0], [10.0, 50.0], [0.0, 0.1]])
 

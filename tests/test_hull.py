@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from nearsub.common import hull
+from nearsub.common.physics import hull
 
 FT = hull.FT
 

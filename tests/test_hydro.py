@@ -11,17 +11,19 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from nearsub.common import geometry, hydro_hf, hydro_lf
-from nearsub.common.hull import R_SUB, explorer_radius, revolution_properties
+from nearsub.common.hydro import high_fidelity as hydro_hf
+from nearsub.common.hydro import low_fidelity as hydro_lf
+from nearsub.common.physics import hull
+from nearsub.common.physics.hull import R_SUB, explorer_radius, revolution_properties
 
 RIGHT = np.array([-1.0, 0.0, 0.0])  # the unit stream -x of the body frame
 
 
 def _sphere(radius=1.0, stations=21, n_azimuths=10):
-    profile = geometry.profile_from_radius(
+    profile = hull.profile_from_radius(
         lambda s: np.sqrt(np.maximum(s * (2.0 * radius - s), 0.0)), (0.0, radius, 2.0 * radius), stations
     )
-    return geometry.revolution_mesh(profile, geometry.azimuths(n_azimuths))
+    return hull.revolution_mesh(profile, hull.azimuths(n_azimuths))
 
 
 def _spheroid_properties(length, diameter):
@@ -40,28 +42,28 @@ def _spheroid_properties(length, diameter):
 def test_meshes_are_closed_and_outward():
     mesh = _sphere()
     assert np.all(np.einsum("ij,ij->i", mesh.normals, mesh.centroids) > 0.9)
-    image = geometry.mirror_z(mesh)
+    image = hull.mirror_z(mesh)
     assert np.all(np.einsum("ij,ij->i", image.normals, image.centroids) > 0.9)
     assert np.all(image.centroids[:, 2] < 0.0)
     # The vertex order of the image still gives its normals.
-    assert np.allclose(geometry.Mesh.from_vertices(image.vertices).normals, image.normals)
+    assert np.allclose(hull.Mesh.from_vertices(image.vertices).normals, image.normals)
     # A closed surface has zero vector area.
-    full = geometry.full_surface(mesh)
+    full = hull.full_surface(mesh)
     assert np.allclose(full.normals.T @ full.areas, 0.0, atol=1e-12)
 
 
 def test_suboff_wetted_area_from_mesh():
     """5.988 m^2 at model scale (hulls.md). 80 stations x 32 azimuths: the chords of the azimuth
     polygon lose 1 - sin(pi/32)/(pi/32) = 0.16 %, the meridian chords a little more: 0.5 %."""
-    profile = geometry.suboff_profile(80, model_scale=True)
-    mesh = geometry.full_surface(geometry.revolution_mesh(profile, geometry.azimuths(16)))
+    profile = hull.suboff_profile(80, model_scale=True)
+    mesh = hull.full_surface(hull.revolution_mesh(profile, hull.azimuths(16)))
     assert mesh.areas.sum() == pytest.approx(5.988, rel=5e-3)
     assert profile.length == pytest.approx(4.3561, abs=1e-4)
     assert profile.cb / profile.length == pytest.approx(0.4611, abs=1e-4)
 
 
 def test_submarine_window_refinement():
-    profile = geometry.suboff_profile(60, window=(-5.0, 5.0), window_spacing=0.2)
+    profile = hull.suboff_profile(60, window=(-5.0, 5.0), window_spacing=0.2)
     inside = (profile.x > -5.0) & (profile.x < 5.0)
     assert np.max(-np.diff(profile.x)[inside[:-1] & inside[1:]]) <= 0.2 + 1e-9
     assert len(profile.s) > 60 + 10.0 / 0.2 - 5
@@ -85,12 +87,12 @@ def test_spheroid_munk_moment_panel():
     """N = (k2 - k1) rho Vol U^2 sin psi cos psi for an L/D = 8 spheroid (hydro-notes section 2.6);
     0.8 % with this mesh."""
     length, diameter, psi = 8.0, 1.0, math.radians(5.0)
-    profile = geometry.profile_from_radius(
+    profile = hull.profile_from_radius(
         lambda s: 0.5 * diameter * np.sqrt(np.maximum(1.0 - ((s - 0.5 * length) / (0.5 * length)) ** 2, 0.0)),
         (0.0, 0.5 * length, length),
         41,
     )
-    mesh = geometry.revolution_mesh(profile, geometry.azimuths(8))
+    mesh = hull.revolution_mesh(profile, hull.azimuths(8))
     onset = np.array([-math.cos(psi), math.sin(psi), 0.0])
     velocity = hydro_hf.surface_velocity(mesh, mesh, hydro_hf.solve_sources(mesh, onset), onset)
     force, moment = hydro_hf.pressure_force(mesh, velocity, 1.0, np.zeros(3))
@@ -108,7 +110,7 @@ def test_two_spheres(arrangement, leading):
     offset = np.array([0.0, 0.5 * d, 0.0]) if arrangement == "abreast" else np.array([0.5 * d, 0.0, 0.0])
     sphere = _sphere()
     first, second = sphere.placed(*offset[:2], 0.0), sphere.placed(*(-offset[:2]), 0.0)
-    both = geometry.concatenate([first, second])
+    both = hull.concatenate([first, second])
     sigma = hydro_hf.solve_sources(both, RIGHT)
     force, _ = hydro_hf.pressure_force(first, hydro_hf.surface_velocity(first, both, sigma, RIGHT), 1.0, offset)
     along_centres = force @ (offset[:2] / np.linalg.norm(offset[:2])) * 0.5  # rho = U = 1: F = (1/2) * that
@@ -145,7 +147,7 @@ def test_ring_source_against_quadrature(x, r):
 
 def test_ring_panels_sphere_surface_speed():
     """The axisymmetric panels reproduce |V| = 3/2 U sin theta on a sphere."""
-    profile = geometry.profile_from_radius(lambda s: np.sqrt(np.maximum(s * (2.0 - s), 0.0)), (0.0, 1.0, 2.0), 61)
+    profile = hull.profile_from_radius(lambda s: np.sqrt(np.maximum(s * (2.0 - s), 0.0)), (0.0, 1.0, 2.0), 61)
     panels = hydro_lf.solve_ring_panels(profile)
     xm, rm = 0.5 * (panels.xa + panels.xb), 0.5 * (panels.ra + panels.rb)
     ux, ur = panels.velocity(xm, rm)
@@ -157,7 +159,7 @@ def test_ring_panels_sphere_surface_speed():
 def test_submarine_field_table_matches_ring_panels():
     """The spline table reproduces the ring-panel sums it was built from, right next to the hull."""
     field = hydro_lf.submarine_field()
-    panels = hydro_lf.solve_ring_panels(geometry.suboff_profile(hydro_lf.N_FRUSTA + 1))
+    panels = hydro_lf.solve_ring_panels(hull.suboff_profile(hydro_lf.N_FRUSTA + 1))
     x = np.linspace(-50.0, 45.0, 97)
     for r in (R_SUB + 0.05, R_SUB + 2.0):
         ux, ur = panels.velocity(x, np.full_like(x, r))
@@ -169,7 +171,7 @@ def test_slender_munk_moment():
     """The strip model's free-stream UUV carries the slender Munk moment rho Vol U^2 sin psi cos psi
     (k2 = 1, k1 = 0; hydro-notes section 2.2) to 1e-3, and no side force."""
     d_ratio, ld, psi = 10.0, 8.0, math.radians(5.0)
-    diameter, length = geometry.uuv_dimensions(d_ratio, ld)
+    diameter, length = hull.uuv_dimensions(d_ratio, ld)
     volume = revolution_properties(
         lambda s: explorer_radius(s, length, diameter), (0.0, diameter, length - 2.0 * diameter, length), n=4000
     ).volume

@@ -3,9 +3,9 @@
 import numpy as np
 
 from conftest import ALPHA
-from nearsub.common.cores import build_cores
-from nearsub.common.lifecycle import Schedule, run_inprocess
-from nearsub.common.mission import load_mission
+from nearsub.common.mission.cores import build_cores
+from nearsub.common.mission.schema import load_mission
+from nearsub.common.runtime.lifecycle import Schedule, run_inprocess
 
 
 def run(overrides=()):

@@ -9,14 +9,14 @@ import pytest
 
 from conftest import ALPHA
 from helpers import finish, log_path, per_topic, wait_registered
-from nearsub.common.cores import build_cores, run_mission
-from nearsub.common.dynamics import Interaction, body_forces
-from nearsub.common.interaction import blend_weight, interaction_at
-from nearsub.common.lifecycle import Schedule, run_inprocess
-from nearsub.common.messages import encode
-from nearsub.common.mission import load_mission
-from nearsub.common.surrogate import analytic_model, load_surrogate
-from nearsub.common.vehicles import SDV
+from nearsub.common.mission.cores import build_cores, run_mission
+from nearsub.common.mission.schema import load_mission
+from nearsub.common.physics.dynamics import Interaction, body_forces
+from nearsub.common.physics.vehicles import SDV
+from nearsub.common.runtime.lifecycle import Schedule, run_inprocess
+from nearsub.common.runtime.messages import encode
+from nearsub.common.surrogate.interaction import blend_weight, interaction_at
+from nearsub.common.surrogate.model import analytic_model, load_surrogate
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -82,8 +82,8 @@ def test_blend_weight_is_zero_outside_bounds_and_constraints():
 
 
 def test_a_hull_outside_the_trained_ratios_is_reported_and_clipped(model_file):
-    from nearsub.common.interaction import geometry_outside
-    from nearsub.common.vehicles import REMUS100
+    from nearsub.common.physics.vehicles import REMUS100
+    from nearsub.common.surrogate.interaction import geometry_outside
 
     assert geometry_outside(SDV) is None
     assert "d_ratio = 54.3" in geometry_outside(REMUS100)
@@ -159,8 +159,8 @@ def test_compensated_heading_is_what_the_helm_publishes(model_file):
 
 def test_a_hull_outside_the_shape_constraints_is_reported_as_getting_no_interaction():
     """The NPS AUV II (L/D 5.31 at D_sub/D_uuv 24.7) fails (4.6), "not too short": no interaction."""
-    from nearsub.common.interaction import geometry_outside
-    from nearsub.common.vehicles import NPS_AUV_II
+    from nearsub.common.physics.vehicles import NPS_AUV_II
+    from nearsub.common.surrogate.interaction import geometry_outside
 
     reason = geometry_outside(NPS_AUV_II)
     assert reason is not None and "(4.6)" in reason and "zero everywhere" in reason

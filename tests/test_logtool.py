@@ -7,10 +7,10 @@ import json
 import pytest
 
 from conftest import ALPHA, nearsub
-from nearsub.common.cores import run_mission
-from nearsub.common.logfile import LogWriter
-from nearsub.common.messages import encode
-from nearsub.common.mission import load_mission
+from nearsub.common.mission.cores import run_mission
+from nearsub.common.mission.schema import load_mission
+from nearsub.common.runtime.logfile import LogWriter
+from nearsub.common.runtime.messages import encode
 
 
 @pytest.fixture(scope="module")

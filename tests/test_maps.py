@@ -3,8 +3,9 @@
 import numpy as np
 import pytest
 
-from nearsub.common.surrogate import constraint_values, constraints_ok, load_surrogate
-from nearsub.common.surrogate_maps import THESIS_MAPS, evaluate_map, mid_window_r_lat, slice_grid
+from nearsub.common.surrogate.domain import constraint_values, constraints_ok
+from nearsub.common.surrogate.maps import THESIS_MAPS, evaluate_map, mid_window_r_lat, slice_grid
+from nearsub.common.surrogate.model import load_surrogate
 from nearsub.tools import maps
 from nearsub.tools.cli import main
 from nearsub.tools.surrogate_cli import write_analytic_model

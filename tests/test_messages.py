@@ -3,7 +3,7 @@ import math
 import msgpack
 import pytest
 
-from nearsub.common.messages import Input, MessageError, State, decode, encode, model_for_key
+from nearsub.common.runtime.messages import Input, MessageError, State, decode, encode, model_for_key
 
 
 def state(**overrides):

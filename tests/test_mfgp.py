@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from nearsub.common.active import initial_design
-from nearsub.common.gp import MultiOutputGP
-from nearsub.common.mfgp import MultiFidelityGP
-from nearsub.common.testproblems import get_problem
+from nearsub.common.learning.active import initial_design
+from nearsub.common.learning.gp import MultiOutputGP
+from nearsub.common.learning.mfgp import MultiFidelityGP
+from nearsub.common.learning.testproblems import get_problem
 
 PARK = get_problem("park")
 

@@ -1,7 +1,7 @@
 import pytest
 
 from conftest import ALPHA, nearsub
-from nearsub.common.mission import MissionError, load_mission
+from nearsub.common.mission.schema import MissionError, load_mission
 
 
 def write(tmp_path, text):

@@ -6,8 +6,8 @@ from datetime import datetime
 import numpy as np
 import pytest
 
-from nearsub.common.gp import MultiOutputGP
-from nearsub.common.modelfile import FORMAT_VERSION, ModelFileError, load_model, save_model
+from nearsub.common.learning.gp import MultiOutputGP
+from nearsub.common.surrogate.modelfile import FORMAT_VERSION, ModelFileError, load_model, save_model
 
 BOUNDS = np.array([[-0.7, 0.7], [2.0, 5.0], [5.0, 50.0]])
 META = dict(

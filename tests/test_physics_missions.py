@@ -3,10 +3,10 @@
 import pytest
 
 from conftest import ALPHA, ROOT, nearsub
-from nearsub.common.cores import run_mission
-from nearsub.common.hull import R_SUB, explorer_cb_from_nose
-from nearsub.common.mission import MissionError, load_mission
-from nearsub.common.vehicles import REMUS100
+from nearsub.common.mission.cores import run_mission
+from nearsub.common.mission.schema import MissionError, load_mission
+from nearsub.common.physics.hull import R_SUB, explorer_cb_from_nose
+from nearsub.common.physics.vehicles import REMUS100
 
 WAVES = ROOT / "missions" / "waves_ss5.toml"
 

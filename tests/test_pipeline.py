@@ -4,11 +4,11 @@ import pytest
 
 from conftest import ALPHA
 from helpers import log_path, per_topic
-from nearsub.common.cores import build_cores
-from nearsub.common.lifecycle import Schedule, run_inprocess
-from nearsub.common.logfile import read_log
-from nearsub.common.messages import encode
-from nearsub.common.mission import load_mission
+from nearsub.common.mission.cores import build_cores
+from nearsub.common.mission.schema import load_mission
+from nearsub.common.runtime.lifecycle import Schedule, run_inprocess
+from nearsub.common.runtime.logfile import read_log
+from nearsub.common.runtime.messages import encode
 
 pytestmark = pytest.mark.timeout(180)
 

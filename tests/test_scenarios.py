@@ -5,12 +5,12 @@ import pytest
 
 from conftest import ROOT, nearsub
 from helpers import finish, log_path, per_topic, wait_registered
-from nearsub.common.cores import HelmCore, build_cores, run_mission
-from nearsub.common.lifecycle import Schedule, run_inprocess
-from nearsub.common.messages import encode
-from nearsub.common.mission import load_mission
-from nearsub.common.scenarios import scenario_figures
-from nearsub.common.surrogate import load_surrogate
+from nearsub.common.analysis.scenarios import scenario_figures
+from nearsub.common.mission.cores import HelmCore, build_cores, run_mission
+from nearsub.common.mission.schema import load_mission
+from nearsub.common.runtime.lifecycle import Schedule, run_inprocess
+from nearsub.common.runtime.messages import encode
+from nearsub.common.surrogate.model import load_surrogate
 
 pytestmark = pytest.mark.timeout(240)
 MISSIONS = ROOT / "missions"

@@ -7,10 +7,11 @@ import msgpack
 import numpy as np
 import pytest
 
-from nearsub.common import surrogate as sg
-from nearsub.common.hull import D_SUB, L_SUB
-from nearsub.common.messages import MessageError
-from nearsub.common.modelfile import ModelFileError, load_model
+from nearsub.common.physics.hull import D_SUB, L_SUB
+from nearsub.common.runtime.messages import MessageError
+from nearsub.common.surrogate import domain
+from nearsub.common.surrogate import model as sg
+from nearsub.common.surrogate.modelfile import ModelFileError, load_model
 from nearsub.tools.surrogate_cli import write_analytic_model
 
 # A feasible mid-domain point: Explorer-like UUV (table 4.1: D_sub/D_uuv 14.0, L/D 7.24).
@@ -28,31 +29,31 @@ def surrogate(model_path):
 
 
 def test_inputs_and_bounds_follow_table_4_2():
-    assert sg.INPUT_NAMES == ("R_long", "R_lat", "u_kn", "psi_deg", "d_ratio", "ld_ratio")
+    assert domain.INPUT_NAMES == ("R_long", "R_lat", "u_kn", "psi_deg", "d_ratio", "ld_ratio")
     expected = [[-0.7, 0.7], [0.059, 0.105], [2, 5], [-2, 2], [5, 50], [4.3, 13]]
-    assert np.array_equal(sg.BOUNDS, np.array(expected, dtype=float))
+    assert np.array_equal(domain.BOUNDS, np.array(expected, dtype=float))
     assert sg.surrogate_key("alpha") == "nearsub/alpha/surrogate"
 
 
 def test_in_domain_checks_every_bound_and_rejects_non_finite():
-    assert sg.in_domain(MID).tolist() == [True]
-    assert sg.in_domain(sg.BOUNDS.T).tolist() == [True, True]  # both corners, ends included
+    assert domain.in_domain(MID).tolist() == [True]
+    assert domain.in_domain(domain.BOUNDS.T).tolist() == [True, True]  # both corners, ends included
     rows = []
     for k in range(6):
         for side, step in ((0, -1e-9), (1, 1e-9)):
             row = MID.copy()
-            row[k] = sg.BOUNDS[k, side] + step
+            row[k] = domain.BOUNDS[k, side] + step
             rows.append(row)
-    assert not sg.in_domain(np.array(rows)).any()
+    assert not domain.in_domain(np.array(rows)).any()
     bad = np.tile(MID, (3, 1))
     bad[0, 0], bad[1, 3], bad[2, 4] = np.nan, np.inf, -np.inf
-    assert not sg.in_domain(bad).any()
+    assert not domain.in_domain(bad).any()
     with pytest.raises(ValueError, match="shape"):
-        sg.in_domain(np.zeros((2, 5)))
+        domain.in_domain(np.zeros((2, 5)))
 
 
 def test_constraints_match_the_printed_equations():
-    g = sg.constraint_values(MID)[0]
+    g = domain.constraint_values(MID)[0]
     r_lat, inv_d, ld = MID[1], 1 / MID[4], MID[5]
     assert g == pytest.approx(
         [
@@ -63,29 +64,29 @@ def test_constraints_match_the_printed_equations():
         ],
         rel=1e-12,
     )
-    assert sg.constraints_ok(MID).tolist() == [True]
+    assert domain.constraints_ok(MID).tolist() == [True]
 
 
 def test_constraint_4_4_is_the_clearance_with_centre_to_centre_r_lat():
     """(4.4) times D_sub is the clearance c - 0.05 m of (4.3) with psi_max = 2 deg, R_lat
     centre-to-centre (errata 7): c = y - D_sub/2 - D_uuv/2 - 0.27 L_uuv sin 2deg."""
-    X = sg.sample_feasible(200, seed=3)
+    X = domain.sample_feasible(200, seed=3)
     d_uuv = D_SUB / X[:, 4]
     clearance = X[:, 1] * L_SUB - D_SUB / 2 - d_uuv / 2 - 0.27 * X[:, 5] * d_uuv * math.sin(math.radians(2))
-    assert np.allclose(sg.constraint_values(X)[:, 0] * D_SUB, clearance - 0.05, atol=2e-3)  # printed constants
+    assert np.allclose(domain.constraint_values(X)[:, 0] * D_SUB, clearance - 0.05, atol=2e-3)  # printed constants
 
 
 def test_the_low_corner_is_infeasible_and_speed_does_not_matter():
     # R_lat = 0.059 violates (4.4) for every UUV size in the domain (SPEC errata 7).
     corners = np.array([[0.0, 0.059, 3.0, 0.0, d, ld] for d in (5.0, 12.0, 50.0) for ld in (4.3, 8.0, 13.0)])
-    assert (sg.constraint_values(corners)[:, 0] < 0).all()
-    assert not sg.constraints_ok(corners).any()
+    assert (domain.constraint_values(corners)[:, 0] < 0).all()
+    assert not domain.constraints_ok(corners).any()
     # No speed term (errata 3): u and psi do not change feasibility.
-    X = sg.sample_feasible(50, seed=1)
+    X = domain.sample_feasible(50, seed=1)
     for k, value in ((2, 2.0), (2, 5.0), (3, -2.0)):
         Y = X.copy()
         Y[:, k] = value
-        assert np.array_equal(sg.constraint_values(Y), sg.constraint_values(X))
+        assert np.array_equal(domain.constraint_values(Y), domain.constraint_values(X))
 
 
 def test_each_constraint_removes_its_region():
@@ -93,34 +94,34 @@ def test_each_constraint_removes_its_region():
     far[1] = 0.105  # beyond 2 D_uuv + D_sub/2: (4.5)
     long_big = np.array([0.0, 0.09, 3.0, 0.0, 5.0, 13.0])  # a Snakehead-size UUV too long: (4.7)
     short_small = np.array([0.0, 0.062, 3.0, 0.0, 50.0, 4.3])  # a small UUV too short: (4.6)
-    g = sg.constraint_values(np.array([far, long_big, short_small]))
+    g = domain.constraint_values(np.array([far, long_big, short_small]))
     assert g[0, 1] < 0 and g[1, 3] < 0 and g[2, 2] < 0
-    assert not sg.constraints_ok(np.array([far, long_big, short_small])).any()
+    assert not domain.constraints_ok(np.array([far, long_big, short_small])).any()
 
 
 def test_sample_feasible_respects_bounds_and_constraints():
-    X = sg.sample_feasible(500, seed=7)
+    X = domain.sample_feasible(500, seed=7)
     assert X.shape == (500, 6)
-    assert sg.in_domain(X).all() and sg.constraints_ok(X).all()
-    assert np.array_equal(X, sg.sample_feasible(500, seed=7))
+    assert domain.in_domain(X).all() and domain.constraints_ok(X).all()
+    assert np.array_equal(X, domain.sample_feasible(500, seed=7))
 
 
 def test_to_inputs_converts_units_and_mirrors_the_minus_y_side():
-    x, y, u, psi = 10.0, 6.0, 2.0 * sg.KNOT, math.radians(1.5)
-    inputs, mirror = sg.to_inputs([x, x], [y, -y], u, [psi, psi], 5.36, 0.74)
+    x, y, u, psi = 10.0, 6.0, 2.0 * domain.KNOT, math.radians(1.5)
+    inputs, mirror = domain.to_inputs([x, x], [y, -y], u, [psi, psi], 5.36, 0.74)
     assert mirror.tolist() == [1.0, -1.0]
     assert inputs[0] == pytest.approx([x / L_SUB, y / L_SUB, 2.0, 1.5, D_SUB / 0.74, 5.36 / 0.74])
     assert inputs[1] == pytest.approx([x / L_SUB, y / L_SUB, 2.0, -1.5, D_SUB / 0.74, 5.36 / 0.74])
     # headings wrap to [-180, 180) before mirroring
-    wrapped, _ = sg.to_inputs(0.0, 6.0, 1.0, 2 * math.pi + psi, 5.36, 0.74)
+    wrapped, _ = domain.to_inputs(0.0, 6.0, 1.0, 2 * math.pi + psi, 5.36, 0.74)
     assert wrapped[0, 3] == pytest.approx(1.5)
-    assert sg.KNOT == pytest.approx(0.514444, rel=1e-6)
+    assert domain.KNOT == pytest.approx(0.514444, rel=1e-6)
 
 
 def test_to_forces_inverts_the_non_dimensionalisation():
     rho, u, length = 1025.0, 1.8, 3.2
     coeffs = np.array([[-1e-3, 2e-3, -5e-4], [-1e-3, 2e-3, -5e-4]])
-    forces = sg.to_forces(coeffs, [1.0, -1.0], u, length, rho)
+    forces = domain.to_forces(coeffs, [1.0, -1.0], u, length, rho)
     q = 0.5 * rho * u**2
     assert forces[0] == pytest.approx([-1e-3 * q * length**2, 2e-3 * q * length**2, -5e-4 * q * length**3])
     assert forces[1] == pytest.approx(forces[0] * [1, -1, -1])
@@ -142,7 +143,7 @@ def test_mirror_symmetry_of_predicted_forces(surrogate):
 
 def test_predict_state_scales_mean_and_std(surrogate):
     x, y, u, psi, length, diameter, rho = 3.0, 6.3, 1.5, 0.005, 5.36, 0.74, 1025.0
-    inputs, _ = sg.to_inputs(x, y, u, psi, length, diameter)
+    inputs, _ = domain.to_inputs(x, y, u, psi, length, diameter)
     coeffs = surrogate.predict(inputs)
     dimensional = surrogate.predict_state(x, y, u, psi, length, diameter, rho)
     q = 0.5 * rho * u**2
@@ -164,7 +165,7 @@ def test_analytic_fixture_is_labelled_and_plausible(surrogate):
     assert (np.diff(np.sign(Y[:, 1])) != 0).any() and (np.diff(np.sign(Y[:, 2])) != 0).any()
     assert 1e-4 < np.abs(Y).max() < 1e-2 and (Y[:, 0] < 0).all()
     # the GP reproduces the function it was fitted to
-    X = sg.sample_feasible(500, seed=11)
+    X = domain.sample_feasible(500, seed=11)
     error = surrogate.predict(X, return_std=False).mean - sg.analytic_coefficients(X)
     assert (np.sqrt(np.mean(error**2, axis=0)) < 0.2 * sg.analytic_coefficients(X).std(axis=0)).all()
 
@@ -188,8 +189,8 @@ def test_out_of_domain_points_are_answered_with_the_gp_value_and_flagged(surroga
 
 
 def test_surrogate_refuses_a_model_of_another_domain(tmp_path):
-    from nearsub.common.gp import MultiOutputGP
-    from nearsub.common.modelfile import save_model
+    from nearsub.common.learning.gp import MultiOutputGP
+    from nearsub.common.surrogate.modelfile import save_model
 
     X = np.random.default_rng(0).uniform(size=(10, 2))
     model = MultiOutputGP(n_restarts=1).fit(X, X)
@@ -225,10 +226,10 @@ def test_model_id_is_a_content_hash(model_path, surrogate):
 
 # ---------------------------------------------------------------------------- messages
 def test_answer_query_round_trip_matches_in_process_prediction(surrogate):
-    X = sg.sample_feasible(7, seed=2)
+    X = domain.sample_feasible(7, seed=2)
     reply = sg.decode_reply(sg.answer_query(surrogate, sg.encode_query(X, step=12, t=0.6, source="sim"), "srv"))
     assert (reply.step, reply.t, reply.source) == (12, 0.6, "srv")
-    assert reply.output_names == list(sg.OUTPUT_NAMES) and reply.model_id == surrogate.model_id
+    assert reply.output_names == list(domain.OUTPUT_NAMES) and reply.model_id == surrogate.model_id
     p, expected = reply.prediction(), surrogate.predict(X)
     assert np.array_equal(p.mean, expected.mean) and np.array_equal(p.std, expected.std)
     assert p.in_domain.all() and p.constraints_ok.all()
@@ -271,7 +272,7 @@ def test_reply_validation_checks_shapes():
         std=[[0.1, 0.1, 0.1]],
         in_domain=[True],
         constraints_ok=[True],
-        output_names=list(sg.OUTPUT_NAMES),
+        output_names=list(domain.OUTPUT_NAMES),
         model_id="x",
     )
     assert sg.decode_reply(msgpack.packb(good)).prediction().mean.shape == (1, 3)

@@ -9,8 +9,9 @@ import sys
 import numpy as np
 import pytest
 
-from nearsub.common import surrogate as sg
-from nearsub.common.modelfile import load_model
+from nearsub.common.surrogate import domain
+from nearsub.common.surrogate import model as sg
+from nearsub.common.surrogate.modelfile import load_model
 from nearsub.tools.surrogate_cli import add_bench_parser, add_parser, bench_surrogate, child_env, write_analytic_model
 
 POINT = {"R_long": 0.1, "R_lat": 0.07, "u_kn": 3.5, "psi_deg": 0.5, "d_ratio": 14.0, "ld_ratio": 7.24}
@@ -42,9 +43,9 @@ def test_info_shows_domain_training_size_hyperparameters_and_provenance(capsys, 
     assert "R_lat" in out and "0.059" in out and "(4.4)" in out and "length scales" in out
     code, out, _ = run(capsys, "surrogate", "info", model_path, "--json")
     info = json.loads(out)
-    assert [i["name"] for i in info["inputs"]] == list(sg.INPUT_NAMES)
+    assert [i["name"] for i in info["inputs"]] == list(domain.INPUT_NAMES)
     assert info["inputs"][2]["bounds"] == [2.0, 5.0] and info["inputs"][2]["unit"] == "kn"
-    assert info["training_points"] == 100 and set(info["inputs"][0]["length_scales"]) == set(sg.OUTPUT_NAMES)
+    assert info["training_points"] == 100 and set(info["inputs"][0]["length_scales"]) == set(domain.OUTPUT_NAMES)
     assert info["provenance"]["n_train"] == 100 and info["outputs"][0]["signal_std"] > 0
 
 
@@ -53,8 +54,8 @@ def test_predict_prints_mean_std_and_flags(capsys, model_path):
     code, out, _ = run(capsys, "surrogate", "predict", model_path, *assignments(), "--json")
     result = json.loads(out)
     assert code == 0 and result["in_domain"] and result["constraints_ok"]
-    assert [result["mean"][n] for n in sg.OUTPUT_NAMES] == expected.mean[0].tolist()
-    assert [result["std"][n] for n in sg.OUTPUT_NAMES] == expected.std[0].tolist()
+    assert [result["mean"][n] for n in domain.OUTPUT_NAMES] == expected.mean[0].tolist()
+    assert [result["std"][n] for n in domain.OUTPUT_NAMES] == expected.std[0].tolist()
     code, out, _ = run(capsys, "surrogate", "predict", model_path, *assignments())
     assert code == 0 and "X_p =" in out and "+/-" in out and "in domain (table 4.2):   yes" in out
 

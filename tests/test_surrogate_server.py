@@ -11,11 +11,12 @@ import numpy as np
 import pytest
 
 from conftest import ALPHA
-from nearsub.common import keys
-from nearsub.common import surrogate as sg
-from nearsub.common.bus import ReplyError
-from nearsub.common.mission import RunConfig, load_mission
-from nearsub.common.modelfile import load_model
+from nearsub.common.mission.schema import RunConfig, load_mission
+from nearsub.common.runtime import keys
+from nearsub.common.runtime.bus import ReplyError
+from nearsub.common.surrogate import domain
+from nearsub.common.surrogate import model as sg
+from nearsub.common.surrogate.modelfile import load_model
 from nearsub.tools.surrogate_cli import child_env, local_server, write_analytic_model
 
 pytestmark = pytest.mark.timeout(90)
@@ -55,18 +56,18 @@ def test_liveliness_token_is_visible(server, community):
 
 
 def test_single_point_equals_the_in_process_prediction(querier, surrogate):
-    point = sg.sample_feasible(1, seed=5)
+    point = domain.sample_feasible(1, seed=5)
     reply = sg.decode_reply(querier.ask(sg.encode_query(point, step=3, t=0.15, source="test")))
     expected = surrogate.predict(point)
     assert (reply.step, reply.t, reply.source) == (3, 0.15, "surrogate")
-    assert reply.model_id == surrogate.model_id and reply.output_names == list(sg.OUTPUT_NAMES)
+    assert reply.model_id == surrogate.model_id and reply.output_names == list(domain.OUTPUT_NAMES)
     p = reply.prediction()
     assert np.array_equal(p.mean, expected.mean) and np.array_equal(p.std, expected.std)
     assert p.in_domain.tolist() == [True] and p.constraints_ok.tolist() == [True]
 
 
 def test_a_batch_of_1000_points_with_flags(querier, surrogate):
-    X = sg.sample_feasible(1000, seed=6)
+    X = domain.sample_feasible(1000, seed=6)
     X[0, 0] = 0.9  # outside the bounds
     X[1, 1] = 0.059  # the infeasible low corner
     reply = sg.decode_reply(querier.ask(sg.encode_query(X)))
@@ -89,7 +90,7 @@ def test_malformed_queries_get_an_error_and_the_server_keeps_serving(querier, su
     with pytest.raises(ReplyError) as info:
         querier.ask(payload)
     assert "surrogate query" in str(info.value) and expected in str(info.value)
-    point = sg.sample_feasible(1, seed=8)
+    point = domain.sample_feasible(1, seed=8)
     reply = sg.decode_reply(querier.ask(sg.encode_query(point)))
     assert np.array_equal(reply.prediction().mean, surrogate.predict(point).mean)
 
@@ -109,7 +110,7 @@ def test_a_second_instance_from_a_run_file_and_clean_sigterm(server, model_path,
             assert process.poll() is None and time.monotonic() < end, "the second server did not start"
             time.sleep(0.05)
         querier = bus.querier(sg.surrogate_key(other), timeout=10.0)
-        reply = sg.decode_reply(querier.ask(sg.encode_query(sg.sample_feasible(1))))
+        reply = sg.decode_reply(querier.ask(sg.encode_query(domain.sample_feasible(1))))
         assert reply.source == "second"
         process.terminate()
         code = process.wait(timeout=20)

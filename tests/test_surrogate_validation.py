@@ -7,16 +7,16 @@ import math
 import numpy as np
 import pytest
 
-from nearsub.common import hydro_hf
-from nearsub.common.surrogate import constraints_ok, in_domain
-from nearsub.common.surrogate_validation import (
+from nearsub.common.hydro import high_fidelity as hydro_hf
+from nearsub.common.physics.vehicles import REMUS100
+from nearsub.common.surrogate.domain import constraints_ok, in_domain
+from nearsub.common.surrogate.validation import (
     THESIS_MAE,
     error_equivalents,
     evaluate_rows,
     latin_hypercube_feasible,
     mean_absolute_error,
 )
-from nearsub.common.vehicles import REMUS100
 from nearsub.tools.cli import main
 
 pytestmark = pytest.mark.timeout(180)

@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from nearsub.common import testproblems as tp
-from nearsub.common.testproblems import get_problem
+from nearsub.common.learning import testproblems as tp
+from nearsub.common.learning.testproblems import get_problem
 
 # Reference values: scalar `math` evaluations of the printed equations, written out by hand
 # (e.g. Park (2.19) at x = 0.5: 2/3 e - 0.5 sin 0.5 + 0.5 = 1.81219 - 0.23971 + 0.5).

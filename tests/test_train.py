@@ -7,9 +7,10 @@ import csv
 import numpy as np
 import pytest
 
-from nearsub.common.active import Campaign, CampaignSettings
-from nearsub.common.modelfile import MultiFidelitySurrogate, load_model
-from nearsub.common.surrogate import Surrogate, sample_feasible
+from nearsub.common.learning.active import Campaign, CampaignSettings
+from nearsub.common.surrogate.domain import sample_feasible
+from nearsub.common.surrogate.model import Surrogate
+from nearsub.common.surrogate.modelfile import MultiFidelitySurrogate, load_model
 from nearsub.tools.train import interaction_problem, train_command
 
 pytestmark = pytest.mark.timeout(300)

@@ -7,9 +7,10 @@ import hashlib
 import numpy as np
 import pytest
 
-from nearsub.common.gp import MultiOutputGP
-from nearsub.common.modelfile import load_model
-from nearsub.common.surrogate import INPUT_NAMES, OUTPUT_NAMES, Surrogate, default_model_path
+from nearsub.common.learning.gp import MultiOutputGP
+from nearsub.common.surrogate.domain import INPUT_NAMES, OUTPUT_NAMES
+from nearsub.common.surrogate.model import Surrogate, default_model_path
+from nearsub.common.surrogate.modelfile import load_model
 from nearsub.tools.cli import main
 
 pytestmark = pytest.mark.timeout(120)

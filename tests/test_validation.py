@@ -3,8 +3,9 @@
 import numpy as np
 import pytest
 
-from nearsub.common import validation as val
-from nearsub.common.vehicles import NPS_AUV_II, REMUS100, SDV, Gains
+from nearsub.common.analysis import validation as val
+from nearsub.common.autonomy import pid_design
+from nearsub.common.physics.vehicles import NPS_AUV_II, REMUS100, SDV, Gains
 
 
 @pytest.fixture(scope="module")
@@ -37,8 +38,8 @@ def test_thesis_figures(rows):
     ids=lambda v: getattr(v, "name", v),
 )
 def test_library_gains_follow_the_design_rule(vehicle, speed):
-    heading = val.design_heading_gains(vehicle, speed)
-    speed_gains = val.design_speed_gains(vehicle, speed)
+    heading = pid_design.design_heading_gains(vehicle, speed)
+    speed_gains = pid_design.design_speed_gains(vehicle, speed)
     for designed, library in ((heading, vehicle.pid.heading), (speed_gains, vehicle.pid.speed)):
         for field in ("kp", "ki", "kd", "integral_limit"):
             assert getattr(library, field) == pytest.approx(getattr(designed, field), rel=0.05, abs=1e-12)
@@ -48,11 +49,11 @@ def test_incremental_form_cannot_stabilise_remus():
     """(5.21) with the derivative on the measurement gives no yaw-rate feedback: a heading-only
     loop (Kd = 0 in positional terms) leaves REMUS's open-loop instability unstable."""
     for kp in np.linspace(0.05, 5.0, 25):
-        poles = val.closed_loop_poles(REMUS100, 1.5, Gains(kp=kp))
+        poles = pid_design.closed_loop_poles(REMUS100, 1.5, Gains(kp=kp))
         assert poles.real.max() > 0
 
 
 def test_incremental_tuning_maps_gains_by_dt():
-    tuning = val.incremental_tuning(NPS_AUV_II, 1.0, 0.2, 0.05)
+    tuning = pid_design.incremental_tuning(NPS_AUV_II, 1.0, 0.2, 0.05)
     assert (tuning.heading.kp, tuning.heading.kd, tuning.heading.ki) == pytest.approx((0.01, 0.05, 0.0))
     assert tuning.speed.kd == pytest.approx(NPS_AUV_II.pid.speed.kp * 0.05)

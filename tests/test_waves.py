@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from nearsub.common import waves
+from nearsub.common.physics import waves
 
 
 @pytest.mark.parametrize(

@@ -26,8 +26,8 @@ from typing import Any
 
 import numpy as np
 
-from nearsub.common.active import Campaign, CampaignSettings, run_campaign
-from nearsub.common.testproblems import PROBLEMS, get_problem
+from nearsub.common.learning.active import Campaign, CampaignSettings, run_campaign
+from nearsub.common.learning.testproblems import PROBLEMS, get_problem
 
 __all__ = ["add_parser", "albench_command", "run_benchmark", "summarise", "crossover", "mape"]
 

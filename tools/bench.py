@@ -16,9 +16,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from nearsub.common.cores import build_cores
-from nearsub.common.lifecycle import Schedule, run_inprocess
-from nearsub.common.mission import load_mission
+from nearsub.common.mission.cores import build_cores
+from nearsub.common.mission.schema import load_mission
+from nearsub.common.runtime.lifecycle import Schedule, run_inprocess
 
 from .launch import Launcher
 
@@ -91,9 +91,9 @@ def bench_envelope(args) -> int:
 
     import numpy as np
 
-    from nearsub.common import envelope as env
-    from nearsub.common.batch import OUTCOMES
-    from nearsub.common.cores import run_mission
+    from nearsub.common.analysis import envelope as env
+    from nearsub.common.analysis.batch import OUTCOMES
+    from nearsub.common.mission.cores import run_mission
 
     n_long, n_lat = (int(v) for v in args.grid.lower().split("x"))
     config = env.EnvelopeConfig(vehicle=args.vehicle, grid=(n_long, n_lat), duration=args.duration)

@@ -67,7 +67,7 @@ def _save_answers(state: Path, request_index: int, answers: dict[str, list[float
 
 
 def _resume(state: Path):
-    from nearsub.common.active import Campaign
+    from nearsub.common.learning.active import Campaign
 
     if not state.exists():
         raise CampaignError(f"no campaign at {state}; start one with `nearsub campaign start --state {state}`")
@@ -80,7 +80,7 @@ def _resume(state: Path):
 def run_low_fidelity(campaign) -> int:
     """Answer the campaign's pending LF requests with the LF physics until it asks for HF (or is
     done); returns the number of LF requests answered."""
-    from nearsub.common import hydro_lf
+    from nearsub.common.hydro import low_fidelity as hydro_lf
 
     answered = 0
     while (request := campaign.ask()) is not None and request.fidelity == "lf":
@@ -91,7 +91,7 @@ def run_low_fidelity(campaign) -> int:
 
 def pending_cases(campaign, state: Path) -> list[dict[str, Any]]:
     """The HF cases of the pending request not yet answered, with their dimensional geometry."""
-    from nearsub.common.campaign_cases import case_geometry
+    from nearsub.common.surrogate.campaign_cases import case_geometry
 
     request = campaign.ask()
     if request is None:
@@ -150,7 +150,7 @@ def _report(campaign, state: Path, as_json: bool) -> None:
 
 
 def start_command(args) -> int:
-    from nearsub.common.active import Campaign
+    from nearsub.common.learning.active import Campaign
 
     from .train import nmmf_settings
 
@@ -180,8 +180,8 @@ def next_command(args) -> int:
 
 def _parse_answer(args, request, row: int) -> list[float]:
     """The answer's [X', Y', N'], converted from N and N m with --si; finite or an error."""
-    from nearsub.common.geometry import uuv_dimensions
-    from nearsub.common.surrogate import KNOT, RHO_SEA, to_coefficients
+    from nearsub.common.physics.hull import uuv_dimensions
+    from nearsub.common.surrogate.domain import KNOT, RHO_SEA, to_coefficients
 
     values = np.array([args.X, args.Y, args.N], dtype=float)
     bad = [f"--{name} {value:g}" for name, value in zip("XYN", values, strict=True) if not np.isfinite(value)]

@@ -5,9 +5,9 @@ from __future__ import annotations
 import time
 import uuid
 
-from nearsub.common import keys
-from nearsub.common.bus import Bus, Endpoints, Mailbox
-from nearsub.common.messages import Control, ControlReply, MessageError, decode, encode
+from nearsub.common.runtime import keys
+from nearsub.common.runtime.bus import Bus, Endpoints, Mailbox
+from nearsub.common.runtime.messages import Control, ControlReply, MessageError, decode, encode
 
 from . import registry
 

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nearsub.common.mission import BEHAVIOURS
+from nearsub.common.mission.schema import BEHAVIOURS
 
 # Imported when a command runs, so that `nearsub --help` stays fast: matplotlib, rich and the
 # envelope core (which loads scipy).
@@ -100,7 +100,7 @@ def _grid(text: str | None) -> tuple[int, int] | None:
 
 def d_lead_lengths(text: str, vehicle: str) -> float:
     """'3' or '3L' -> 3 UUV lengths; '4m' -> 4 m in UUV lengths."""
-    from nearsub.common.vehicles import get_vehicle
+    from nearsub.common.physics.vehicles import get_vehicle
 
     text = text.strip()
     if text.lower().endswith("m"):
@@ -123,8 +123,8 @@ def shared_settings(args) -> dict:
 
 def configs_from_args(args) -> list:
     """The cartesian product of the condition options (EnvelopeConfig each)."""
-    from nearsub.common import envelope as env
-    from nearsub.common.vehicles import get_vehicle
+    from nearsub.common.analysis import envelope as env
+    from nearsub.common.physics.vehicles import get_vehicle
 
     shared = shared_settings(args)
     configs = []
@@ -153,19 +153,19 @@ def surrogate_window(vehicle: str) -> tuple[float, float] | None:
     hull ratios the interaction uses (clipped to the trained range, `interaction_at`). None when
     the hull fails (4.6) or (4.7) (the NPS AUV II fails (4.6)): the blend weight is then zero at
     every position, and the surrogate never acts on that vehicle."""
-    from nearsub.common import surrogate as sg
-    from nearsub.common.hull import D_SUB
-    from nearsub.common.vehicles import get_vehicle
+    from nearsub.common.physics.hull import D_SUB
+    from nearsub.common.physics.vehicles import get_vehicle
+    from nearsub.common.surrogate import domain
 
     v = get_vehicle(vehicle)
-    d_ratio = float(np.clip(D_SUB / v.diameter, *sg.BOUNDS[4]))
-    ld_ratio = float(np.clip(v.length / v.diameter, *sg.BOUNDS[5]))
-    hull_only = sg.constraint_values(np.array([[0.0, 0.08, 3.0, 0.0, d_ratio, ld_ratio]]))[0, 2:]
+    d_ratio = float(np.clip(D_SUB / v.diameter, *domain.BOUNDS[4]))
+    ld_ratio = float(np.clip(v.length / v.diameter, *domain.BOUNDS[5]))
+    hull_only = domain.constraint_values(np.array([[0.0, 0.08, 3.0, 0.0, d_ratio, ld_ratio]]))[0, 2:]
     if (hull_only < 0.0).any():  # (4.6), (4.7): no R_lat term
         return None
     low = (0.5048 + 0.5 / d_ratio + 9.425e-3 * ld_ratio / d_ratio) / 8.575  # (4.4), SPEC errata 3
     high = (0.5 + 2.0 / d_ratio) / 8.575  # (4.5)
-    return max(low, sg.BOUNDS[1, 0]), min(high, sg.BOUNDS[1, 1])
+    return max(low, domain.BOUNDS[1, 0]), min(high, domain.BOUNDS[1, 1])
 
 
 def _edges(centres: np.ndarray) -> np.ndarray:
@@ -180,9 +180,9 @@ def draw_envelope(ax, summary: dict, title: str | None = None) -> None:
     where the surrogate's interaction acts drawn dashed."""
     from matplotlib.colors import BoundaryNorm, ListedColormap
 
-    from nearsub.common import surrogate as sg
-    from nearsub.common.batch import OUTCOMES
-    from nearsub.common.hull import L_SUB, submarine_outline
+    from nearsub.common.analysis.batch import OUTCOMES
+    from nearsub.common.physics.hull import L_SUB, submarine_outline
+    from nearsub.common.surrogate import domain
 
     r_long, r_lat = np.asarray(summary["r_long"]), np.asarray(summary["r_lat"])
     outcome = np.asarray(summary["outcome"])
@@ -213,7 +213,7 @@ def draw_envelope(ax, summary: dict, title: str | None = None) -> None:
         )
     else:
         low, high = window
-        (x_lo, x_hi) = sg.BOUNDS[0]
+        (x_lo, x_hi) = domain.BOUNDS[0]
         ax.plot([x_lo, x_hi, x_hi, x_lo, x_lo], [low, low, high, high, low], "k--", linewidth=0.8, zorder=4)
     ax.set_xlim(_edges(r_long)[[0, -1]])
     ax.set_ylim(_edges(r_lat)[[0, -1]])
@@ -270,7 +270,7 @@ def write_cells_csv(envelope, path: Path) -> Path:
 
 def write_envelope(envelope, stem: Path) -> list[Path]:
     """STEM.png, STEM.csv and STEM.json."""
-    from nearsub.common import envelope as env
+    from nearsub.common.analysis import envelope as env
 
     stem.parent.mkdir(parents=True, exist_ok=True)
     summary = envelope.summary()
@@ -291,7 +291,7 @@ def _progress():
 def run_configs(configs: list, args) -> list:
     """One envelope in this process with a bar over its steps; several as a sweep with a bar over
     configurations (on Dask with --workers or --scheduler)."""
-    from nearsub.common import envelope as env
+    from nearsub.common.analysis import envelope as env
 
     with _progress() as progress:
         if len(configs) == 1 and not (args.workers or args.scheduler):
@@ -343,8 +343,8 @@ def envelope_command(args) -> int:
 
 def cell_mission_command(configs: list, args) -> int:
     """One TOML mission per configuration: the cell whose UUV starts at (R_long, R_lat)."""
-    from nearsub.common import envelope as env
-    from nearsub.common.hull import L_SUB
+    from nearsub.common.analysis import envelope as env
+    from nearsub.common.physics.hull import L_SUB
 
     r_long, r_lat = _pair(args.cell_mission, "--cell-mission")
     out = Path(args.out or "envelopes")
@@ -358,7 +358,7 @@ def cell_mission_command(configs: list, args) -> int:
 
 
 def compare_command(args) -> int:
-    from nearsub.common import envelope as env
+    from nearsub.common.analysis import envelope as env
 
     try:
         first, second = (env.load_summary(path) for path in args.compare)
@@ -380,7 +380,7 @@ def compare_command(args) -> int:
 def thesis_command(args) -> int:
     """Every envelope figure of chapters 5 and 6: one JSON per configuration in OUT/data, one PNG
     per figure, and the fractions table (fractions.md, fractions.csv)."""
-    from nearsub.common import envelope as env
+    from nearsub.common.analysis import envelope as env
 
     out = Path(args.out or THESIS_OUT)
     (out / "data").mkdir(parents=True, exist_ok=True)
@@ -428,8 +428,8 @@ def thesis_command(args) -> int:
 
 def write_fractions(rows: list[tuple[str, str, dict]], out: Path) -> None:
     """The safe / stray / close-call / collision fractions of every panel, as CSV and Markdown."""
-    from nearsub.common import envelope as env
-    from nearsub.common.batch import OUTCOMES
+    from nearsub.common.analysis import envelope as env
+    from nearsub.common.analysis.batch import OUTCOMES
 
     names = OUTCOMES[:-1]
     with (out / "fractions.csv").open("w", newline="") as handle:

@@ -18,10 +18,10 @@ from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # as tools/cli.py: one BLAS thread per process
 
-from nearsub.common import free_stream as fs  # noqa: E402
-from nearsub.common import hydro_hf  # noqa: E402
-from nearsub.common.modelfile import ModelFileError  # noqa: E402
-from nearsub.common.surrogate import default_model_path, load_surrogate  # noqa: E402
+from nearsub.common.hydro import free_stream as fs  # noqa: E402
+from nearsub.common.hydro import high_fidelity as hydro_hf  # noqa: E402
+from nearsub.common.surrogate.model import default_model_path, load_surrogate  # noqa: E402
+from nearsub.common.surrogate.modelfile import ModelFileError  # noqa: E402
 
 PANELS = {"coarse": hydro_hf.COARSE, "medium": hydro_hf.MEDIUM, "fine": hydro_hf.FINE}
 HF_MARK = "common/hydro_hf.py"  # what `nearsub train` writes into a model's provenance["high_fidelity"]

@@ -10,8 +10,9 @@ from pathlib import Path
 
 import numpy as np
 
-from nearsub.common import hydro_hf, hydro_lf
-from nearsub.common.surrogate import sample_feasible
+from nearsub.common.hydro import high_fidelity as hydro_hf
+from nearsub.common.hydro import low_fidelity as hydro_lf
+from nearsub.common.surrogate.domain import sample_feasible
 
 # Poses of the convergence study: thesis figure 4-4's UUV (D_sub/D_uuv = 10, L/D = 8) mid-gap over
 # the midbody, the bow and the stern, then the smallest clearances (4.4) allows for a small and a

@@ -25,10 +25,18 @@ from pathlib import Path
 
 import msgpack
 
-from nearsub.common import keys
-from nearsub.common.bus import Bus, Endpoints, Mailbox, free_tcp_port
-from nearsub.common.lifecycle import ORDER
-from nearsub.common.messages import (
+from nearsub.common.mission.schema import (
+    Mission,
+    MissionError,
+    RunConfig,
+    apply_overrides,
+    load_mission,
+    mission_from_dict,
+)
+from nearsub.common.runtime import keys
+from nearsub.common.runtime.bus import Bus, Endpoints, Mailbox, free_tcp_port
+from nearsub.common.runtime.lifecycle import ORDER
+from nearsub.common.runtime.messages import (
     Event,
     MessageError,
     MissionEnd,
@@ -36,7 +44,6 @@ from nearsub.common.messages import (
     encode,
     model_for_key,
 )
-from nearsub.common.mission import Mission, MissionError, RunConfig, apply_overrides, load_mission, mission_from_dict
 
 from . import registry
 from .connect import Caller

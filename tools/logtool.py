@@ -8,7 +8,7 @@ import sys
 from collections import Counter, defaultdict
 from pathlib import Path
 
-from nearsub.common.logfile import INVALID_SUFFIX, LogContents, read_log
+from nearsub.common.runtime.logfile import INVALID_SUFFIX, LogContents, read_log
 
 
 def flatten(value: dict) -> dict:

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nearsub.common.surrogate_maps import LABELS, MID_WINDOW, THESIS_MAPS, MapPanel, mid_window_r_lat
+from nearsub.common.surrogate.maps import LABELS, MID_WINDOW, THESIS_MAPS, MapPanel, mid_window_r_lat
 
 DEFAULT_OUT = Path("docs") / "maps"
 _FIDELITY_TITLES = {"hf": "HF-trained surrogate", "lf": "LF surrogate"}
@@ -41,7 +41,7 @@ def _held_text(panel: MapPanel) -> str:
 
 def _draw_hull_edge(ax, x_range) -> None:
     """The submarine's side (|y| <= r) in R_long, R_lat coordinates, filled."""
-    from nearsub.common.hull import L_SUB, submarine_half_width
+    from nearsub.common.physics.hull import L_SUB, submarine_half_width
 
     x = np.linspace(*x_range, 600)
     ax.fill_between(x, 0.0, submarine_half_width(x * L_SUB) / L_SUB, color="0.35", zorder=3, lw=0)
@@ -51,8 +51,7 @@ def _draw_position_strip(ax, panels: tuple[MapPanel, ...]) -> None:
     """Plan view to scale: the submarine, the map's window in R_long/R_lat, and the reference UUV."""
     from matplotlib.patches import Rectangle
 
-    from nearsub.common.geometry import uuv_dimensions
-    from nearsub.common.hull import L_SUB, submarine_outline, uuv_outline
+    from nearsub.common.physics.hull import L_SUB, submarine_outline, uuv_dimensions, uuv_outline
 
     sx, sy = submarine_outline()
     ax.fill(sx / L_SUB, sy / L_SUB, color="0.35", lw=0)
@@ -99,7 +98,7 @@ def plot_figure(surrogate, name: str, out_dir: Path, nx: int = 121, ny: int = 81
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from nearsub.common.surrogate_maps import evaluate_map, training_points
+    from nearsub.common.surrogate.maps import evaluate_map, training_points
 
     panels = THESIS_MAPS[name]
     maps = [evaluate_map(surrogate.model, panel, nx, ny) for panel in panels]
@@ -157,8 +156,8 @@ def plot_figure(surrogate, name: str, out_dir: Path, nx: int = 121, ny: int = 81
 
 
 def maps_command(args) -> int:
-    from nearsub.common.modelfile import ModelFileError
-    from nearsub.common.surrogate import load_surrogate
+    from nearsub.common.surrogate.model import load_surrogate
+    from nearsub.common.surrogate.modelfile import ModelFileError
 
     try:
         surrogate = load_surrogate(args.model)

@@ -19,9 +19,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from nearsub.common.hull import submarine_outline  # noqa: E402
-from nearsub.common.logfile import read_log  # noqa: E402
-from nearsub.common.mission import mission_from_dict  # noqa: E402
+from nearsub.common.mission.schema import mission_from_dict  # noqa: E402
+from nearsub.common.physics.hull import submarine_outline  # noqa: E402
+from nearsub.common.runtime.logfile import read_log  # noqa: E402
 
 EVENT_STYLE = {
     "collision": ("X", "red"),

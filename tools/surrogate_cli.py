@@ -25,24 +25,20 @@ from pathlib import Path
 import numpy as np
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
-from nearsub.common import keys
-from nearsub.common.bus import Bus, Endpoints, free_tcp_port
-from nearsub.common.gp import GaussianProcess, MultiOutputGP
-from nearsub.common.modelfile import ModelFileError, load_model
-from nearsub.common.surrogate import (
-    BOUNDS,
-    CONSTRAINT_NAMES,
-    INPUT_NAMES,
+from nearsub.common.learning.gp import GaussianProcess, MultiOutputGP
+from nearsub.common.runtime import keys
+from nearsub.common.runtime.bus import Bus, Endpoints, free_tcp_port
+from nearsub.common.surrogate.domain import BOUNDS, CONSTRAINT_NAMES, INPUT_NAMES, constraint_values, sample_feasible
+from nearsub.common.surrogate.model import (
     Surrogate,
     analytic_coefficients,
-    constraint_values,
     decode_reply,
     encode_query,
     load_surrogate,
-    sample_feasible,
     surrogate_key,
 )
-from nearsub.common.surrogate_validation import (
+from nearsub.common.surrogate.modelfile import ModelFileError, load_model
+from nearsub.common.surrogate.validation import (
     THESIS_TEST_POINTS,
     evaluate_rows,
     latin_hypercube_feasible,
@@ -64,7 +60,7 @@ def child_env() -> dict[str, str]:
 def write_analytic_model(path: str | os.PathLike, n: int = 100, seed: int = 0) -> Path:
     """Write the analytic test fixture to `path`, fitted in a child process with one BLAS thread."""
     code = (
-        "import sys; from nearsub.common.surrogate import analytic_model; "
+        "import sys; from nearsub.common.surrogate.model import analytic_model; "
         "analytic_model(int(sys.argv[2]), int(sys.argv[3]), sys.argv[1])"
     )
     subprocess.run([sys.executable, "-c", code, str(path), str(n), str(seed)], env=child_env(), check=True)
@@ -324,7 +320,9 @@ def validate_command(args) -> int:
     if surrogate is None:
         return 2
     X = latin_hypercube_feasible(args.points, args.seed)
-    from nearsub.common import hydro_hf  # imported here: the panel code is not needed to build the parser
+    from nearsub.common.hydro import (
+        high_fidelity as hydro_hf,  # imported here: the panel code is not needed to build the parser
+    )
 
     hf = functools.partial(hydro_hf.hf_coefficients, panels=getattr(hydro_hf, args.panels.upper()))
     started = time.perf_counter()

@@ -15,7 +15,7 @@ import uuid
 
 import msgpack
 
-from nearsub.common import keys
+from nearsub.common.runtime import keys
 
 from .connect import Caller, open_bus
 

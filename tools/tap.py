@@ -9,9 +9,9 @@ from collections import defaultdict, deque
 
 import msgpack
 
-from nearsub.common import keys
-from nearsub.common.bus import Mailbox
-from nearsub.common.messages import MessageError, decode, encode, model_for_key
+from nearsub.common.runtime import keys
+from nearsub.common.runtime.bus import Mailbox
+from nearsub.common.runtime.messages import MessageError, decode, encode, model_for_key
 
 from .connect import open_bus
 

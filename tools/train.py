@@ -26,11 +26,13 @@ from pathlib import Path
 import numpy as np
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
-from nearsub.common import hydro_hf, hydro_lf
-from nearsub.common import surrogate as sg
-from nearsub.common.active import Campaign, CampaignSettings
-from nearsub.common.gp import MultiOutputGP
-from nearsub.common.testproblems import Problem
+from nearsub.common.hydro import high_fidelity as hydro_hf
+from nearsub.common.hydro import low_fidelity as hydro_lf
+from nearsub.common.learning.active import Campaign, CampaignSettings
+from nearsub.common.learning.gp import MultiOutputGP
+from nearsub.common.learning.testproblems import Problem
+from nearsub.common.surrogate import domain
+from nearsub.common.surrogate import model as sg
 
 DEFAULT_STATE = Path("training") / "campaign.json"
 
@@ -45,12 +47,12 @@ def interaction_problem(
     user's CFD, so that `train --resume` never fills such a campaign with panel-method samples)."""
     return Problem(
         name=name,
-        bounds=sg.BOUNDS,
-        input_names=sg.INPUT_NAMES,
-        output_names=sg.OUTPUT_NAMES,
+        bounds=domain.BOUNDS,
+        input_names=domain.INPUT_NAMES,
+        output_names=domain.OUTPUT_NAMES,
         hf=hf,
         lf=hydro_lf.lf_coefficients,
-        constraint=sg.constraint_values,
+        constraint=domain.constraint_values,
         description=description,
     )
 
@@ -58,7 +60,7 @@ def interaction_problem(
 def write_samples(path: Path, X: np.ndarray, Y: np.ndarray) -> None:
     with open(path, "w", newline="") as fh:
         writer = csv.writer(fh)
-        writer.writerow([*sg.INPUT_NAMES, *sg.OUTPUT_NAMES])
+        writer.writerow([*domain.INPUT_NAMES, *domain.OUTPUT_NAMES])
         writer.writerows(np.column_stack([X, Y]).tolist())
 
 
@@ -121,7 +123,7 @@ def train_command(args) -> int:
                 hf_seconds += time.perf_counter() - began
             campaign.tell(request.X, Y)
             if campaign.model is not None:
-                probe = sg.sample_feasible(200, seed=1)
+                probe = domain.sample_feasible(200, seed=1)
                 _, std = campaign.model.predict(probe, return_std=True)
                 progress.update(task, completed=campaign.n_hf, error=f"mean predicted std {np.mean(std):.2e}")
     out = Path(args.out or sg.default_model_path())
@@ -190,7 +192,7 @@ def read_training_table(path: Path) -> tuple[np.ndarray, np.ndarray]:
     (INPUT_NAMES and OUTPUT_NAMES, in any order; other columns are ignored), every row a finite
     number inside table 4.2's bounds and constraints (4.4)-(4.7). Raises DataFileError naming the
     file, row (data rows from 1, with the file's line), column and value of the first problem."""
-    names = (*sg.INPUT_NAMES, *sg.OUTPUT_NAMES)
+    names = (*domain.INPUT_NAMES, *domain.OUTPUT_NAMES)
     try:
         with open(path, newline="") as fh:
             reader = csv.reader(fh)
@@ -214,7 +216,7 @@ def read_training_table(path: Path) -> tuple[np.ndarray, np.ndarray]:
             try:
                 values[r, c] = float(text)
             except ValueError:
-                unit = sg.UNITS[name]
+                unit = domain.UNITS[name]
                 raise DataFileError(
                     f"{path}: row {r + 1} (line {r + 2}), column {name}: {text!r} is not a number "
                     f"(give a plain number in the column's unit, {unit})"
@@ -223,19 +225,19 @@ def read_training_table(path: Path) -> tuple[np.ndarray, np.ndarray]:
                 raise DataFileError(f"{path}: row {r + 1} (line {r + 2}), column {name}: {text!r} is not finite")
     if len(values) < MIN_DATA_ROWS:
         raise DataFileError(f"{path}: {len(values)} data row(s); a surrogate needs at least {MIN_DATA_ROWS}")
-    X, Y = values[:, : len(sg.INPUT_NAMES)], values[:, len(sg.INPUT_NAMES) :]
+    X, Y = values[:, : len(domain.INPUT_NAMES)], values[:, len(domain.INPUT_NAMES) :]
     for r, x in enumerate(X):
-        for name, value, (low, high) in zip(sg.INPUT_NAMES, x, sg.BOUNDS, strict=True):
+        for name, value, (low, high) in zip(domain.INPUT_NAMES, x, domain.BOUNDS, strict=True):
             if not low <= value <= high:
                 raise DataFileError(
                     f"{path}: row {r + 1} (line {r + 2}), column {name}: {value:g} is outside table 4.2's "
-                    f"[{low:g}, {high:g}] {sg.UNITS[name]}"
+                    f"[{low:g}, {high:g}] {domain.UNITS[name]}"
                 )
-        g = sg.constraint_values(x)[0]
+        g = domain.constraint_values(x)[0]
         if not np.all(g >= 0.0):
             violated = "; ".join(
-                f"{name} {sg.CONSTRAINTS[name]} (left side {value:.4g})"
-                for name, value in zip(sg.CONSTRAINT_NAMES, g, strict=True)
+                f"{name} {domain.CONSTRAINTS[name]} (left side {value:.4g})"
+                for name, value in zip(domain.CONSTRAINT_NAMES, g, strict=True)
                 if not value >= 0.0
             )
             raise DataFileError(
@@ -249,7 +251,7 @@ def fit_from_data(path: Path, out: Path, seed: int = 0, n_restarts: int = 5) -> 
     """Fit a single-fidelity GP surrogate to a user's table and save it with its provenance;
     returns the number of rows. Raises DataFileError for a bad table."""
     X, Y = read_training_table(path)
-    model = MultiOutputGP(bounds=sg.BOUNDS, n_restarts=n_restarts, seed=seed).fit(X, Y)
+    model = MultiOutputGP(bounds=domain.BOUNDS, n_restarts=n_restarts, seed=seed).fit(X, Y)
     provenance = {
         "method": "single-fidelity GP regression (thesis section 2.2.1) fitted to a user's table",
         "high_fidelity": f"user-supplied data: {path.name} (nearsub did not compute it)",
@@ -291,7 +293,7 @@ def add_parser(subparsers) -> None:
         "--data",
         metavar="FILE.csv",
         help="fit a GP to your own table instead of training: columns as the shipped samples CSV "
-        f"({', '.join((*sg.INPUT_NAMES, *sg.OUTPUT_NAMES))})",
+        f"({', '.join((*domain.INPUT_NAMES, *domain.OUTPUT_NAMES))})",
     )
     p.add_argument("--progress", action="store_true", help="show the progress bar even when not on a terminal")
     p.set_defaults(func=train_command)

@@ -12,10 +12,10 @@ from pathlib import Path
 from rich.console import Console
 from rich.table import Table
 
-from nearsub.common.cores import run_mission
-from nearsub.common.mission import load_mission
-from nearsub.common.scenarios import scenario_figures
-from nearsub.common.validation import Row, run_validation
+from nearsub.common.analysis.scenarios import scenario_figures
+from nearsub.common.analysis.validation import Row, run_validation
+from nearsub.common.mission.cores import run_mission
+from nearsub.common.mission.schema import load_mission
 
 MISSIONS = Path(__file__).resolve().parents[1] / "missions"
 

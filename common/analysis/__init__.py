@@ -1,0 +1,7 @@
+"""Analysis: many missions at once, and what they show.
+
+- batch: the vectorised engine, N UUVs through the very functions the apps call.
+- envelope: operating envelopes (thesis 5.11, 6.4) and sweeps.
+- scenarios: figures of merit of the thesis scenarios.
+- validation: the thesis section 5.10 validation cases.
+"""

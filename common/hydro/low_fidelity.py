@@ -1,0 +1,314 @@
+"""Low fidelity "one-way slender" model of the UUV-submarine interaction (issue 6; SPEC section 7).
+
+The thesis's low fidelity source was FS-Flow potential flow with ITTC-57 friction (thesis sections
+3.4 and 4.4). This replacement (hydro-notes section 6(a)):
+
+1. The flow of the submarine alone: an axisymmetric ring-source panel solution of the SUBOFF hull
+   in the stream -U x (hydro-notes section 2.3), tabulated once per process on an (x, R) grid around
+   the hull and interpolated with bicubic splines. Both vehicles move at the same speed U = u
+   through the water, so in the submarine frame the flow is steady (thesis section 4.2.2).
+2. The UUV in that flow, one way (the UUV does not disturb the submarine's flow: the thesis's
+   "one-way assumption", section 3.5): slender-body strip theory with the Froude-Krylov pressure
+   gradient and added-mass terms, which give the exact Munk moment (hydro-notes section 2.2,
+   finite-diameter variant).
+3. ITTC-57 friction drag at the strip-averaged local speed (thesis section 4.4, no form factor).
+
+Inputs are rows [R_long, R_lat, u_kn, psi_deg, d_ratio, ld_ratio] (SPEC section 5); outputs are the
+UUV body-axis coefficients [X', Y', N'] (SPEC section 2): Y' > 0 away from the submarine and N' > 0
+bow turning away, for the UUV on the +y side.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+from scipy.interpolate import CubicSpline, RectBivariateSpline
+from scipy.special import ellipe, ellipk
+
+from nearsub.common.physics.hull import (
+    L_SUB,
+    R_SUB,
+    SUB_BOW_X,
+    SUB_STERN_X,
+    Profile,
+    explorer_cb_from_nose,
+    explorer_radius,
+    suboff_profile,
+    uuv_dimensions,
+)
+
+NU = 1.19e-6  # kinematic viscosity of sea water at about 15 C [m^2/s] (hydro-notes section 1)
+KNOT = 1852.0 / 3600.0  # [m/s]
+
+N_FRUSTA = 240  # ring-source panels on the SUBOFF profile (hydro-notes section 2.3: 150-250)
+N_STRIPS = 60  # UUV strips (hydro-notes section 6(a)2)
+_GAUSS_RULES = tuple(np.polynomial.legendre.leggauss(k) for k in (1, 2, 8, 32))
+
+
+def ittc57(reynolds):
+    """ITTC-57 model-ship correlation line C_F = 0.075 / (log10 Re - 2)^2 (hydro-notes section 2.5)."""
+    return 0.075 / (np.log10(reynolds) - 2.0) ** 2
+
+
+def ring_source_velocity(x, r, x0, a):
+    """Velocity (u_x, u_r) at axial position x, radius r of a ring source of unit total volume flux
+    at axial position x0 with radius a (hydro-notes section 2.3; Hess & Smith 1967). Arrays
+    broadcast; m = 2B / (A + B) is scipy's elliptic parameter k^2."""
+    dx = np.asarray(x) - x0
+    big_a = dx**2 + np.asarray(r) ** 2 + np.asarray(a) ** 2
+    big_b = 2.0 * a * r
+    m = 2.0 * big_b / (big_a + big_b)
+    k, e = ellipk(m), ellipe(m)
+    root = np.sqrt(big_a + big_b)
+    e_term = e / ((big_a - big_b) * root)
+    ux = dx * e_term / (2.0 * np.pi**2)
+    i0 = 4.0 * e_term
+    i1 = (4.0 / big_b) * (big_a * e_term - k / root)
+    ur = (r * i0 - a * i1) / (8.0 * np.pi**2)
+    return ux, ur
+
+
+@dataclass(frozen=True)
+class RingPanels:
+    """Conical frusta between consecutive profile stations and their source densities (per unit
+    stream speed) solving the Neumann condition at the frustum midpoints."""
+
+    xa: np.ndarray
+    ra: np.ndarray
+    xb: np.ndarray
+    rb: np.ndarray
+    sigma: np.ndarray
+
+    @property
+    def lengths(self) -> np.ndarray:
+        return np.hypot(self.xb - self.xa, self.rb - self.ra)
+
+    def velocity(self, x, r) -> tuple[np.ndarray, np.ndarray]:
+        """Perturbation velocity (u_x, u_r) per unit stream speed at points (x, r)."""
+        return _frusta_velocity(self, np.ravel(x), np.ravel(r), self.sigma)
+
+
+def _frustum_rule(dist_over_length: np.ndarray, self_pair: np.ndarray):
+    """Gauss-Legendre nodes on [0, 1] per pair, by distance d over frustum length h: 1 point beyond
+    10 lengths (relative error ~ (h/d)^2/24 < 4e-4), 2 beyond 4 (~ (h/d)^4), 8 beyond 1.5, 32 closer;
+    a panel's own midpoint gets 16 on each half so the nodes cluster at its integrable log
+    singularity."""
+    bands = (np.inf, 10.0, 4.0, 1.5, 0.0)
+    rules = []
+    for (nodes, weights), lo, hi in zip(_GAUSS_RULES, bands[1:], bands[:-1], strict=True):
+        mask = (dist_over_length >= lo) & (dist_over_length < hi) & ~self_pair
+        rules.append((mask, 0.5 * (nodes + 1.0), 0.5 * weights))
+    half_nodes, half_weights = np.polynomial.legendre.leggauss(16)
+    t = np.concatenate([0.25 * (half_nodes + 1.0), 0.5 + 0.25 * (half_nodes + 1.0)])
+    rules.append((self_pair, t, np.concatenate([0.25 * half_weights] * 2)))
+    return rules
+
+
+def _frusta_velocity(panels: RingPanels, x: np.ndarray, r: np.ndarray, strengths, self_index=None):
+    """Sum over frusta of the ring-source integral along each generator (flux 2 pi r sigma per
+    unit generator length), with the quadrature of `_frustum_rule`. strengths=False returns the
+    influence matrices instead of the sums."""
+    xm, rm = 0.5 * (panels.xa + panels.xb), 0.5 * (panels.ra + panels.rb)
+    length = panels.lengths
+    dist = np.hypot(x[:, None] - xm[None, :], r[:, None] - rm[None, :]) / length[None, :]
+    self_pair = np.zeros(dist.shape, dtype=bool)
+    if self_index is not None:
+        self_pair[np.arange(len(x)), self_index] = True
+    ux = np.zeros(dist.shape)
+    ur = np.zeros(dist.shape)
+    for mask, nodes, weights in _frustum_rule(dist, self_pair):
+        i, j = np.nonzero(mask)
+        if i.size == 0:
+            continue
+        xs = panels.xa[j, None] + nodes * (panels.xb - panels.xa)[j, None]
+        a = panels.ra[j, None] + nodes * (panels.rb - panels.ra)[j, None]
+        flux = 2.0 * np.pi * a * length[j, None] * weights
+        u, v = ring_source_velocity(x[i, None], r[i, None], xs, a)
+        ux[i, j] = np.sum(flux * u, axis=1)
+        ur[i, j] = np.sum(flux * v, axis=1)
+    if strengths is False:
+        return ux, ur
+    return ux @ strengths, ur @ strengths
+
+
+def solve_ring_panels(profile: Profile) -> RingPanels:
+    """Ring-source panel solution of a body of revolution in the unit stream -x (frame of the
+    profile). Boundary condition u.n = n_x at each frustum midpoint (the body-frame stream is
+    -U x, hydro-notes section 2.4), with the source sheet's own jump sigma/2 on the diagonal."""
+    x, r = profile.x, profile.r
+    panels = RingPanels(x[:-1], r[:-1], x[1:], r[1:], np.zeros(len(x) - 1))
+    length = panels.lengths
+    # Outward normal of each frustum: the generator runs nose to tail (towards -x).
+    nx = (panels.rb - panels.ra) / length
+    nr = -(panels.xb - panels.xa) / length
+    xm, rm = 0.5 * (panels.xa + panels.xb), 0.5 * (panels.ra + panels.rb)
+    ux, ur = _frusta_velocity(panels, xm, rm, False, self_index=np.arange(len(xm)))
+    matrix = nx[:, None] * ux + nr[:, None] * ur + 0.5 * np.eye(len(xm))
+    sigma = np.linalg.solve(matrix, nx)
+    return RingPanels(panels.xa, panels.ra, panels.xb, panels.rb, sigma)
+
+
+# --- the tabulated submarine field ---------------------------------------------------------------
+
+_R_MIN = R_SUB + 0.01  # the table starts 1 cm outside the widest section [m]
+_R_MAX = 25.0  # R_lat up to about 0.27 [m]
+_X_FINE = (SUB_STERN_X - 15.0, SUB_BOW_X + 15.0)  # 0.15 m spacing here [m]
+_X_MAX = 1.5 * L_SUB  # coarse (1 m) beyond _X_FINE, out to |R_long| = 1.5 [m]
+
+
+def _field_grid() -> tuple[np.ndarray, np.ndarray]:
+    """(x, R) table nodes: 0.15 m in x beside and near the hull, 1 m farther out; in R, 2 mm at the
+    hull growing by 12 % a node, because the field varies on the scale of the distance from it.
+    The splines then reproduce the ring-panel field to about 1.5e-4 U, below the ring solution's
+    own discretisation error (240 against 960 frusta: at most 1.8e-3 U, 5 cm off the hull at the
+    afterbody joint; median 6e-5 U)."""
+    x = np.unique(
+        np.concatenate(
+            [
+                np.arange(-_X_MAX, _X_FINE[0], 1.0),
+                np.arange(_X_FINE[0], _X_FINE[1], 0.15),
+                np.arange(_X_FINE[1], _X_MAX + 1.0, 1.0),
+            ]
+        )
+    )
+    steps = 0.002 * 1.12 ** np.arange(200)
+    r = _R_MIN + np.concatenate([[0.0], np.cumsum(steps)])
+    return x, r[: np.searchsorted(r, _R_MAX) + 1]
+
+
+@dataclass(frozen=True)
+class SubmarineField:
+    """Splines of the submarine-alone perturbation velocity (u_x, u_R) per unit stream speed."""
+
+    ux: RectBivariateSpline
+    ur: RectBivariateSpline
+    x_range: tuple[float, float]
+    r_range: tuple[float, float]
+
+
+def submarine_field(n_frusta: int = N_FRUSTA) -> SubmarineField:
+    """The ring-panel solution of the full-scale SUBOFF, tabulated once per panel count and process
+    (about 3 s; hydro-notes section 6(a)1)."""
+    return _submarine_field(int(n_frusta))
+
+
+@lru_cache(maxsize=4)
+def _submarine_field(n_frusta: int) -> SubmarineField:
+    panels = solve_ring_panels(suboff_profile(n_frusta + 1))
+    x, r = _field_grid()
+    xx, rr = np.meshgrid(x, r, indexing="ij")
+    ux = np.empty(xx.size)
+    ur = np.empty(xx.size)
+    chunk = 4000
+    for start in range(0, xx.size, chunk):
+        part = slice(start, start + chunk)
+        ux[part], ur[part] = panels.velocity(xx.ravel()[part], rr.ravel()[part])
+    shape = xx.shape
+    return SubmarineField(
+        RectBivariateSpline(x, r, ux.reshape(shape)),
+        RectBivariateSpline(x, r, ur.reshape(shape)),
+        (float(x[0]), float(x[-1])),
+        (float(r[0]), float(r[-1])),
+    )
+
+
+# --- the UUV: slender-body strips ------------------------------------------------------------------
+
+
+@lru_cache(maxsize=1)
+def _explorer_cb_table() -> CubicSpline:
+    """CB from the nose of a unit-diameter Explorer hull against L/D (hull.explorer_cb_from_nose on
+    L/D = 3..30 every 0.1, splined): rows with new L/D values then cost no quadrature."""
+    ld = np.arange(3.0, 30.05, 0.1)
+    return CubicSpline(ld, [explorer_cb_from_nose(float(v), 1.0) for v in ld])
+
+
+def _strips(ld_ratio: np.ndarray, n_strips: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Strips of Explorer UUVs of unit diameter, one row per L/D: body-frame stations xi (ascending,
+    tail to nose, cosine-spaced so the tips are resolved), radius r and meridian arc length."""
+    t = 0.5 * (1.0 - np.cos(np.linspace(0.0, np.pi, n_strips)))[::-1]
+    s = ld_ratio[:, None] * t
+    r = np.stack([explorer_radius(row, ld, 1.0) for row, ld in zip(s, ld_ratio, strict=True)])
+    xi = _explorer_cb_table()(ld_ratio)[:, None] - s
+    arc = np.concatenate([np.zeros((len(s), 1)), np.cumsum(np.hypot(np.diff(xi), np.diff(r)), axis=1)], axis=1)
+    return xi, r, arc
+
+
+def input_columns(inputs) -> tuple[np.ndarray, ...]:
+    """Columns of an (n, 6) input array [R_long, R_lat, u_kn, psi_deg, d_ratio, ld_ratio] as SI
+    quantities: CB position x, y [m], speed U [m/s], heading psi [rad], D_uuv, L_uuv [m]."""
+    rows = np.atleast_2d(np.asarray(inputs, dtype=float))
+    if rows.shape[1] != 6:
+        raise ValueError(
+            f"inputs must have 6 columns [R_long, R_lat, u_kn, psi_deg, d_ratio, ld_ratio], got {rows.shape}"
+        )
+    diameter, length = uuv_dimensions(rows[:, 4], rows[:, 5])
+    return rows[:, 0] * L_SUB, rows[:, 1] * L_SUB, rows[:, 2] * KNOT, np.radians(rows[:, 3]), diameter, length
+
+
+def _strip_coefficients(inputs, n_strips: int, n_frusta: int | None) -> np.ndarray:
+    """[X', Y', N'] of the strip model; n_frusta None means no submarine (the free-stream UUV)."""
+    x_c, y_c, speed, psi, diameter, length = input_columns(inputs)
+    xi, r, arc = (part * diameter[:, None] for part in _strips(length / diameter, n_strips))
+    cos_psi, sin_psi = np.cos(psi)[:, None], np.sin(psi)[:, None]
+    axis_x, axis_y = x_c[:, None] + xi * cos_psi, y_c[:, None] + xi * sin_psi
+    # Ring points at azimuth 0 (+eta, away from the submarine), pi (-eta) and pi/2 (+z); the -z
+    # point mirrors +z, so it carries twice the weight in ring means.
+    px = np.stack([axis_x - r * sin_psi, axis_x + r * sin_psi, axis_x])
+    py = np.stack([axis_y + r * cos_psi, axis_y - r * cos_psi, axis_y])
+    pz = np.stack([np.zeros_like(r), np.zeros_like(r), r])
+    radial = np.hypot(py, pz)
+    ux = np.zeros(px.shape)
+    ur = np.zeros(px.shape)
+    valid = np.ones(len(x_c), dtype=bool)
+    if n_frusta is not None:
+        field = submarine_field(n_frusta)
+        inside = (
+            (px >= field.x_range[0])
+            & (px <= field.x_range[1])
+            & (radial >= field.r_range[0])
+            & (radial <= field.r_range[1])
+        )
+        valid = inside.all(axis=(0, 2))
+        ux[inside] = field.ux.ev(px[inside], radial[inside])
+        ur[inside] = field.ur.ev(px[inside], radial[inside])
+    # Velocity per unit U (stream -U x plus the submarine's perturbation), in UUV body axes.
+    vx = -1.0 + ux
+    vy = ur * py / np.where(radial > 0.0, radial, 1.0)
+    vz = ur * pz / np.where(radial > 0.0, radial, 1.0)
+    v_xi = vx * cos_psi + vy * sin_psi
+    v_eta = -vx * sin_psi + vy * cos_psi
+    cp = -(vx**2 + vy**2 + vz**2)  # p / (rho U^2 / 2) up to a constant
+    ring = np.array([0.25, 0.25, 0.5])[:, None, None]
+    cp_mean, v_eta_mean, u_axial = (np.sum(ring * q, axis=0) for q in (cp, v_eta, -v_xi))
+    area = np.pi * r**2
+    # Lateral pressure gradient from the +eta/-eta points (hydro-notes section 2.2, finite diameter).
+    dcp_deta = np.where(r > 0.0, (cp[0] - cp[1]) / np.where(r > 0.0, 2.0 * r, 1.0), 0.0)
+    # Strip forces over (1/2) rho U^2 (hydro-notes section 2.2): f_y = -d/dxi[rho A U_x V_y] - A dp/dy.
+    # Y integrates the first term to zero (A = 0 at both tips); N takes it by parts.
+    y_force = -np.trapezoid(area * dcp_deta, xi, axis=1)
+    n_moment = np.trapezoid(2.0 * area * u_axial * v_eta_mean - xi * area * dcp_deta, xi, axis=1)
+    x_pressure = -np.sum(0.5 * (area[:, 1:] + area[:, :-1]) * np.diff(cp_mean, axis=1), axis=1)
+    # ITTC-57 friction at the perimeter-weighted local axial speed (thesis section 4.4).
+    reynolds = speed * length / NU
+    friction = -ittc57(reynolds) * np.trapezoid(2.0 * np.pi * r * u_axial**2, arc, axis=1)
+    out = np.column_stack([(x_pressure + friction) / length**2, y_force / length**2, n_moment / length**3])
+    out[~valid] = np.nan
+    return out
+
+
+def lf_coefficients(inputs, *, n_strips: int = N_STRIPS, n_frusta: int = N_FRUSTA) -> np.ndarray:
+    """Low-fidelity [X', Y', N'] (n, 3) for input rows [R_long, R_lat, u_kn, psi_deg, d_ratio, ld_ratio].
+
+    Rows whose UUV reaches outside the tabulated field (closer than 1 cm to the submarine's widest
+    radius, or beyond |x| = 1.5 L_sub, R = 25 m) come back as NaN."""
+    return _strip_coefficients(inputs, n_strips, n_frusta)
+
+
+def lf_free_stream(inputs, *, n_strips: int = N_STRIPS) -> np.ndarray:
+    """The same model's [X', Y', N'] for the UUV alone at that speed and heading (R_long, R_lat
+    ignored): ITTC-57 friction and the slender Munk moment rho Vol U^2 sin psi cos psi
+    (hydro-notes section 2.2). The interaction increment of SPEC section 5 is lf - lf_free_stream."""
+    return _strip_coefficients(inputs, n_strips, None)

@@ -1,0 +1,8 @@
+"""Gaussian processes and active learning, independent of the hydrodynamics.
+
+- gp: single-output and multi-output GP regression (ARD RBF, type-II maximum likelihood).
+- mfgp: two-fidelity AR(1) GP (thesis 2.2.4).
+- active: acquisitions, NMMF (thesis algorithm 1) and its baselines, ask/tell campaigns.
+- testproblems: benchmark problems of thesis sections 2.4-2.5.
+- albench: the NMMF benchmark runner and its summaries.
+"""

@@ -1,0 +1,321 @@
+"""The lock-stepped app cores: helm, pid and sim. Each wires messages to the pure functions of
+behaviours, control and dynamics, and follows the lifecycle of `lifecycle.Core`. They know
+nothing of Zenoh; `apps/` runs them as processes and `lifecycle.run_inprocess` runs them here.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from nearsub.common.autonomy import behaviours, control
+from nearsub.common.mission.schema import Mission
+from nearsub.common.physics import dynamics
+from nearsub.common.physics import proximity as events
+from nearsub.common.runtime.lifecycle import InProcessResult, Iteration, Schedule, run_inprocess
+from nearsub.common.runtime.messages import Desired, Event, Forces, HelmProgress, Input, Message, State
+from nearsub.common.surrogate.interaction import ForceModel, geometry_outside, interaction_at
+from nearsub.common.surrogate.model import load_surrogate
+
+
+def state_array(message: State) -> np.ndarray:
+    return np.array([message.u, message.v, message.r, message.x, message.y, message.psi])
+
+
+def state_message(values: np.ndarray, step: int, t: float, source: str) -> State:
+    u, v, r, x, y, psi = (float(value) for value in values)
+    return State(step=step, t=t, source=source, u=u, v=v, r=r, x=x, y=y, psi=psi)
+
+
+def event(role: str, step: int, t: float, kind: str, detail: str, data: dict | None = None) -> Event:
+    return Event(step=step, t=t, source=role, kind=kind, detail=detail, data=data or {})
+
+
+class HelmCore:
+    """pHelmIvP: the waypoints behaviour (thesis 5.7) or the modified one (6.3.2), optionally with
+    N_uv compensation (6.3.1, which asks the surrogate for N_s), turning x_k into x_d,k."""
+
+    role = "helm"
+    inputs = ("state",)
+    outputs = ("desired", "helm")
+
+    def __init__(self, mission: Mission, surrogate: ForceModel | None = None):
+        self.settings = mission.apps.helm
+        self.vehicle = mission.vehicle_model
+        self.rho = mission.environment.rho
+        self.surrogate = surrogate if self.settings.compensated else None
+        if self.settings.compensated and surrogate is None:
+            raise ValueError("N_uv compensation needs the surrogate (a force model)")
+        v = self.vehicle
+        # gamma from (6.4) at the M11 the thesis quotes for library vehicles (5.21, 1.30, 1.03).
+        self.gamma = self.settings.gamma or float(behaviours.gamma_from_m11(v.thesis_M11 or v.M11))
+        self.legs = self.settings.legs
+        # N_s is the yaw moment the interaction adds to the vehicle's own model, as the sim applies
+        # it: the interaction increment in "increment" mode, the surrogate's total otherwise.
+        self.interaction_mode = "increment" if mission.apps.sim.interaction == "increment" else "replace"
+        self.cross_flow = None
+        if self.settings.modified:
+            u_sub = mission.environment.u_sub
+            self.cross_flow = behaviours.CrossFlow(u_sub, self.settings.alpha, mission.vehicle_model.length)
+        self.progress_state = behaviours.initial_progress(self.legs, (mission.start.x, mission.start.y))
+        self.state: State | None = None
+        self.straying = False
+
+    def startup(self) -> list[tuple[str, Message]]:
+        return []
+
+    def new_mail(self, mail: dict[str, Message]) -> None:
+        if "state" in mail:
+            self.state = mail["state"]
+
+    def iterate(self, step: int, t: float) -> Iteration:
+        s = self.state
+        decision = behaviours.waypoints(self.legs, self.progress_state, s.x, s.y, s.psi, self.cross_flow)
+        self.progress_state = decision.progress
+        psi_d, delta_psi, n_s = decision.psi_d, 0.0, 0.0
+        if self.surrogate is not None and not decision.progress.complete:
+            seen = interaction_at(self.surrogate, state_array(s), self.vehicle, self.rho, self.interaction_mode)
+            n_s = float(seen.interaction.weight * seen.interaction.forces[2])
+            delta_psi = float(
+                behaviours.nuv_heading_offset(n_s, decision.u_d, self.vehicle.compensation_N_uv, self.gamma)
+            )
+            psi_d = decision.psi_d + delta_psi
+        result = Iteration()
+        for leg, index, point in decision.captured:
+            result.events.append(
+                event(
+                    self.role,
+                    step,
+                    t,
+                    "waypoint",
+                    f"reached {self.legs[leg].name} point {index + 1} at ({point[0]:g}, {point[1]:g})",
+                    {"leg": leg, "index": index, "x": s.x, "y": s.y},
+                )
+            )
+        progress = decision.progress
+        cross_track = 0.0
+        if progress.previous is not None and decision.target is not None:
+            cross_track = float(events.track_distance(s.x, s.y, progress.previous, decision.target))
+        straying = cross_track > events.STRAY_LIMIT
+        if straying and not self.straying:
+            result.events.append(
+                event(
+                    self.role,
+                    step,
+                    t,
+                    "large_stray",
+                    f"{cross_track:.2f} m from the track-line",
+                    {"x": s.x, "y": s.y, "cross_track": cross_track},
+                )
+            )
+        self.straying = straying
+        result.outputs.append(("desired", Desired(step=step, t=t, source=self.role, u_d=decision.u_d, psi_d=psi_d)))
+        result.outputs.append(
+            (
+                "helm",
+                HelmProgress(
+                    step=step,
+                    t=t,
+                    source=self.role,
+                    behaviour=self.settings.behaviour,
+                    leg=progress.leg,
+                    waypoint_index=progress.index,
+                    waypoints_reached=progress.reached,
+                    psi_d=psi_d,
+                    delta_psi=delta_psi,
+                    cross_track=cross_track,
+                    n_s=n_s,
+                    complete=progress.complete,
+                ),
+            )
+        )
+        if progress.complete:
+            result.end, result.reason = "completed", f"all {progress.reached} waypoints reached"
+        return result
+
+    def progress(self) -> dict:
+        return {"waypoints": self.progress_state.to_dict(), "straying": self.straying}
+
+    def restore(self, progress: dict) -> None:
+        self.progress_state = behaviours.WaypointProgress.from_dict(progress["waypoints"])
+        self.straying = bool(progress["straying"])
+
+
+class PidCore:
+    """pMarinePID: thesis (5.21) turning x_d,k and x_k into u_k."""
+
+    role = "pid"
+    inputs = ("state", "desired")
+    outputs = ("input",)
+
+    def __init__(self, mission: Mission):
+        self.vehicle = mission.vehicle_model
+        self.form = mission.apps.pid.form
+        self.dt = mission.dt * mission.apps.pid.period
+        self.memory = control.PidState.zeros()
+        self.state: State | None = None
+        self.desired: Desired | None = None
+        self.saturated = (False, False)
+
+    def startup(self) -> list[tuple[str, Message]]:
+        return []
+
+    def new_mail(self, mail: dict[str, Message]) -> None:
+        self.state = mail.get("state", self.state)
+        self.desired = mail.get("desired", self.desired)
+
+    def iterate(self, step: int, t: float) -> Iteration:
+        self.memory, out = control.pid_step(
+            self.memory,
+            np.asarray(self.desired.u_d),
+            np.asarray(self.desired.psi_d),
+            state_array(self.state),
+            self.vehicle,
+            self.vehicle.pid,
+            self.dt,
+            self.form,
+        )
+        result = Iteration()
+        result.outputs.append(
+            ("input", Input(step=step, t=t, source=self.role, X_prop=float(out.thrust), delta_r=float(out.rudder)))
+        )
+        saturated = (bool(out.thrust_saturated), bool(out.rudder_saturated))
+        for name, now, before in zip(("thrust", "rudder"), saturated, self.saturated, strict=True):
+            if now and not before:
+                result.events.append(event(self.role, step, t, "saturation", f"{name} saturated at the vehicle limit"))
+        self.saturated = saturated
+        return result
+
+    def progress(self) -> dict:
+        return {"memory": self.memory.to_dict(), "saturated": list(self.saturated)}
+
+    def restore(self, progress: dict) -> None:
+        self.memory = control.PidState.from_dict(progress["memory"])
+        self.saturated = tuple(progress["saturated"])
+
+
+class SimCore:
+    """uSimMarine: integrates (5.10)/(5.12) from x_k and u_k to x_{k+1}; near the submarine with
+    the surrogate's interaction forces, (5.20) (SPEC section 5)."""
+
+    role = "sim"
+    inputs = ("input",)
+    outputs = ("state", "forces")
+
+    def __init__(self, mission: Mission, surrogate: ForceModel | None = None):
+        self.vehicle = mission.vehicle_model
+        self.rho = mission.environment.rho
+        self.interaction_mode = mission.apps.sim.interaction
+        wanted = mission.environment.submarine and self.interaction_mode != "off"
+        if wanted and surrogate is None:
+            raise ValueError("the sim's interaction forces need the surrogate (a force model)")
+        self.surrogate = surrogate if wanted else None
+        self.settings = mission.apps.sim
+        self.env = mission.environment.dynamics()
+        self.submarine = mission.environment.submarine
+        self.close = False
+        self.base_dt = mission.dt
+        self.dt = mission.dt * self.settings.period
+        start = mission.start
+        psi = math.radians(start.psi_deg)
+        self.x = np.array([start.speed, 0.0, 0.0, start.x, start.y, psi])
+        self.inp: Input | None = None
+
+    def startup(self) -> list[tuple[str, Message]]:
+        return [("state", state_message(self.x, 0, 0.0, self.role))]
+
+    def new_mail(self, mail: dict[str, Message]) -> None:
+        self.inp = mail.get("input", self.inp)
+
+    def iterate(self, step: int, t: float) -> Iteration:
+        result = Iteration()
+        command = self.saturated_command(step, t, result)
+        interaction = None
+        if self.surrogate is not None:
+            if step == 0 and (outside := geometry_outside(self.vehicle)):
+                result.events.append(event(self.role, step, t, "info", outside))
+            seen = interaction_at(self.surrogate, self.x, self.vehicle, self.rho, self.interaction_mode)
+            interaction = seen.interaction
+            (fx, fy, fn), (sx, sy, sn) = seen.forces[0].tolist(), seen.std[0].tolist()
+            forces = Forces(
+                step=step,
+                t=t,
+                source=self.role,
+                X_s=fx,
+                Y_s=fy,
+                N_s=fn,
+                std_X=sx,
+                std_Y=sy,
+                std_N=sn,
+                weight=float(interaction.weight),
+                in_domain=bool(seen.in_domain[0]),
+                constraints_ok=bool(seen.constraints_ok[0]),
+            )
+            result.outputs.append(("forces", forces))
+        self.x = dynamics.step(
+            self.x, command, self.vehicle, self.env, self.dt, self.settings.integrator, t, interaction
+        )
+        next_step = step + self.settings.period
+        next_t = next_step * self.base_dt
+        if not np.all(np.isfinite(self.x)) or abs(self.x[dynamics.U]) > self.settings.divergence_speed:
+            result.end = "diverged"
+            result.reason = (
+                f"state diverged at t = {next_t:.2f} s (u = {self.x[dynamics.U]:.4g} m/s, "
+                f"limit {self.settings.divergence_speed:g} m/s)"
+            )
+            result.events.append(event(self.role, step, t, "error", result.reason))
+            return result
+        result.outputs.append(("state", state_message(self.x, next_step, next_t, self.role)))
+        if self.submarine:
+            self.check_proximity(next_step, next_t, result)
+        return result
+
+    def saturated_command(self, step: int, t: float, result: Iteration) -> np.ndarray:
+        """The input, clipped at the vehicle's limits (the pid already saturates; anything else
+        reaching the sim beyond them is clipped and reported)."""
+        v = self.vehicle
+        raw = np.array([self.inp.X_prop, self.inp.delta_r])
+        command = np.clip(raw, [-v.max_thrust, -v.max_rudder], [v.max_thrust, v.max_rudder])
+        if not np.array_equal(command, raw):
+            detail = f"input {raw.tolist()} clipped at the vehicle limits"
+            result.events.append(event(self.role, step, t, "saturation", detail))
+        return command
+
+    def check_proximity(self, step: int, t: float, result: Iteration) -> None:
+        """Collision ends the mission (a normal ending); a close call is reported on entry."""
+        u, v, r, x, y, psi = self.x
+        found = events.classify(x, y, psi, self.vehicle.length, self.vehicle.diameter)
+        data = {"x": float(x), "y": float(y), "psi": float(psi)}
+        if bool(found.collision):
+            result.events.append(
+                event(self.role, step, t, "collision", f"UUV touched the submarine at ({x:.2f}, {y:.2f})", data)
+            )
+            result.end, result.reason = "collision", f"collision with the submarine at t = {t:.2f} s"
+        close = bool(found.close_call)
+        if close and not self.close:
+            result.events.append(event(self.role, step, t, "close_call", f"close call at ({x:.2f}, {y:.2f})", data))
+        self.close = close
+
+    def progress(self) -> dict:
+        return {"x": self.x.tolist(), "close": self.close}
+
+    def restore(self, progress: dict) -> None:
+        self.x = np.asarray(progress["x"], dtype=float)
+        self.close = bool(progress["close"])
+
+
+def build_cores(mission: Mission, surrogate: ForceModel | None = None) -> dict:
+    return {
+        "helm": HelmCore(mission, surrogate),
+        "pid": PidCore(mission),
+        "sim": SimCore(mission, surrogate),
+    }
+
+
+def run_mission(mission: Mission, surrogate: ForceModel | None = None) -> InProcessResult:
+    """The whole mission in this process (the reference for the multi-process run). The surrogate
+    is loaded from the mission's model file when the mission needs one and none is given."""
+    if surrogate is None and mission.needs_surrogate:
+        surrogate = load_surrogate(mission.surrogate.model or None)
+    return run_inprocess(build_cores(mission, surrogate), Schedule(mission.periods()), mission.dt, mission.max_steps)

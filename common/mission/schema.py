@@ -1,0 +1,250 @@
+"""Mission files: TOML validated by pydantic, with `--set key=value` overrides.
+
+A broken mission file gives one `MissionError` line naming the file, the field and the value.
+Headings in mission files are SPEC section 2's psi in degrees (from +x towards +y); MOOS compass
+headings convert as psi = 90 deg - heading.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import tomllib
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from nearsub.common.autonomy.behaviours import Leg
+from nearsub.common.physics import dynamics
+from nearsub.common.physics.vehicles import Vehicle, get_vehicle
+from nearsub.common.runtime.messages import describe_validation_error
+
+COMMUNITY_PATTERN = re.compile(r"^[A-Za-z0-9_\-]+$")
+
+
+class MissionError(ValueError):
+    """A mission file that cannot be used; the message names the file, field and value."""
+
+
+class Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class Network(Strict):
+    """Where the apps meet. By default (`connect` empty) the launcher starts its own router on a
+    free loopback port and every app connects to it as a client. `connect` points the apps, the
+    logger and the tools at existing Zenoh endpoints instead: a `nearsub router` (or zenohd) on
+    this or another host, or a Zenoh peer that routes for clients. Multicast scouting stays off;
+    endpoints are always explicit (SPEC section 3)."""
+
+    connect: list[str] = Field(default_factory=list)
+
+
+class Start(Strict):
+    x: float = 0.0
+    y: float = 0.0
+    psi_deg: float = 0.0
+    speed: float = 0.0
+
+
+class Environment(Strict):
+    u_sub: float = Field(default=0.0, description="submarine speed through the water [m/s]")
+    rho: float = Field(default=1025.0, gt=0, description="sea water density [kg/m^3] (SPEC section 2)")
+    submarine: bool = Field(default=True, description="a submarine at the frame origin (collision checks)")
+    sea_state: int = Field(default=0, ge=0, le=6, description="thesis table 5.1")
+    depth: float = Field(default=50.0, gt=0, description="UUV operating depth [m] (wave decay)")
+    wave_heading_deg: float = Field(default=0.0, description="direction the waves travel, psi convention")
+
+    def dynamics(self) -> dynamics.Environment:
+        """The dynamics module's view of it."""
+        return dynamics.Environment(self.u_sub, self.sea_state, self.depth, math.radians(self.wave_heading_deg))
+
+
+class AppSettings(Strict):
+    period: int = Field(default=1, ge=1, description="runs every `period` base steps")
+
+
+BEHAVIOURS = ("waypoints", "modified_waypoints", "nuv_compensation", "modified_waypoints+nuv_compensation")
+
+
+class HelmSettings(AppSettings):
+    """The helm's behaviour: the standard waypoints (thesis 5.7), the modified waypoints (6.3.2),
+    N_uv compensation (6.3.1) on top of the standard waypoints, or both composed."""
+
+    period: int = Field(default=5, ge=1)
+    behaviour: Literal[BEHAVIOURS] = "waypoints"
+    alpha: float = Field(default=1.0, ge=0.0, le=1.0, description="modified waypoints: alpha of (6.2)")
+    gamma: float | None = Field(default=None, gt=0, description="N_uv compensation gain; default from (6.4)")
+    legs: list[Leg] = Field(min_length=1)
+
+    @property
+    def modified(self) -> bool:
+        return self.behaviour.startswith("modified_waypoints")
+
+    @property
+    def compensated(self) -> bool:
+        return self.behaviour.endswith("nuv_compensation")
+
+
+class PidSettings(AppSettings):
+    form: Literal["positional", "incremental"] = "positional"
+
+
+class SimSettings(AppSettings):
+    integrator: Literal["euler", "rk4"] = "euler"
+    interaction: Literal["replace", "increment", "thesis", "off"] = Field(
+        default="increment",
+        description="how the surrogate's forces enter the dynamics near the submarine (dynamics.Interaction)",
+    )
+    divergence_speed: float = Field(default=50.0, gt=0, description="|u| beyond this ends the mission [m/s]")
+
+
+class SurrogateSettings(Strict):
+    model: str = Field(default="", description="model file; empty = the shipped model")
+
+
+class LoggerSettings(Strict):
+    enabled: bool = True
+
+
+class Apps(Strict):
+    helm: HelmSettings
+    pid: PidSettings = Field(default_factory=PidSettings)
+    sim: SimSettings = Field(default_factory=SimSettings)
+    logger: LoggerSettings = Field(default_factory=LoggerSettings)
+
+
+class Mission(Strict):
+    name: str = Field(description="community name: the key-expression prefix nearsub/<name>/...")
+    description: str = ""
+    vehicle: str | Vehicle = "remus100"
+    dt: float = Field(default=0.05, gt=0, le=1.0, description="base step [s]")
+    time_limit: float = Field(default=600.0, gt=0, description="simulated seconds")
+    warp: float = Field(default=0.0, ge=0, description="0 = as fast as possible, 1 = real time")
+    step_timeout: float = Field(default=10.0, gt=0, description="wall seconds an app may take per step")
+    startup_timeout: float = Field(default=30.0, gt=0)
+    seed: int = 0
+    pause_at_step: int | None = Field(
+        default=None, ge=0, description="the clock pauses before this step until resumed (swap, inspection)"
+    )
+    start: Start = Field(default_factory=Start)
+    environment: Environment = Field(default_factory=Environment)
+    network: Network = Field(default_factory=Network)
+    surrogate: SurrogateSettings = Field(default_factory=SurrogateSettings)
+    apps: Apps
+
+    @field_validator("name")
+    @classmethod
+    def _community_name(cls, value: str) -> str:
+        if not COMMUNITY_PATTERN.match(value):
+            raise ValueError("must contain only letters, digits, '_' and '-' (it is a key-expression chunk)")
+        return value
+
+    @field_validator("vehicle")
+    @classmethod
+    def _known_vehicle(cls, value: str | Vehicle) -> str | Vehicle:
+        if isinstance(value, str):
+            try:
+                get_vehicle(value)
+            except KeyError as exc:
+                raise ValueError(str(exc.args[0])) from None
+        return value
+
+    @model_validator(mode="after")
+    def _consistent(self) -> Mission:
+        if not math.isfinite(self.dt * self.time_limit):
+            raise ValueError("dt and time_limit must be finite")
+        if self.apps.helm.modified and self.environment.u_sub <= 0:
+            raise ValueError(
+                f"apps.helm.behaviour = {self.apps.helm.behaviour!r} steers against the submarine's cross-flow "
+                f"and needs environment.u_sub > 0 (got {self.environment.u_sub})"
+            )
+        return self
+
+    @property
+    def vehicle_model(self) -> Vehicle:
+        return self.vehicle if isinstance(self.vehicle, Vehicle) else get_vehicle(self.vehicle)
+
+    @property
+    def vehicle_name(self) -> str:
+        """The vehicle chunk of the key expressions."""
+        return self.vehicle_model.name
+
+    @property
+    def needs_surrogate(self) -> bool:
+        """A submarine is near, and the sim adds its interaction forces or the helm compensates."""
+        return self.environment.submarine and (self.apps.sim.interaction != "off" or self.apps.helm.compensated)
+
+    @property
+    def max_steps(self) -> int:
+        return int(round(self.time_limit / self.dt))
+
+    def periods(self) -> dict[str, int]:
+        return {"helm": self.apps.helm.period, "pid": self.apps.pid.period, "sim": self.apps.sim.period}
+
+
+def parse_override(text: str) -> tuple[list[str], Any]:
+    """'a.b=value' -> (['a', 'b'], value); the value is read as TOML, else kept as a string."""
+    if "=" not in text:
+        raise MissionError(f"--set {text!r}: expected key=value")
+    key, raw = text.split("=", 1)
+    key = key.strip()
+    if not key:
+        raise MissionError(f"--set {text!r}: empty key")
+    try:
+        value = tomllib.loads(f"v = {raw}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = raw
+    return key.split("."), value
+
+
+def apply_overrides(data: dict, overrides: list[str]) -> dict:
+    for text in overrides:
+        path, value = parse_override(text)
+        node = data
+        for part in path[:-1]:
+            child = node.get(part)
+            if not isinstance(child, dict):
+                child = {}
+                node[part] = child
+            node = child
+        node[path[-1]] = value
+    return data
+
+
+def load_mission(path: str | Path, overrides: list[str] = ()) -> Mission:
+    """Read, override and validate a mission file."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise MissionError(f"{path}: cannot read mission file ({exc.strerror})") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise MissionError(f"{path}: not valid TOML ({exc})") from None
+    apply_overrides(data, list(overrides))
+    return mission_from_dict(data, str(path))
+
+
+def mission_from_dict(data: dict, where: str = "mission") -> Mission:
+    try:
+        return Mission.model_validate(data)
+    except ValidationError as exc:
+        raise MissionError(describe_validation_error(exc, where)) from None
+
+
+class RunConfig(Strict):
+    """What the launcher hands every app it starts: the resolved mission and where to connect."""
+
+    mission: Mission
+    connect: list[str]
+    log_dir: str = ""
+
+    @classmethod
+    def load(cls, path: str | Path) -> RunConfig:
+        return cls.model_validate_json(Path(path).read_text())
+
+    def save(self, path: str | Path) -> None:
+        Path(path).write_text(self.model_dump_json(indent=2))

@@ -1,0 +1,158 @@
+"""Mission logs: MCAP files holding the msgpack bytes exactly as received (zenoh-notes.md 3.2, 3.4).
+
+One channel per key expression, `message_encoding = "msgpack"`, schema = the pydantic model's
+JSON schema; `log_time` is simulated time in ns, `publish_time` the wall-clock receive time. The
+mission (resolved, as JSON) is stored as metadata and the mission file as an attachment.
+
+Chunks are small, so a log cut short by a crash loses at most its last chunk: `read_log` falls
+back to a streaming read that recovers every complete chunk.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import msgpack
+from mcap.reader import make_reader
+from mcap.records import Channel, Metadata, Schema
+from mcap.records import Message as McapMessage
+from mcap.stream_reader import StreamReader
+from mcap.writer import CompressionType, Writer
+
+from nearsub.common.runtime.messages import model_for_key
+
+CHUNK_SIZE = 64 * 1024
+INVALID_SUFFIX = "#invalid"
+
+
+class LogWriter:
+    """Append messages to an MCAP file; always call `finish` (it writes the index)."""
+
+    def __init__(self, path: str | Path, library: str = "nearsub"):
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._file = open(self.path, "wb")
+        self._writer = Writer(self._file, chunk_size=CHUNK_SIZE, compression=CompressionType.ZSTD)
+        self._writer.start(profile="", library=library)
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[str, int] = {}
+        self._sequence: dict[int, int] = {}
+        self.count = 0
+        self.finished = False
+
+    def _channel(self, key: str, valid: bool) -> int:
+        topic = key if valid else key + INVALID_SUFFIX
+        channel = self._channels.get(topic)
+        if channel is not None:
+            return channel
+        schema_id = 0
+        model = model_for_key(key) if valid else None
+        if model is not None:
+            schema_id = self._schemas.get(model.__name__, 0)
+            if not schema_id:
+                schema_id = self._writer.register_schema(
+                    name=f"nearsub.{model.__name__}",
+                    encoding="jsonschema",
+                    data=json.dumps(model.model_json_schema()).encode(),
+                )
+                self._schemas[model.__name__] = schema_id
+        encoding = "msgpack" if valid else "application/octet-stream"
+        channel = self._writer.register_channel(topic=topic, message_encoding=encoding, schema_id=schema_id)
+        self._channels[topic] = channel
+        return channel
+
+    def write(self, key: str, data: bytes, sim_time: float, valid: bool = True) -> None:
+        channel = self._channel(key, valid)
+        sequence = self._sequence.get(channel, 0)
+        self._sequence[channel] = sequence + 1
+        self._writer.add_message(
+            channel_id=channel,
+            log_time=max(0, int(round(sim_time * 1e9))),
+            data=data,
+            publish_time=time.time_ns(),
+            sequence=sequence,
+        )
+        self.count += 1
+
+    def metadata(self, name: str, values: dict[str, str]) -> None:
+        self._writer.add_metadata(name, {k: str(v) for k, v in values.items()})
+
+    def attach(self, name: str, data: bytes, media_type: str = "text/plain") -> None:
+        now = time.time_ns()
+        self._writer.add_attachment(create_time=now, log_time=0, name=name, media_type=media_type, data=data)
+
+    def finish(self) -> None:
+        if not self.finished:
+            self.finished = True
+            self._writer.finish()
+            self._file.close()
+
+
+@dataclass
+class LogRecord:
+    topic: str
+    log_time: int
+    publish_time: int
+    sequence: int
+    data: bytes
+
+    @property
+    def sim_time(self) -> float:
+        return self.log_time / 1e9
+
+    def value(self) -> dict:
+        """The decoded msgpack map (raw bytes for invalid payloads)."""
+        if self.topic.endswith(INVALID_SUFFIX):
+            return {"raw": self.data.hex()}
+        return msgpack.unpackb(self.data)
+
+
+@dataclass
+class LogContents:
+    records: list[LogRecord]
+    metadata: dict[str, dict[str, str]]
+    recovered: bool  # True when the file had no valid summary and was read as a stream
+
+    def topics(self) -> list[str]:
+        return sorted({r.topic for r in self.records})
+
+
+def read_log(path: str | Path) -> LogContents:
+    """Every message of a log in file order, with its metadata. A file that was not finished
+    (crash) is read as a stream up to its last complete record."""
+    path = Path(path)
+    try:
+        with open(path, "rb") as f:
+            reader = make_reader(f)
+            records = [
+                LogRecord(channel.topic, m.log_time, m.publish_time, m.sequence, m.data)
+                for _, channel, m in reader.iter_messages(log_time_order=False)
+            ]
+            metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+            return LogContents(records, metadata, recovered=False)
+    except Exception:
+        return _recover(path)
+
+
+def _recover(path: Path) -> LogContents:
+    channels: dict[int, Channel] = {}
+    records: list[LogRecord] = []
+    metadata: dict[str, dict[str, str]] = {}
+    with open(path, "rb") as f:
+        try:
+            for record in StreamReader(f).records:
+                if isinstance(record, Channel):
+                    channels[record.id] = record
+                elif isinstance(record, McapMessage):
+                    topic = channels[record.channel_id].topic
+                    records.append(LogRecord(topic, record.log_time, record.publish_time, record.sequence, record.data))
+                elif isinstance(record, Metadata):
+                    metadata[record.name] = dict(record.metadata)
+                elif isinstance(record, Schema):
+                    continue
+        except Exception:
+            pass  # the torn tail of a crashed log: keep everything read before it
+    return LogContents(records, metadata, recovered=True)

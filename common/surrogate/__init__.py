@@ -1,0 +1,11 @@
+"""The interaction surrogate: its domain, model files, predictions, training and checks.
+
+- domain: inputs, bounds, constraints (4.4)-(4.7) and unit conversions.
+- model: the loaded surrogate, its predictions and the query messages of the surrogate server.
+- modelfile: one versioned file per trained surrogate.
+- interaction: the interaction forces the sim and the helm apply at a vehicle's state.
+- training: NMMF training of the shipped surrogate and fitting of a user's table.
+- maps: the thesis section 4.5 colour maps as data.
+- validation: MAE against the high fidelity in the form of thesis table 4.3.
+- campaign_cases: a surrogate input as the dimensional case a CFD user sets up.
+"""

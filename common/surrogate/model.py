@@ -1,0 +1,316 @@
+"""The loaded surrogate: predictions with their domain flags, and the surrogate server's messages.
+
+The thesis's reduced-order model (chapter 4) maps six inputs to the non-dimensional interaction
+coefficients X', Y', N' of the UUV (SPEC section 2). This module is pure numpy (no Zenoh): it says
+which inputs are valid (table 4.2, constraints (4.4)-(4.7) with SPEC errata 3 and 7), converts a
+dimensional state to inputs and coefficients back to forces (mirroring the -y side, section
+4.2.1), wraps a model file as a `Surrogate`, and defines the query/reply messages of the
+surrogate server (`apps/surrogate.py`).
+
+A point outside the domain or the constraints is never refused and never extrapolated silently:
+it is answered with the GP's value at that point and flagged (`in_domain`, `constraints_ok`);
+the consumer (the sim's blend, SPEC section 5) decides what to do with it.
+
+Until the hydrodynamics issue trains and ships the real model (`default_model_path()`), the
+server, CLI and tests use `analytic_model()`: a GP fitted to a made-up smooth function. It is a
+test fixture, it says so in its provenance, and whoever falls back to it says so on stderr.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+import sys
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Annotated, Any
+
+import numpy as np
+from pydantic import Field, model_validator
+from pydantic.types import FiniteFloat
+
+import nearsub
+from nearsub.common.learning.gp import MultiOutputGP
+from nearsub.common.physics.hull import D_SUB, L_SUB
+from nearsub.common.runtime import keys
+from nearsub.common.runtime.messages import FiniteMessage, decode, encode
+from nearsub.common.surrogate.domain import (
+    BOUNDS,
+    CONSTRAINTS,
+    INPUT_NAMES,
+    OUTPUT_NAMES,
+    RHO_SEA,
+    UNITS,
+    _as_inputs,
+    _flat_broadcast,
+    _force_scales,
+    constraints_ok,
+    in_domain,
+    sample_feasible,
+    to_forces,
+    to_inputs,
+)
+from nearsub.common.surrogate.modelfile import LoadedModel, ModelFileError, load_model, save_model
+
+# Largest batch one query may carry (a nearsub choice: bounds the server's memory per query,
+# about 1 MB of msgpack; a 10,000-point sweep is 10 queries).
+MAX_QUERY_POINTS = 100_000
+
+
+def surrogate_key(community: str) -> str:
+    """The server's queryable: nearsub/<community>/surrogate (SPEC section 3, a service key)."""
+    return f"{keys.community_root(community)}/surrogate"
+
+
+def default_model_path() -> Path:
+    """Where the shipped model lives inside the installed package (package data `data/*`)."""
+    return Path(nearsub.__file__).resolve().parent / "data" / "surrogate.npz"
+
+
+# ------------------------------------------------------------------------------- prediction
+@dataclass(frozen=True)
+class Prediction:
+    """Answers for n points: mean and std (n, 3) (None if not asked), and the two flags (n,).
+
+    For points outside the bounds or constraints, mean and std are still the GP's posterior at
+    that very point (no clipping, no substitution): far from the data the RBF GP reverts to the
+    training mean and its std grows towards the prior std, so the numbers stay finite and honest,
+    and the flags say not to trust them. Non-finite inputs give NaN mean and std.
+    """
+
+    mean: np.ndarray
+    std: np.ndarray | None
+    in_domain: np.ndarray
+    constraints_ok: np.ndarray
+
+    @property
+    def valid(self) -> np.ndarray:
+        """(n,) inside the bounds and the constraints: the region the model was trained on."""
+        return self.in_domain & self.constraints_ok
+
+
+def _model_id(model: MultiOutputGP) -> str:
+    """A short content hash of a fitted model (data and hyperparameters): names a model in replies
+    independently of where its file lives."""
+    digest = hashlib.sha256()
+    for gp in getattr(model, "all_gps", model.gps):
+        for array in (gp.X_train_, gp.y_train_, gp.lower_, gp.width_, gp.theta_):
+            digest.update(np.ascontiguousarray(array, dtype=float).tobytes())
+    return digest.hexdigest()[:16]
+
+
+class Surrogate:
+    """A loaded surrogate model file with the domain checks around every prediction."""
+
+    def __init__(self, loaded: LoadedModel, source: str | None = None):
+        if loaded.input_names != INPUT_NAMES or len(loaded.output_names) != len(OUTPUT_NAMES):
+            raise ModelFileError(
+                f"{loaded.path}: not a surrogate of this domain: inputs {loaded.input_names} and "
+                f"{len(loaded.output_names)} outputs, expected inputs {INPUT_NAMES} and {len(OUTPUT_NAMES)} outputs"
+            )
+        self.loaded = loaded
+        self.model = loaded.model
+        self.bounds = np.asarray(loaded.bounds, dtype=float)
+        self.output_names = loaded.output_names
+        self.model_id = _model_id(loaded.model)
+        self.source = source or str(loaded.path)
+
+    def predict(self, inputs: Any, return_std: bool = True) -> Prediction:
+        """GP mean (and std) of [X', Y', N'] at inputs (n, 6) or (6,), flagged (see `Prediction`).
+        `in_domain` uses the model file's bounds (table 4.2 for models saved by `save_surrogate`)."""
+        X = _as_inputs(inputs)
+        # Row-wise arithmetic: a vehicle asking alone and a sweep asking for 800 get the same bits.
+        if return_std:
+            mean, std = self.model.predict_rows(X, return_std=True)
+        else:
+            mean, std = self.model.predict_rows(X), None
+        inside = in_domain(X, self.bounds)
+        if not inside.all():  # non-finite inputs are never inside: only then look for them
+            finite = np.all(np.isfinite(X), axis=1)
+            mean[~finite] = np.nan
+            if std is not None:
+                std[~finite] = np.nan
+        return Prediction(mean, std, inside, constraints_ok(X))
+
+    def predict_state(
+        self,
+        x: Any,
+        y: Any,
+        u: Any,
+        psi: Any,
+        uuv_length: Any,
+        uuv_diameter: Any,
+        rho: float = RHO_SEA,
+        d_sub: float = D_SUB,
+        l_sub: float = L_SUB,
+    ) -> Prediction:
+        """Dimensional state (as `to_inputs`) -> dimensional [X_s, Y_s, N_s] and their std (n, 3),
+        in N and N m, with the flags of the underlying inputs."""
+        inputs, mirror = to_inputs(x, y, u, psi, uuv_length, uuv_diameter, d_sub, l_sub)
+        p = self.predict(inputs, return_std=True)
+        speed, length = _flat_broadcast(u, uuv_length, x, y, psi, uuv_diameter)[:2]  # u, L_uuv per row
+        return Prediction(
+            to_forces(p.mean, mirror, speed, length, rho),
+            p.std * _force_scales(speed, length, rho),
+            p.in_domain,
+            p.constraints_ok,
+        )
+
+
+# ----------------------------------------------------------------- model files and fixture
+def save_surrogate(path: str | os.PathLike, model: MultiOutputGP, provenance: dict[str, Any]) -> Path:
+    """Save a fitted (n, 6) -> (n, 3) GP as a surrogate model file with this domain's metadata."""
+    return save_model(
+        path,
+        model,
+        input_names=INPUT_NAMES,
+        output_names=OUTPUT_NAMES,
+        units=UNITS,
+        bounds=BOUNDS,
+        constraints=CONSTRAINTS,
+        provenance=provenance,
+    )
+
+
+def analytic_coefficients(X: Any) -> np.ndarray:
+    """A made-up smooth stand-in for [X', Y', N'] (n, 3) at inputs (n, 6): NOT hydrodynamics.
+
+    Only the shape is plausible (magnitudes ~1e-3 as REMUS-size coefficients; thesis chapter 4
+    trends): a drag X' < 0 growing with |psi|; an interaction that decays over ~0.015 in R_lat
+    away from the hull, grows for larger UUVs (smaller D_sub/D_uuv); Y' < 0 (towards the
+    submarine) amidships and > 0 near the bow and stern, changing sign at |R_long| = 0.7/3;
+    N' changing sign at R_long = 0. Heading adds a linear sway force and moment.
+    """
+    X = _as_inputs(X)
+    s = X[:, 0] / 0.7  # position along the domain, -1..1
+    near = np.exp(-(X[:, 1] - 0.059) / 0.015) * (20.0 / X[:, 4]) ** 0.25 * (X[:, 5] / 8.0) ** 0.3
+    heading = X[:, 3] / 2.0
+    drag = -1.2e-3 * (1.0 + 0.3 * heading**2) * (1.0 - 0.05 * (X[:, 2] - 3.5))
+    return np.column_stack(
+        [
+            drag + 0.4e-3 * near * np.sin(math.pi * s),
+            -1.0e-3 * near * np.cos(1.5 * math.pi * s) + 0.6e-3 * heading,
+            0.5e-3 * near * np.sin(math.pi * s) + 0.3e-3 * heading,
+        ]
+    )
+
+
+def analytic_model(n: int = 100, seed: int = 0, path: str | os.PathLike | None = None) -> LoadedModel:
+    """TEST FIXTURE: a MultiOutputGP fitted to `analytic_coefficients` at n feasible points, saved
+    as a model file (at `path`, or a temporary file that is removed again) and read back, so it
+    goes through exactly the path a real model does. Stands in until the real model ships."""
+    X = sample_feasible(n, seed)
+    model = MultiOutputGP(bounds=BOUNDS, n_restarts=5, seed=seed).fit(X, analytic_coefficients(X))
+    provenance = {
+        "method": "ANALYTIC TEST FIXTURE: GP fitted to nearsub.common.surrogate.model.analytic_coefficients, "
+        "a made-up smooth function; NOT hydrodynamics",
+        "command": f"nearsub.common.surrogate.model.analytic_model(n={n}, seed={seed})",
+        "notes": "For tests and plumbing only, until the hydrodynamics issue trains and ships the real "
+        "model (SPEC section 7). Do not use its numbers.",
+        "n_train": n,
+        "seed": seed,
+    }
+    if path is not None:
+        return load_model(save_surrogate(path, model, provenance))
+    with tempfile.TemporaryDirectory(prefix="nearsub-analytic-") as folder:
+        return load_model(save_surrogate(Path(folder) / "analytic.npz", model, provenance))
+
+
+def load_surrogate(path: str | os.PathLike | None = None) -> Surrogate:
+    """The model at `path`; without one the shipped model, or, if none is shipped yet, the analytic
+    test fixture, with a loud warning on stderr. Raises ModelFileError for a bad file."""
+    if path is not None:
+        return Surrogate(load_model(path))
+    shipped = default_model_path()
+    if shipped.exists():
+        return Surrogate(load_model(shipped))
+    print(
+        f"WARNING: no shipped surrogate model at {shipped}; using the ANALYTIC TEST FIXTURE "
+        "(a made-up function, not hydrodynamics). Its predictions are meaningless.",
+        file=sys.stderr,
+        flush=True,
+    )
+    return Surrogate(analytic_model(), source=f"analytic test fixture (no model at {shipped})")
+
+
+# -------------------------------------------------------------------------------- messages
+Point = Annotated[list[FiniteFloat], Field(min_length=len(INPUT_NAMES), max_length=len(INPUT_NAMES))]
+
+
+class SurrogateQuery(FiniteMessage):
+    """A batch of points to predict at: `points` is a list of rows [R_long, R_lat, u_kn, psi_deg,
+    d_ratio, ld_ratio] (INPUT_NAMES order, units of table 4.2), finite, 1..MAX_QUERY_POINTS rows.
+
+    Rows rather than a dict of columns: a row is one vehicle state, maps to a numpy (n, 6) array
+    without reordering, and a bad value is named by its position (field 'points.<row>.<column>').
+    The header (schema_version, step, t, source) is the sender's; the reply echoes step and t.
+    """
+
+    points: Annotated[list[Point], Field(min_length=1, max_length=MAX_QUERY_POINTS)]
+
+
+class SurrogateReply(FiniteMessage):
+    """Answers to a `SurrogateQuery`, row for row: mean and std (n, len(output_names)) of the
+    non-dimensional coefficients, and the flags (n,) (see `Prediction` for out-of-domain points).
+    model_id names the model (a content hash), source is the server instance."""
+
+    mean: list[list[FiniteFloat]]
+    std: list[list[FiniteFloat]]
+    in_domain: list[bool]
+    constraints_ok: list[bool]
+    output_names: list[str]
+    model_id: str
+
+    @model_validator(mode="after")
+    def _consistent_shapes(self) -> SurrogateReply:
+        n, m = len(self.mean), len(self.output_names)
+        if len(self.std) != n or len(self.in_domain) != n or len(self.constraints_ok) != n:
+            raise ValueError(
+                f"mean has {n} rows but std has {len(self.std)}, in_domain {len(self.in_domain)}, "
+                f"constraints_ok {len(self.constraints_ok)}"
+            )
+        bad = next((i for i, row in enumerate(self.mean + self.std) if len(row) != m), None)
+        if bad is not None:
+            raise ValueError(f"row {bad % n} of {'mean' if bad < n else 'std'} does not have {m} values")
+        return self
+
+    def prediction(self) -> Prediction:
+        """The reply as numpy arrays."""
+        return Prediction(
+            np.array(self.mean, dtype=float).reshape(-1, len(self.output_names)),
+            np.array(self.std, dtype=float).reshape(-1, len(self.output_names)),
+            np.array(self.in_domain, dtype=bool),
+            np.array(self.constraints_ok, dtype=bool),
+        )
+
+
+def encode_query(points: Any, step: int = 0, t: float = 0.0, source: str = "") -> bytes:
+    """msgpack bytes of a SurrogateQuery for points (n, 6) or (6,)."""
+    rows = _as_inputs(points).tolist()
+    return encode(SurrogateQuery(step=step, t=t, source=source, points=rows))
+
+
+def answer_query(surrogate: Surrogate, payload: bytes, source: str = "surrogate") -> bytes:
+    """The server's work for one query: validate, predict the whole batch, encode the reply.
+    Raises MessageError (naming the field and value) for a malformed query."""
+    query = decode(payload, SurrogateQuery, "surrogate query")
+    p = surrogate.predict(np.array(query.points, dtype=float), return_std=True)
+    reply = SurrogateReply(
+        step=query.step,
+        t=query.t,
+        source=source,
+        mean=p.mean.tolist(),
+        std=p.std.tolist(),
+        in_domain=p.in_domain.tolist(),
+        constraints_ok=p.constraints_ok.tolist(),
+        output_names=list(surrogate.output_names),
+        model_id=surrogate.model_id,
+    )
+    return encode(reply)
+
+
+def decode_reply(payload: bytes) -> SurrogateReply:
+    """Validate a server reply (raises MessageError naming the field and value)."""
+    return decode(payload, SurrogateReply, "surrogate reply")
