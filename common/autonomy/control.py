@@ -18,11 +18,11 @@ Conventions:
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
-from nearsub.common.physics.dynamics import PSI, R, U, wrap_angle
+from nearsub.common.physics.dynamics import PSI, R, U, clip, components, is_batch, wrap_angle
 from nearsub.common.physics.vehicles import PidTuning, Vehicle
 
 FORMS = ("positional", "incremental")
@@ -73,39 +73,39 @@ def pid_step(
     """One controller update from the desired [u_d, psi_d] and the measured state."""
     if form not in FORMS:
         raise ValueError(f"pid form {form!r} is not one of {FORMS}")
-    u, r, psi = state[..., U], state[..., R], state[..., PSI]
+    u, r, psi = components(state, U, R, PSI)
     heading, speed = tuning.heading, tuning.speed
     e_psi = wrap_angle(psi_d - psi)
     e_u = u_d - u
     de_psi = -r
-    de_u = np.where(memory.started, -(u - memory.previous_u) / dt, 0.0)
+    if not is_batch(u):  # one vehicle: np.where costs more than the whole loop law
+        de_u = -(u - memory.previous_u) / dt if memory.started else 0.0
+    else:
+        de_u = np.where(memory.started, -(u - memory.previous_u) / dt, 0.0)
 
     if form == "positional":
-        i_psi = np.clip(
-            memory.heading_integral + heading.ki * e_psi * dt, -heading.integral_limit, heading.integral_limit
-        )
-        i_u = np.clip(memory.speed_integral + speed.ki * e_u * dt, -speed.integral_limit, speed.integral_limit)
-        feed_forward = -vehicle.X_uu * u_d * np.abs(u_d)
+        i_psi = clip(memory.heading_integral + heading.ki * e_psi * dt, -heading.integral_limit, heading.integral_limit)
+        i_u = clip(memory.speed_integral + speed.ki * e_u * dt, -speed.integral_limit, speed.integral_limit)
+        feed_forward = -vehicle.X_uu * u_d * abs(u_d)
         thrust_cmd = feed_forward + speed.kp * e_u + speed.kd * de_u + i_u
         rudder_cmd = -(heading.kp * e_psi + heading.kd * de_psi + i_psi)
     else:
         # (5.21): tau = Kp e + Kd e' + Ki * integral(e); command_{t+1} = command_t + tau.
-        i_psi = np.clip(memory.heading_integral + e_psi * dt, -heading.integral_limit, heading.integral_limit)
-        i_u = np.clip(memory.speed_integral + e_u * dt, -speed.integral_limit, speed.integral_limit)
+        i_psi = clip(memory.heading_integral + e_psi * dt, -heading.integral_limit, heading.integral_limit)
+        i_u = clip(memory.speed_integral + e_u * dt, -speed.integral_limit, speed.integral_limit)
         tau_thrust = speed.kp * e_u + speed.kd * de_u + speed.ki * i_u
         tau_rudder = heading.kp * e_psi + heading.kd * de_psi + heading.ki * i_psi
         thrust_cmd = memory.thrust + tau_thrust
         rudder_cmd = memory.rudder - tau_rudder
 
-    thrust = np.clip(thrust_cmd, -vehicle.max_thrust, vehicle.max_thrust)
-    rudder = np.clip(rudder_cmd, -vehicle.max_rudder, vehicle.max_rudder)
-    new_memory = replace(
-        memory,
+    thrust = clip(thrust_cmd, -vehicle.max_thrust, vehicle.max_thrust)
+    rudder = clip(rudder_cmd, -vehicle.max_rudder, vehicle.max_rudder)
+    new_memory = PidState(
         heading_integral=i_psi,
         speed_integral=i_u,
         previous_u=np.asarray(u, dtype=float),
         thrust=thrust,
         rudder=rudder,
-        started=np.ones_like(memory.started),
+        started=np.ones_like(memory.started) if is_batch(u) else True,
     )
     return new_memory, PidOutput(thrust, rudder, thrust != thrust_cmd, rudder != rudder_cmd)
