@@ -14,19 +14,27 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from typing import Annotated
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
+
+# Positions in a mission lie within this range of the submarine [m]: a nearsub choice that turns
+# a slip of the exponent (1e12) into an error; the largest envelope reaches about 1.5 L_sub.
+MAX_RANGE = 100_000.0
+MAX_SPEED = 20.0  # [m/s]: beyond any UUV or submarine of the vehicle library (nearsub choice)
+Coordinate = Annotated[float, Field(ge=-MAX_RANGE, le=MAX_RANGE)]
+Speed = Annotated[float, Field(ge=-MAX_SPEED, le=MAX_SPEED)]
 
 
 class Leg(BaseModel):
     """One BHV_Waypoint block: a list of points visited in order at one speed."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
     name: str = "leg"
-    points: list[tuple[float, float]] = Field(min_length=1)
-    speed: float = Field(gt=0, description="desired speed through the water [m/s]")
+    points: list[tuple[Coordinate, Coordinate]] = Field(min_length=1)
+    speed: float = Field(gt=0, le=MAX_SPEED, description="desired speed through the water [m/s]")
     lead: float | None = Field(default=None, gt=0, description="d_lead [m]; None steers at the waypoint")
     lead_damper: float | None = Field(default=None, gt=0)
     capture_radius: float = Field(default=3.0, gt=0)

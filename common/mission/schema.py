@@ -15,12 +15,16 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from nearsub.common.autonomy.behaviours import Leg
+from nearsub.common.autonomy.behaviours import Coordinate, Leg, Speed
 from nearsub.common.physics import dynamics
 from nearsub.common.physics.vehicles import Vehicle, get_vehicle
 from nearsub.common.runtime.messages import describe_validation_error
 
 COMMUNITY_PATTERN = re.compile(r"^[A-Za-z0-9_\-]+$")
+# A Zenoh locator as a mission may name it: protocol/address, with a port for the IP protocols.
+ENDPOINT_PATTERN = re.compile(
+    r"^(?:(?:tcp|udp|tls|quic|ws)/(?:\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.\-]+):\d{1,5}|unixsock-stream/\S+)$"
+)
 
 
 class MissionError(ValueError):
@@ -28,7 +32,9 @@ class MissionError(ValueError):
 
 
 class Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    """No unknown fields, and no NaN or infinity in any number."""
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
 
 class Network(Strict):
@@ -40,16 +46,27 @@ class Network(Strict):
 
     connect: list[str] = Field(default_factory=list)
 
+    @field_validator("connect")
+    @classmethod
+    def _locators(cls, value: list[str]) -> list[str]:
+        for endpoint in value:
+            if not ENDPOINT_PATTERN.match(endpoint):
+                raise ValueError(f"{endpoint!r} is not a Zenoh endpoint such as 'tcp/192.0.2.10:7447'")
+            port = endpoint.rsplit(":", 1)[-1]
+            if port.isdigit() and not 0 < int(port) < 65536:
+                raise ValueError(f"{endpoint!r}: port {port} is outside 1-65535")
+        return value
+
 
 class Start(Strict):
-    x: float = 0.0
-    y: float = 0.0
-    psi_deg: float = 0.0
-    speed: float = 0.0
+    x: Coordinate = 0.0
+    y: Coordinate = 0.0
+    psi_deg: float = Field(default=0.0, ge=-360.0, le=360.0)
+    speed: Speed = 0.0
 
 
 class Environment(Strict):
-    u_sub: float = Field(default=0.0, description="submarine speed through the water [m/s]")
+    u_sub: Speed = Field(default=0.0, description="submarine speed through the water [m/s]")
     rho: float = Field(default=1025.0, gt=0, description="sea water density [kg/m^3] (SPEC section 2)")
     submarine: bool = Field(default=True, description="a submarine at the frame origin (collision checks)")
     sea_state: int = Field(default=0, ge=0, le=6, description="thesis table 5.1")
@@ -217,22 +234,37 @@ def load_mission(path: str | Path, overrides: list[str] = ()) -> Mission:
     """Read, override and validate a mission file."""
     path = Path(path)
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise MissionError(f"{path}: cannot read mission file ({exc.strerror})") from None
+    except UnicodeDecodeError as exc:
+        raise MissionError(
+            f"{path}: not UTF-8 text (byte 0x{exc.object[exc.start]:02x} at offset {exc.start})"
+        ) from None
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise MissionError(f"{path}: not valid TOML ({exc})") from None
     apply_overrides(data, list(overrides))
-    return mission_from_dict(data, str(path))
+    return mission_from_dict(data, str(path), overrides)
 
 
-def mission_from_dict(data: dict, where: str = "mission") -> Mission:
+def mission_from_dict(data: dict, where: str = "mission", overrides: list[str] = ()) -> Mission:
+    """Validate a mission; an error names `where`, or the `--set` override that gave the bad value."""
     try:
         return Mission.model_validate(data)
     except ValidationError as exc:
-        raise MissionError(describe_validation_error(exc, where)) from None
+        raise MissionError(describe_validation_error(exc, _source_of(exc, where, overrides))) from None
+
+
+def _source_of(error: ValidationError, where: str, overrides: list[str]) -> str:
+    """`--set KEY=VALUE` when the first bad field lies at or below an override's key, else `where`."""
+    loc = [str(p) for p in error.errors()[0]["loc"]]
+    for text in reversed(list(overrides)):  # the last override of a key wins, as in apply_overrides
+        path, _ = parse_override(text)
+        if loc[: len(path)] == path:
+            return f"--set {text}"
+    return where
 
 
 class RunConfig(Strict):
