@@ -1,4 +1,5 @@
-"""Collision, close-call and large-stray geometry (thesis section 5.11.2, SPEC section 5)."""
+"""Collision, close-call and large-stray geometry (thesis section 5.11.2; docs/design.md, "Physics
+decisions")."""
 
 import math
 from functools import lru_cache
@@ -10,7 +11,7 @@ from scipy.spatial import cKDTree
 from nearsub.common.physics import hull
 from nearsub.common.physics import proximity as events
 
-REMUS_L, REMUS_D = 1.33, 0.191  # vehicles.md section 1
+REMUS_L, REMUS_D = 1.33, 0.191  # Prestero (2001): REMUS 100 length and diameter
 R = hull.R_SUB
 
 

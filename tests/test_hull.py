@@ -1,4 +1,5 @@
-"""SUBOFF and Explorer geometry against ../shared/data/hulls.md section 5."""
+"""SUBOFF geometry against the offsets of Groves, Huang & Chang (1989), DTRC/SHD-1298-01, and the
+Explorer profile of thesis (3.1)/(3.2) (docs/design.md, "Vehicle data and sources")."""
 
 import math
 
@@ -42,15 +43,15 @@ def test_suboff_ends_and_outside():
 
 def test_suboff_model_volume_and_wetted_area():
     props = _model_properties()
-    assert props.volume == pytest.approx(0.699, abs=5e-4)  # hulls.md
-    assert props.wetted_area == pytest.approx(5.988, abs=5e-4)  # hulls.md
+    assert props.volume == pytest.approx(0.699, abs=5e-4)  # integrated from the Groves et al. offsets
+    assert props.wetted_area == pytest.approx(5.988, abs=5e-4)  # as used for SUBOFF towing-tank C_T
 
 
 def test_full_scale_dimensions():
-    assert hull.L_SUB == pytest.approx(88.86, abs=0.01)  # SPEC section 2
+    assert hull.L_SUB == pytest.approx(88.86, abs=0.01)  # D = 34 ft, L/D = 8.575 (docs/design.md, "Frames")
     assert hull.D_SUB == pytest.approx(10.363, abs=1e-3)
-    assert hull.SUBOFF_JOINTS_M == pytest.approx((20.73, 66.19, 86.92), abs=0.01)  # hulls.md
-    assert hull.suboff_properties().volume == pytest.approx(5936, rel=1e-3)  # hulls.md
+    assert hull.SUBOFF_JOINTS_M == pytest.approx((20.73, 66.19, 86.92), abs=0.01)  # stations x 20.4
+    assert hull.suboff_properties().volume == pytest.approx(5936, rel=1e-3)  # model volume x 20.4^3
     assert float(hull.suboff_radius(40.0)) == pytest.approx(hull.R_SUB)
 
 

@@ -1,8 +1,10 @@
-"""The two physics-based fidelities (issue 6) against analytic cases, SUBOFF data and the thesis's
-interaction sign pattern. Coarse meshes: the whole file runs in seconds.
+"""The two physics-based fidelities (docs/hydro/README.md) against analytic cases, SUBOFF data and
+the thesis's interaction sign pattern. Coarse meshes: the whole file runs in seconds.
 
-Validation sources: hydro-notes section 2.6 (analytic cases), thesis table 3.2 (SUBOFF drift),
-thesis section 4.5 (sign pattern), hulls.md (SUBOFF wetted area).
+Validation sources: classical potential-flow results (Lamb's added-mass coefficients of a spheroid
+and its Munk moment; the sphere pair forces of the Lagally theorem), thesis table 3.2 (SUBOFF
+drift), thesis section 4.5 (sign pattern), the SUBOFF offsets of Groves, Huang & Chang 1989 (wetted
+area).
 """
 
 import math
@@ -27,7 +29,7 @@ def _sphere(radius=1.0, stations=21, n_azimuths=10):
 
 
 def _spheroid_properties(length, diameter):
-    """Volume and Lamb's k1, k2 of a prolate spheroid (hydro-notes section 2.6)."""
+    """Volume and Lamb's k1, k2 of a prolate spheroid (Lamb, Hydrodynamics)."""
     a, b = 0.5 * length, 0.5 * diameter
     e = math.sqrt(1.0 - b**2 / a**2)
     log = math.log((1.0 + e) / (1.0 - e))
@@ -53,8 +55,8 @@ def test_meshes_are_closed_and_outward():
 
 
 def test_suboff_wetted_area_from_mesh():
-    """5.988 m^2 at model scale (hulls.md). 80 stations x 32 azimuths: the chords of the azimuth
-    polygon lose 1 - sin(pi/32)/(pi/32) = 0.16 %, the meridian chords a little more: 0.5 %."""
+    """5.988 m^2 at model scale (from the Groves et al. 1989 offsets). 80 stations x 32 azimuths:
+    the chords of the azimuth polygon lose 1 - sin(pi/32)/(pi/32) = 0.16 %, the meridian chords a little more: 0.5 %."""
     profile = hull.suboff_profile(80, model_scale=True)
     mesh = hull.full_surface(hull.revolution_mesh(profile, hull.azimuths(16)))
     assert mesh.areas.sum() == pytest.approx(5.988, rel=5e-3)
@@ -84,7 +86,7 @@ def test_sphere_surface_pressure():
 
 
 def test_spheroid_munk_moment_panel():
-    """N = (k2 - k1) rho Vol U^2 sin psi cos psi for an L/D = 8 spheroid (hydro-notes section 2.6);
+    """N = (k2 - k1) rho Vol U^2 sin psi cos psi for an L/D = 8 spheroid (Munk);
     0.8 % with this mesh."""
     length, diameter, psi = 8.0, 1.0, math.radians(5.0)
     profile = hull.profile_from_radius(
@@ -105,7 +107,7 @@ def test_spheroid_munk_moment_panel():
 @pytest.mark.parametrize("arrangement, leading", [("abreast", -3.0), ("in line", 6.0)])
 def test_two_spheres(arrangement, leading):
     """Two spheres (a = 1, d = 6a) moving together: abreast they attract with 3 pi rho a^6 U^2/d^4,
-    in line they repel with 6 pi rho a^6 U^2/d^4 (hydro-notes section 2.6), within 5 %."""
+    in line they repel with 6 pi rho a^6 U^2/d^4 (leading order in a/d), within 5 %."""
     d = 6.0
     offset = np.array([0.0, 0.5 * d, 0.0]) if arrangement == "abreast" else np.array([0.5 * d, 0.0, 0.0])
     sphere = _sphere()
@@ -169,7 +171,7 @@ def test_submarine_field_table_matches_ring_panels():
 
 def test_slender_munk_moment():
     """The strip model's free-stream UUV carries the slender Munk moment rho Vol U^2 sin psi cos psi
-    (k2 = 1, k1 = 0; hydro-notes section 2.2) to 1e-3, and no side force."""
+    (k2 = 1, k1 = 0, slender-body theory) to 1e-3, and no side force."""
     d_ratio, ld, psi = 10.0, 8.0, math.radians(5.0)
     diameter, length = hull.uuv_dimensions(d_ratio, ld)
     volume = revolution_properties(
@@ -186,7 +188,7 @@ def test_lf_nan_outside_the_table_and_speed_free_potential():
     touching = [0.0, 0.059, 3.5, 0.0, 5.0, 5.0]  # centre 5.24 m from the axis, UUV radius 1.04 m
     out = hydro_lf.lf_coefficients([inside, touching])
     assert np.all(np.isfinite(out[0])) and np.all(np.isnan(out[1]))
-    # Y' and N' are potential flow only: independent of the speed (hydro-notes section 1).
+    # Y' and N' are potential flow only: independent of the speed (docs/hydro/README.md).
     slow, fast = hydro_lf.lf_coefficients([[0.4, 0.075, 2.0, 1.0, 10.0, 8.0], [0.4, 0.075, 5.0, 1.0, 10.0, 8.0]])
     assert slow[1:] == pytest.approx(fast[1:], rel=1e-12)
     assert slow[0] < fast[0] < 0.0  # friction coefficient falls with Reynolds number

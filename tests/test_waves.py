@@ -22,7 +22,7 @@ def test_table_values_and_dispersion():
     assert ss6.amplitude == 3.0  # half of the 6.0 m upper significant height
     assert ss6.omega == pytest.approx(2 * math.pi / 12.4)
     assert ss6.wavenumber == pytest.approx(ss6.omega**2 / waves.G)
-    assert ss6.wavelength == pytest.approx(2 * math.pi * waves.G / ss6.omega**2)  # SPEC errata 1
+    assert ss6.wavelength == pytest.approx(2 * math.pi * waves.G / ss6.omega**2)  # docs/design.md, errata 1
     amplitudes = [waves.sea_state(n).orbital_amplitude(0.0) for n in range(7)]
     assert amplitudes[0] == amplitudes[1] == 0.0  # no period in table 5.1: calm
     assert all(a < b for a, b in zip(amplitudes[2:], amplitudes[3:], strict=False))

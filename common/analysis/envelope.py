@@ -4,9 +4,10 @@ given conditions, stays safe, strays far, has a close call or collides.
 One run per grid cell: the UUV starts at the cell's position with heading 0 and U_UUV = U_sub +
 U_ot, and follows a track-line parallel to the submarine axis through its start, for `duration`
 seconds. Each cell is classified, in priority order, as collision, close call, large stray or
-safe (SPEC section 5, `events`); cells whose UUV starts inside or touching the hull are
-infeasible. The cells run together in the batch engine (`batch.run_batch`), which calls the
-functions the apps call, so a cell replayed as a mission (`cell_mission`) ends the same way.
+safe (thesis section 5.11.2; docs/design.md, "Physics decisions"; `physics.proximity`); cells
+whose UUV starts inside or touching the hull are infeasible. The cells run together in the batch
+engine (`batch.run_batch`), which calls the functions the apps call, so a cell replayed as a
+mission (`cell_mission`) ends the same way.
 
 The default grid spans R_long = x / L_sub from -0.8 to 0.8 (past both ends of the hull) and R_lat =
 y / L_sub from 0.05 (inside the middle body, outside the tapered ends) to 0.12, beyond the

@@ -2,9 +2,10 @@
 
 Every case runs in-process with `dynamics.step` (explicit Euler (5.12), dt = 0.01 s) and returns
 a `Row`. Open-loop cases hold the speed by freezing u at the stated value after every step: the
-thesis says "speed held" (vehicles.md section 4), and a frozen u is the limit of an infinitely
-stiff speed loop, with no extra gain to choose. (X_prop = 3.86 N plus a P loop of 100 N/(m/s)
-gives -10.03 deg/s for REMUS instead of -10.08; both are within 2 % of the thesis.)
+thesis's yaw rates are reproduced with the speed held (docs/physics.md), and a frozen u is the
+limit of an infinitely stiff speed loop, with no extra gain to choose. (X_prop = 3.86 N plus a
+P loop of 100 N/(m/s) gives -10.03 deg/s for REMUS instead of -10.08; both are within 2 % of the
+thesis.)
 
 The library PID gains are designed in autonomy/pid_design.py (docs/pid-tuning.md); the cases here
 check them.
@@ -23,15 +24,16 @@ from nearsub.common.autonomy.pid_design import closed_loop_poles, incremental_tu
 from nearsub.common.physics.dynamics import PSI, Environment, R, U, step
 from nearsub.common.physics.vehicles import NPS_AUV_II, REMUS100, SDV, PidTuning, Vehicle
 
-DT = 0.01  # validation step [s]; vehicles.md section 4: results identical for dt 0.1 ... 0.001
+DT = 0.01  # validation step [s]; the steady yaw rates are the same for dt 0.1 ... 0.001
 _ENV = Environment()  # earth-fixed: no submarine, no waves
 
 # Heading-step cases: vehicle, speed [m/s], time after which |error| must stay <= 5 deg [s].
 # Typical speeds: the thesis envelopes run at U_sub = 1.5 m/s (section 5.11.2); NPS AUV II is
-# checked at 1.0 m/s, between its 0.61 m/s nominal speed (vehicles.md section 2) and 1.5 m/s.
+# checked at 1.0 m/s, between its 0.61 m/s nominal speed (2 ft/s, NPSNET-IV SUBmodel.h) and 1.5 m/s.
 HEADING_CASES = ((REMUS100, 1.5, 20.0), (NPS_AUV_II, 1.0, 30.0), (SDV, 1.5, 60.0))
-# Cruise-speed ranges for the stability check (vehicles.md sections 1-3: REMUS 2.5 m/s top speed,
-# NPS max_thrust sized for 2 m/s, SDV 1.9 m/s top speed; thesis section 5.9: U_sub >= 2 knots).
+# Cruise-speed ranges for the stability check (physics/vehicles.py: REMUS 2.5 m/s top speed from
+# Fossen's remus100, NPS max_thrust sized for 2 m/s, SDV 1.9 m/s top speed from MSS SIMnpsauv.m;
+# thesis section 5.9: U_sub >= 2 knots).
 CRUISE_SPEEDS = {"remus100": (1.0, 2.5), "nps_auv_ii": (0.61, 2.0), "sdv": (1.0, 1.9)}
 # Incremental (5.21) heading gains as positional-equivalent (Kp on heading, Ki on error), see
 # `incremental_tuning` and docs/pid-tuning.md. REMUS has none: it needs yaw-rate feedback.
@@ -74,7 +76,7 @@ def held_speed_run(
 ):
     """States (n, 6) of a rudder manoeuvre with u frozen at `speed` (module doc)."""
     state = np.array([speed, 0.0, 0.0, 0.0, 0.0, 0.0])
-    # Trim thrust -X_u|u| u^2 (vehicles.md section 3); u is frozen anyway.
+    # Trim thrust -X_u|u| u^2, which holds u in steady state; u is frozen anyway.
     thrust = -vehicle.X_uu * speed * speed
     n = int(round(duration / dt))
     out = np.empty((n, 6))
@@ -143,13 +145,13 @@ def step_metrics(t, psi_deg, step_deg: float, settle_after: float) -> tuple[floa
 
 # --- the table --------------------------------------------------------------------------------
 def _open_loop_rows() -> list[Row]:
-    # REMUS at its trim speed sqrt(3.86 / 1.62) = 1.544 m/s (vehicles.md section 1).
+    # REMUS at its trim speed sqrt(3.86 / 1.62) = 1.544 m/s (Prestero 2001, table C.9).
     remus_r = rudder_step_yaw_rate(REMUS100, 1.544, 4.0)
     fine = 5  # dt / 5 = 0.002 s; compare the whole transient at the coarse steps
     remus_fine = rudder_step_yaw_rate(REMUS100, 1.544, 4.0, dt=DT / fine)[fine - 1 :: fine]
     remus = float(remus_r[-1])
     dt_change = float(np.max(np.abs(remus_r - remus_fine))) / abs(remus) * 100.0
-    nps = alternating_rudder_yaw_rate(NPS_AUV_II, 0.61)  # 2 ft/s (vehicles.md section 2)
+    nps = alternating_rudder_yaw_rate(NPS_AUV_II, 0.61)  # 2 ft/s (NPSNET-IV SUBmodel.h nominal speed)
     sdv = alternating_rudder_yaw_rate(SDV, 1.5)  # the envelope speed (thesis section 5.11.2)
     return [
         _relative_row(

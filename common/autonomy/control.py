@@ -1,4 +1,4 @@
-"""Speed and heading PID, thesis (5.21), in two forms (SPEC errata 6):
+"""Speed and heading PID, thesis (5.21), in two forms (docs/design.md, "Thesis errata" 6):
 
 - "incremental": (5.21) as printed, the new command = the old command + tau;
 - "positional" (default): the form of MOOS-IvP's pMarinePID, command = P + I + D. Its gains do
@@ -10,10 +10,10 @@ batch (shape (N,)), element-wise.
 Conventions:
 - The derivative acts on the measurement, not on the error: for heading d(e)/dt = -r between the
   helm's updates (psi_d is piecewise constant), which avoids a derivative kick at every update.
-- A positive rudder gives a negative yaw rate (vehicles.md), so the rudder is minus the heading
-  loop output.
+- A positive rudder gives a negative yaw rate (the Prestero / Healey sign of physics/vehicles.py),
+  so the rudder is minus the heading loop output.
 - The speed loop adds the feed-forward X_prop = -X_u|u| u_d|u_d| that holds u_d in steady state
-  (vehicles.md section 3).
+  (the trim thrust against the vehicle's own axial drag).
 """
 
 from __future__ import annotations

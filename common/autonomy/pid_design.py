@@ -46,7 +46,7 @@ def design_heading_gains(vehicle: Vehicle, speed: float, band_deg: float = 10.0,
     """The tuning rule of docs/pid-tuning.md, on the linearised model at the design speed:
     Kp saturates the rudder at `band_deg` of heading error; Kd is the smallest gain whose PD loop
     has every pole damped by at least `zeta`; Ki = Kp w / 10 with w the slowest PD pole (the rule
-    of Fossen's MSS depth loop, vehicles.md section 6). Integral clipped at 0.1 rad of rudder."""
+    of the depth loop in Fossen's MSS SIMremus100.m). Integral clipped at 0.1 rad of rudder."""
     kp = vehicle.max_rudder / math.radians(band_deg)
     for kd in np.arange(0.0, 50.0, 0.01):
         poles = closed_loop_poles(vehicle, speed, Gains(kp=kp, kd=kd))

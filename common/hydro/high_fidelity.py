@@ -1,24 +1,27 @@
-"""High fidelity "two-way panel" model of the UUV-submarine interaction (issue 6; SPEC section 7).
+"""High fidelity "two-way panel" model of the UUV-submarine interaction (docs/hydro/README.md).
 
 The thesis's high fidelity source was steady RANS CFD (STAR-CCM+, k-omega; thesis section 3.3).
-This replacement keeps the two-way coupling the thesis found essential (section 3.5) and adds
-empirical viscous corrections (hydro-notes section 6(b)):
+The thesis's CFD data are not public, so nearsub makes its own (docs/design.md, "Hydrodynamic
+fidelities"). This replacement keeps the two-way coupling the thesis found essential (section 3.5)
+and adds empirical viscous corrections:
 
-1. Potential flow of both hulls together: 3D constant-strength source panels (Hess & Smith 1967;
-   hydro-notes section 2.4) on the half meshes of geometry.py with their z = 0 images, in the
+1. Potential flow of both hulls together: 3D constant-strength source panels (Hess & Smith 1967,
+   Prog. Aero. Sci. 8) on the half meshes of physics/hull.py with their z = 0 images, in the
    steady stream -U x of the submarine frame (both vehicles move at U = u through the water,
    thesis section 4.2.2). One dense solve per evaluation (scipy.linalg.solve).
 2. Forces by integrating the Bernoulli pressure over the UUV panels, minus the isolated UUV's
-   numerical drag (the same UUV mesh alone at the same heading; hydro-notes section 2.4).
-3. Viscous corrections (hydro-notes section 2.5):
-   - friction: ITTC-57 C_F(Re_L) times Hoerner's form factor, applied panel by panel at the local
-     surface speed of the two-body solution;
-   - cross-flow drag: Allen & Perkins strips on the local cross-flow of the submarine's field;
+   numerical drag (the same UUV mesh alone at the same heading: low-order pressure integration
+   leaves a small spurious drag, which d'Alembert says must be zero).
+3. Viscous corrections:
+   - friction: ITTC-57 C_F(Re_L) times Hoerner's (1965) form factor, applied panel by panel at the
+     local surface speed of the two-body solution;
+   - cross-flow drag: Allen & Perkins (1951) strips on the local cross-flow of the submarine's
+     field;
    - the potential yaw moment due to the UUV's own heading (its isolated Munk moment) scaled by
      a Munk efficiency calibrated on one SUBOFF drift angle of thesis table 3.2.
 
 Inputs are rows [R_long, R_lat, u_kn, psi_deg, d_ratio, ld_ratio]; outputs the UUV body-axis
-[X', Y', N'] with the signs of hydro_lf (SPEC section 2).
+[X', Y', N'] with the signs of low_fidelity (docs/design.md, "Frames, units and signs").
 """
 
 from __future__ import annotations
@@ -43,9 +46,9 @@ from nearsub.common.physics.hull import (
 from nearsub.common.physics.proximity import closest_distance
 
 FOURPI = 4.0 * np.pi
-FAR_FIELD = 4.0  # point-source far field beyond 4 panel sizes (hydro-notes section 2.4)
+FAR_FIELD = 4.0  # point-source far field beyond 4 panel sizes (about 1 % of the pairs are nearer)
 _CHUNK = 512  # target points per block of the influence assembly (bounds the temporaries' memory)
-_NUDGE = 1e-9  # control points sit this many panel sizes outside their panel (hydro-notes section 2.4)
+_NUDGE = 1e-9  # control points sit this many panel sizes outside their panel
 
 
 # --- the Hess-Smith kernel -------------------------------------------------------------------------
@@ -70,7 +73,7 @@ def _cross(a, b):
 def _solid_angle(r1, r2, r3, n1, n2, n3):
     """Signed solid angle of triangles seen from P, given R_k = vertex_k - P and n_k = |R_k|;
     positive on the side of the normal of the counter-clockwise order (Van Oosterom & Strackee 1983,
-    IEEE Trans. BME-30:125; hydro-notes Appendix A)."""
+    IEEE Trans. BME-30:125)."""
     numerator = _dot(r1, _cross(r2, r3))
     denominator = n1 * n2 * n3 + _dot(r1, r2) * n3 + _dot(r1, r3) * n2 + _dot(r2, r3) * n1
     return -2.0 * np.arctan2(numerator, denominator)
@@ -79,7 +82,8 @@ def _solid_angle(r1, r2, r3, n1, n2, n3):
 def panel_velocity(points: np.ndarray, vertices: np.ndarray, normals: np.ndarray) -> np.ndarray:
     """Velocity at points (K, 3) of unit-density flat source panels (K, 4, 3) paired row by row:
     (1/4 pi) [sum over edges of the outward edge normal times ln((ra + rb + d)/(ra + rb - d)) plus
-    n times the solid angle] (hydro-notes section 2.4; Katz & Plotkin 2001, ch. 10). Degenerate
+    n times the solid angle] (Hess & Smith 1967; Katz & Plotkin 2001, Low-Speed Aerodynamics,
+    ch. 10). Degenerate
     (zero-length) edges of the triangles at the tips contribute nothing."""
     rel = vertices - points[:, None, :]
     dist = np.sqrt(_dot(rel, rel))
@@ -102,7 +106,7 @@ def panel_velocity(points: np.ndarray, vertices: np.ndarray, normals: np.ndarray
 def _point_sources(points: np.ndarray, mesh: Mesh):
     """Far-field weights area_j / (4 pi r_ij^3) of the panels of one mesh (no image) seen as point
     sources (M, N), computed with matrix products, and the pairs closer than FAR_FIELD panel sizes
-    (rows, columns) with their exact velocities (hydro-notes section 2.4 "Far field")."""
+    (rows, columns) with their exact velocities."""
     centroids = mesh.centroids
     r2 = points @ centroids.T
     r2 *= -2.0
@@ -178,7 +182,7 @@ def pressure_force(mesh: Mesh, velocity: np.ndarray, speed: float, about: np.nda
     """Force (x, y) and yaw moment about `about` on the whole body from the Bernoulli pressure on a
     half mesh, over (1/2) rho U^2: F = -sum Cp n A with Cp = 1 - |V|^2/U^2, doubled for the image
     half (its z-force cancels). Pressure integration converges far better than Lagally for
-    moments (hydro-notes section 2.4)."""
+    moments (the spheroid Munk moment, tests/test_hydro.py)."""
     cp = 1.0 - np.sum(velocity**2, axis=1) / speed**2
     df = -(cp * mesh.areas)[:, None] * mesh.normals
     return _totals(mesh, df, about)
@@ -191,11 +195,11 @@ def _totals(mesh: Mesh, df: np.ndarray, about: np.ndarray) -> tuple[np.ndarray, 
     return 2.0 * np.sum(df[:, :2], axis=0), 2.0 * moment
 
 
-# --- viscous corrections (hydro-notes section 2.5) -------------------------------------------------
+# --- viscous corrections (docs/hydro/README.md, high fidelity) -----------------------------------
 
-C_DC = 1.2  # cross-flow drag coefficient of a circular cylinder, subcritical Re_c (hydro-notes section 2.5)
+C_DC = 1.2  # cross-flow drag coefficient of a circular cylinder, subcritical Re_c
 # Munk efficiency: the share of the isolated potential (Munk) yaw moment that a real hull feels
-# (hydro-notes section 2.5 option 1), calibrated on the EFD N' of thesis table 3.2 at psi = 2.08 deg,
+# calibrated on the EFD N' of thesis table 3.2 at psi = 2.08 deg,
 # the table's angle nearest the surrogate's |psi| <= 2 deg. `munk_efficiency(panels)` recomputes it
 # for each mesh spec so that it also absorbs the mesh's Munk-moment error; for MEDIUM it is:
 MUNK_EFFICIENCY_MEDIUM = 0.943
@@ -227,27 +231,27 @@ TABLE_3_2_CFD = np.array(  # the thesis's own STAR-CCM+ values, same table
 
 def hoerner_form_factor(d_over_l):
     """1 + k = 1 + 1.5 (D/L)^1.5 + 7 (D/L)^3 for bodies of revolution (Hoerner 1965, Fluid-Dynamic
-    Drag; hydro-notes section 2.5)."""
+    Drag)."""
     return 1.0 + 1.5 * d_over_l**1.5 + 7.0 * d_over_l**3
 
 
 def crossflow_efficiency(l_over_d):
     """Allen & Perkins' (1951, NACA TR-1048) finite-length factor eta: about 0.6 at L/D = 4 to 0.7
-    at L/D = 12-13 (hydro-notes section 2.5), interpolated linearly between those ends."""
+    at L/D = 12-13, interpolated linearly between those ends."""
     return np.interp(l_over_d, [4.0, 12.5], [0.6, 0.7])
 
 
 def _friction(mesh: Mesh, velocity: np.ndarray, about: np.ndarray, cf_total: float) -> tuple[np.ndarray, float]:
     """Skin friction over (1/2) rho U^2: tau = C_F (1 + k) |V_t| V_t on every panel, along the
-    local tangential velocity (hydro-notes section 2.5 "Interaction on friction")."""
+    local tangential velocity, so friction grows with the local speed near the submarine."""
     tangential = velocity - np.sum(velocity * mesh.normals, axis=1)[:, None] * mesh.normals
     speed = np.linalg.norm(tangential, axis=1)
     return _totals(mesh, cf_total * (speed * mesh.areas)[:, None] * tangential, about)
 
 
 def _crossflow(xi: np.ndarray, r: np.ndarray, v_cross: np.ndarray, l_over_d: float) -> tuple[float, float]:
-    """Cross-flow drag strips over (1/2) rho U^2: f = eta C_dc 2r V_c |V_c| (hydro-notes section 2.5;
-    Allen & Perkins 1951), pushing the section along the cross-flow V_c; returns (Y, N about xi = 0)."""
+    """Cross-flow drag strips over (1/2) rho U^2: f = eta C_dc 2r V_c |V_c| (Allen & Perkins 1951,
+    NACA TR-1048), pushing the section along the cross-flow V_c; returns (Y, N about xi = 0)."""
     f = crossflow_efficiency(l_over_d) * C_DC * 2.0 * r * v_cross * np.abs(v_cross)
     return float(np.trapezoid(f, xi)), float(np.trapezoid(xi * f, xi))
 
@@ -259,7 +263,7 @@ def _crossflow(xi: np.ndarray, r: np.ndarray, v_cross: np.ndarray, l_over_d: flo
 class Panels:
     """Panel counts. Half meshes (z >= 0): azimuth counts are per half. The submarine gets
     `sub_stations` stations cosine/arc-length spaced plus a refined window beside the UUV with an
-    axial spacing of `window_spacing` UUV diameters (hydro-notes section 6(b)1). The defaults put
+    axial spacing of `window_spacing` UUV diameters. The defaults put
     the panels where docs/hydro/panel-convergence.md found the error: on the UUV, not the submarine."""
 
     sub_stations: int = 80
@@ -344,7 +348,7 @@ def _suboff_model(panels: Panels) -> tuple[IsolatedBody, float]:
 
 def munk_efficiency(panels: Panels = MEDIUM) -> float:
     """The Munk efficiency that makes the SUBOFF N' at CALIBRATION_ANGLE equal thesis table 3.2's
-    EFD value, given the friction and cross-flow moments (hydro-notes section 2.5)."""
+    EFD value, given the friction and cross-flow moments."""
     return _munk_efficiency(panels)
 
 
@@ -417,7 +421,7 @@ def _two_body(x_c, y_c, speed, psi, diameter, length, panels: Panels) -> np.ndar
 
 def hf_coefficients(inputs, panels: Panels = MEDIUM) -> np.ndarray:
     """High-fidelity [X', Y', N'] (n, 3) for input rows [R_long, R_lat, u_kn, psi_deg, d_ratio,
-    ld_ratio] (SPEC section 5), one panel solve per row: about 1 s at MEDIUM, 0.2 s at COARSE,
+    ld_ratio] (thesis table 4.2), one panel solve per row: about 1 s at MEDIUM, 0.2 s at COARSE,
     12 s at FINE (docs/hydro/README.md). Rows whose hulls touch are NaN."""
     x_c, y_c, speed, psi, diameter, length = input_columns(inputs)
     return np.array(
@@ -427,7 +431,8 @@ def hf_coefficients(inputs, panels: Panels = MEDIUM) -> np.ndarray:
 
 def hf_free_stream(inputs, panels: Panels = MEDIUM) -> np.ndarray:
     """The same model's [X', Y', N'] for the UUV alone at that speed and heading (R_long, R_lat
-    ignored). The interaction increment of SPEC section 5 is hf_coefficients - hf_free_stream."""
+    ignored). The interaction increment (docs/design.md, "Physics decisions") is
+    hf_coefficients - hf_free_stream."""
     _, _, speed, psi, diameter, length = input_columns(inputs)
     out = []
     for u, heading, d, big_l in zip(speed, psi, diameter, length, strict=True):

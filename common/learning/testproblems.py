@@ -89,7 +89,8 @@ def park_hf(X: np.ndarray) -> np.ndarray:
 
 
 def park_lf(X: np.ndarray) -> np.ndarray:
-    """Xiong's LF for Park, thesis (2.20): 1.2 y_HF - 1 (affine in the HF: see the notes)."""
+    """Xiong's LF for Park, thesis (2.20): 1.2 y_HF - 1 (affine in the HF; learning/mfgp.py explains why
+    that matters)."""
     return 1.2 * park_hf(X) - 1.0
 
 

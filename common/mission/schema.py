@@ -1,8 +1,8 @@
 """Mission files: TOML validated by pydantic, with `--set key=value` overrides.
 
 A broken mission file gives one `MissionError` line naming the file, the field and the value.
-Headings in mission files are SPEC section 2's psi in degrees (from +x towards +y); MOOS compass
-headings convert as psi = 90 deg - heading.
+Headings in mission files are the psi of docs/design.md, "Frames, units and signs", in degrees
+(from +x towards +y); MOOS compass headings convert as psi = 90 deg - heading.
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ class Network(Strict):
     free loopback port and every app connects to it as a client. `connect` points the apps, the
     logger and the tools at existing Zenoh endpoints instead: a `nearsub router` (or zenohd) on
     this or another host, or a Zenoh peer that routes for clients. Multicast scouting stays off;
-    endpoints are always explicit (SPEC section 3)."""
+    endpoints are always explicit (docs/design.md, "Transport")."""
 
     connect: list[str] = Field(default_factory=list)
 
@@ -67,7 +67,7 @@ class Start(Strict):
 
 class Environment(Strict):
     u_sub: Speed = Field(default=0.0, description="submarine speed through the water [m/s]")
-    rho: float = Field(default=1025.0, gt=0, description="sea water density [kg/m^3] (SPEC section 2)")
+    rho: float = Field(default=1025.0, gt=0, description="sea water density [kg/m^3]")
     submarine: bool = Field(default=True, description="a submarine at the frame origin (collision checks)")
     sea_state: int = Field(default=0, ge=0, le=6, description="thesis table 5.1")
     depth: float = Field(default=50.0, gt=0, description="UUV operating depth [m] (wave decay)")

@@ -5,9 +5,9 @@ N vehicles (shapes (N, 6) and (N, 2)). It uses element-wise numpy operations onl
 products), so each vehicle of a batch sees exactly the arithmetic of a single step.
 
 State columns: [u, v, r, x, y, psi]; input columns: [X_prop, delta_r].
-Kinematics in the submarine frame (SPEC section 2): the water flows past at -U_sub, so
-x' = u cos psi - v sin psi - U_sub + u_wave, y' = u sin psi + v cos psi + v_wave, psi' = r,
-with the wave orbital velocity of thesis (5.22)/(5.23) (`waves.orbital_velocity`).
+Kinematics in the submarine frame (docs/design.md, "Frames, units and signs"): the water flows
+past at -U_sub, so x' = u cos psi - v sin psi - U_sub + u_wave, y' = u sin psi + v cos psi + v_wave,
+psi' = r, with the wave orbital velocity of thesis (5.22)/(5.23) (`waves.orbital_velocity`).
 """
 
 from __future__ import annotations
@@ -76,7 +76,8 @@ INTERACTION_MODES = ("replace", "increment", "thesis")
 
 @dataclass(frozen=True)
 class Interaction:
-    """Interaction forces near the submarine, from the surrogate (thesis (5.20), SPEC section 5).
+    """Interaction forces near the submarine, from the surrogate (thesis (5.20); docs/design.md,
+    "Physics decisions").
 
     forces: (..., 3) X_s, Y_s, N_s [N, N, N m] in the frame's sign convention; weight: (...,) in
     [0, 1], 1 well inside the surrogate's domain and 0 outside, smooth across the boundary, so no

@@ -1,13 +1,13 @@
 """Hull geometry: the DARPA SUBOFF submarine and the Explorer-shaped UUV.
 
 Both hulls are bodies of revolution, so one radius function r(s) of the distance s from the nose
-describes each. In the 3-DOF plane (the plane of both axes, SPEC section 2) the outline is
-|y| <= r(s). Frames:
+describes each. In the 3-DOF plane (the plane of both axes; docs/design.md, "Frames, units and
+signs") the outline is |y| <= r(s). Frames:
 - Submarine frame: origin at the submarine's centre of buoyancy (CB), x forward (bow at +x).
-  ../shared/data/hulls.md gives no CB for SUBOFF, so the CB is the volume centroid of the bare
-  hull computed here from the offsets: 2.0086 m behind the nose at model scale (0.4611 L),
-  40.976 m behind the nose at full scale. The bow tip sits at x = +40.976 m, the stern tip at
-  x = -47.889 m.
+  The SUBOFF offsets (Groves, Huang & Chang 1989) give no CB, so the CB is the volume centroid
+  of the bare hull computed here from the offsets: 2.0086 m behind the nose at model scale
+  (0.4611 L), 40.976 m behind the nose at full scale. The bow tip sits at x = +40.976 m, the
+  stern tip at x = -47.889 m.
 - UUV body frame: origin at the UUV's CB (thesis section 5.4), also taken as the volume centroid
   of its Explorer profile, x forward.
 """
@@ -22,18 +22,20 @@ import numpy as np
 
 FT = 0.3048  # international foot [m]
 
-# DARPA SUBOFF bare hull, model scale in feet (../shared/data/hulls.md section 5, [SUBOFF] hull.f90)
+# DARPA SUBOFF bare hull, model scale in feet: the DARPA2GEN offset formulas of Groves, Huang &
+# Chang (1989), DTRC/SHD-1298-01
 SUBOFF_RMAX_FT = 0.8333333  # R_max (D = 0.508 m)
 SUBOFF_BOW_END_FT = 3.333333  # bow / parallel middle body joint
 SUBOFF_PMB_END_FT = 10.645833  # parallel middle body / afterbody joint
 SUBOFF_AFT_END_FT = 13.979167  # afterbody / cap joint
 SUBOFF_LENGTH_FT = 14.291667  # overall length L = 4.3561 m
-_RH = 0.1175  # r_h, afterbody end radius / R_max (hulls.md)
-_K0 = 10.0  # afterbody slope parameter K0 (hulls.md)
-_K1 = 44.6244  # afterbody curvature parameter K1 (hulls.md)
+_RH = 0.1175  # r_h, afterbody end radius / R_max (Groves et al. 1989)
+_K0 = 10.0  # afterbody slope parameter K0 (Groves et al. 1989)
+_K1 = 44.6244  # afterbody curvature parameter K1 (Groves et al. 1989)
 
-# Thesis submarine: SUBOFF scaled to D = 34 ft (thesis section 5.9; SPEC section 2)
-SUBOFF_SCALE = 34.0 / (2.0 * SUBOFF_RMAX_FT)  # k = 20.4 (hulls.md "Scaling")
+# Thesis submarine: SUBOFF scaled to D = 34 ft (thesis section 5.9; docs/design.md, "Frames, units
+# and signs")
+SUBOFF_SCALE = 34.0 / (2.0 * SUBOFF_RMAX_FT)  # k = 20.4
 D_SUB = 2.0 * SUBOFF_RMAX_FT * SUBOFF_SCALE * FT  # 10.363 m
 R_SUB = 0.5 * D_SUB
 L_SUB = SUBOFF_LENGTH_FT * SUBOFF_SCALE * FT  # 88.86 m
@@ -49,7 +51,8 @@ class RevolutionProperties:
 
 
 def suboff_model_radius_ft(x_ft):
-    """SUBOFF bare-hull radius in feet at x feet from the nose, exactly the hulls.md formulas."""
+    """SUBOFF bare-hull radius in feet at x feet from the nose, exactly the DARPA2GEN formulas
+    of Groves, Huang & Chang (1989)."""
     x = np.asarray(x_ft, dtype=float)
     rm = SUBOFF_RMAX_FT
     a = 0.3 * x - 1.0
@@ -93,7 +96,7 @@ def suboff_radius(x_from_nose_m):
 
 SUBOFF_JOINTS_M = tuple(
     s * SUBOFF_SCALE * FT for s in (SUBOFF_BOW_END_FT, SUBOFF_PMB_END_FT, SUBOFF_AFT_END_FT)
-)  # 20.73, 66.19, 86.92 m (hulls.md "Scaling")
+)  # 20.73, 66.19, 86.92 m
 
 
 def revolution_properties(radius, breakpoints, n: int = 4000) -> RevolutionProperties:
@@ -148,12 +151,12 @@ def submarine_outline(n: int = 400) -> tuple[np.ndarray, np.ndarray]:
     return _closed_outline(SUB_CB_FROM_NOSE - s, suboff_radius(s))
 
 
-# Explorer-shaped UUV, thesis (3.1) bow ellipse and (3.2) stern paraboloid (hulls.md section 5)
+# Explorer-shaped UUV, thesis (3.1) bow ellipse and (3.2) stern paraboloid (thesis section 3.2)
 def explorer_radius(s, length: float, diameter: float):
     """Explorer hull radius at s from the nose: ellipse (3.1) over 2R, cylinder, paraboloid (3.2)
     over 4R with a pointed tail. Requires length >= 3 diameter (L = 6R + L_p, L_p >= 0)."""
     radius = 0.5 * diameter
-    parallel = length - 6.0 * radius  # L_p (hulls.md: L = 6R + L_p)
+    parallel = length - 6.0 * radius  # L_p (L = 6R + L_p)
     if parallel < 0.0:
         raise ValueError(f"Explorer hull needs length >= 3 diameters, got L={length}, D={diameter}")
     s = np.asarray(s, dtype=float)
@@ -200,16 +203,16 @@ def uuv_outline(x, y, psi, length: float, diameter: float, n: int = 64) -> tuple
 # The radius functions come from hull.py (SUBOFF, Explorer); this module only places stations and
 # panels on them.
 #
-# Frames (SPEC section 2, hull.py): a body frame has its origin at the body's centre of buoyancy (CB)
-# with x forward, so a station at distance s from the nose sits at x = cb - s. Meshes cover the half
-# z >= 0 of the surface: both hulls' axes lie in the plane z = 0, which is therefore a plane of
-# symmetry of the flow (thesis section 3.3.3.1 uses the same symmetry plane in its CFD;
-# hydro-notes section 2.4 "Mirror symmetry"). `mirror_z` gives the image half.
+# Frames (docs/design.md, "Frames, units and signs"): a body frame has its origin at the body's
+# centre of buoyancy (CB) with x forward, so a station at distance s from the nose sits at
+# x = cb - s. Meshes cover the half z >= 0 of the surface: both hulls' axes lie in the plane z = 0,
+# which is therefore a plane of symmetry of the flow (thesis section 3.3.3.1 uses the same symmetry
+# plane in its CFD). `mirror_z` gives the image half.
 #
 # Half-mesh azimuth theta runs from 0 (facing +y) to pi (facing -y) through +z: y = r cos(theta),
 # z = r sin(theta). Panels are flat quads (planar: isosceles trapezoids between two stations and two
 # azimuths), degenerate to triangles at the pointed tips, ordered counter-clockwise about the
-# outward normal (hydro-notes Appendix A).
+# outward normal (the edge and solid-angle formulas of high_fidelity.panel_velocity expect it).
 
 _DENSE = 400  # dense meridian samples per smooth piece, for arc lengths and station placement
 
@@ -292,7 +295,7 @@ def concatenate(meshes: Sequence[Mesh]) -> Mesh:
 def mirror_z(mesh: Mesh) -> Mesh:
     """Image of a half mesh in the plane z = 0, with the vertex order reversed so that the normals
     still point out of the body. With the same source strength on each panel and its image, the
-    normal velocity through z = 0 vanishes (hydro-notes section 2.4 "Mirror symmetry")."""
+    normal velocity through z = 0 vanishes (method of images)."""
     flip = np.array([1.0, 1.0, -1.0])
     return Mesh(
         mesh.vertices[:, ::-1] * flip,
@@ -330,7 +333,7 @@ def place_stations(
     `end_clustering`) so the curved ends get small panels. `window` = (s_lo, s_hi) adds a region
     where the arc-length spacing is at most `window_spacing`, graded geometrically outside it (the
     spacing grows by `growth` times the distance from the window): the submarine panels next to
-    the UUV must be comparable to the UUV's size and clearance (hydro-notes section 6(b)1).
+    the UUV must be comparable to the UUV's size and clearance (docs/hydro/README.md).
     """
     s_dense, _, arc = _dense_meridian(radius, breakpoints)
     total = arc[-1]
@@ -387,7 +390,7 @@ def suboff_profile(
 
 
 def uuv_dimensions(d_ratio, ld_ratio) -> tuple[np.ndarray, np.ndarray]:
-    """UUV diameter and length [m] from D_sub/D_uuv and L/D_uuv (SPEC section 5, table 4.2)."""
+    """UUV diameter and length [m] from D_sub/D_uuv and L/D_uuv (thesis table 4.2)."""
     diameter = D_SUB / np.asarray(d_ratio, dtype=float)
     return diameter, np.asarray(ld_ratio, dtype=float) * diameter
 
@@ -407,7 +410,7 @@ def azimuths(n: int, *, power: float = 1.0, both_ends: bool = False) -> np.ndarr
     """n + 1 half-mesh azimuth nodes from 0 to pi.
 
     power > 1 clusters them towards theta = 0 (the +y side: the submarine's side facing the UUV,
-    hydro-notes section 6(b)1, theta = pi s^1.6); both_ends uses cosine spacing, clustering both
+    docs/hydro/README.md, high fidelity); both_ends uses cosine spacing, clustering both
     in-plane sides (the UUV's side facing the submarine and its far side)."""
     t = np.linspace(0.0, 1.0, n + 1)
     if both_ends:

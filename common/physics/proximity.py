@@ -1,7 +1,8 @@
-"""Event geometry of thesis section 5.11.2 (SPEC section 5): collision, close call, large stray.
+"""Event geometry of thesis section 5.11.2 (docs/design.md, "Physics decisions"): collision, close
+call, large stray.
 
-Everything works in the plane of both axes (the submarine frame of SPEC section 2) and is
-vectorised over arrays of UUV poses.
+Everything works in the plane of both axes (the submarine frame of docs/design.md, "Frames, units
+and signs") and is vectorised over arrays of UUV poses.
 
 - Collision: the UUV outline (Explorer profile of the vehicle's length and diameter, hull.py)
   touches or overlaps the SUBOFF outline, i.e. `closest_distance <= 0`.

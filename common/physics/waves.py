@@ -9,7 +9,8 @@ instead of orthogonal to the plane of the two axes. nearsub implements exactly t
 - the propagation component u_w acts along the wave heading beta in the horizontal plane;
 - the "down" component v_w acts along the in-plane normal that points towards the submarine's
   axis for beta = 0 (a wave running along +x pushes a UUV on the +y side towards -y at phase 0);
-- on the -y side the field is mirrored (SPEC section 2), so both sides see the same worst case.
+- on the -y side the field is mirrored (docs/design.md, "Frames, units and signs"), so both sides
+  see the same worst case.
 
 Since both components share one amplitude, the lateral (towards/away) velocity always has the full
 amplitude omega A e^(-k d), whatever the heading. The phase k xi - omega t uses the position xi
@@ -52,7 +53,7 @@ class SeaState:
 
     @property
     def wavelength(self) -> float:
-        """lambda = 2 pi g / omega^2 (SPEC errata 1; the thesis misprints it) [m]."""
+        """lambda = 2 pi g / omega^2 [m] (docs/design.md, "Thesis errata" 1)."""
         return 2.0 * math.pi / self.wavenumber if self.wavenumber else math.inf
 
     def orbital_amplitude(self, depth):
@@ -86,10 +87,11 @@ def orbital_velocity(x, y, t, state: SeaState, depth: float, heading: float = 0.
 
     x, y [m] are submarine-frame positions (any broadcastable shapes), t [s], depth [m] the UUV's
     operating depth, heading [rad] the wave's direction of travel (from +x towards +y), u_sub
-    [m/s] the submarine's speed through the water. The result adds to x' and y' (SPEC section 2).
+    [m/s] the submarine's speed through the water. The result adds to x' and y'
+    (docs/design.md, "Frames, units and signs").
     """
     x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
-    mirror = np.where(y < 0.0, -1.0, 1.0)  # SPEC section 2: mirror the -y side
+    mirror = np.where(y < 0.0, -1.0, 1.0)  # mirror the -y side (docs/design.md, "Frames")
     cos_b, sin_b = math.cos(heading), math.sin(heading)
     xi = (x + u_sub * t) * cos_b + y * mirror * sin_b  # distance along the heading, water-fixed
     phase = state.wavenumber * xi - state.omega * t

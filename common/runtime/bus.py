@@ -1,9 +1,9 @@
-"""The only module that talks to Zenoh (eclipse-zenoh 1.10; zenoh-notes.md).
+"""The only module that talks to Zenoh (eclipse-zenoh 1.10; docs/design.md, "Transport").
 
 Rules it enforces for every app:
 - sessions open in `with` blocks, listen on explicit loopback endpoints, multicast scouting off;
 - lock-step and log traffic uses `CongestionControl.BLOCK` publishers (the default DROP loses
-  messages under load, zenoh-notes.md section 1.6);
+  messages under load: `CongestionControl.DEFAULT` is DROP in zenoh/__init__.pyi);
 - apps receive through Zenoh FIFO channels drained by their own main loop (`Stream`); nothing
   blocks or calls Zenoh inside a callback.
 
@@ -278,8 +278,8 @@ class Bus:
 
     def put_when_matched(self, key: str, payload: bytes, wait: float = 2.0) -> bool:
         """Publish once some subscriber matches `key` (a fresh session may not yet know the
-        subscribers; data put before that is not delivered, zenoh-notes.md P8). Returns whether a
-        match was seen; publishes anyway after `wait` seconds."""
+        subscribers, and data put before that is not delivered). Returns whether a match was seen;
+        publishes anyway after `wait` seconds."""
         pub = self._session.declare_publisher(key, encoding=ENCODING, congestion_control=zenoh.CongestionControl.BLOCK)
         try:
             end = time.monotonic() + wait

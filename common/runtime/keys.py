@@ -1,5 +1,6 @@
-"""Key expressions (SPEC section 3): nearsub/<community>/<vehicle>/<topic> for vehicle data and
-nearsub/<community>/<service>/... for the clock, events, status and services."""
+"""Key expressions (docs/design.md, "Topics and messages"): nearsub/<community>/<vehicle>/<topic>
+for vehicle data and nearsub/<community>/<service>/... for the clock, events, status and
+services."""
 
 ROOT = "nearsub"
 

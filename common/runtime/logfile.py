@@ -1,4 +1,5 @@
-"""Mission logs: MCAP files holding the msgpack bytes exactly as received (zenoh-notes.md 3.2, 3.4).
+"""Mission logs: MCAP files holding the msgpack bytes exactly as received (docs/design.md,
+"Transport").
 
 One channel per key expression, `message_encoding = "msgpack"`, schema = the pydantic model's
 JSON schema; `log_time` is simulated time in ns, `publish_time` the wall-clock receive time. The
