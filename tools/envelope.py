@@ -37,7 +37,6 @@ THESIS_OUT = Path("docs") / "envelopes"
 def add_parser(sub) -> None:
     p = sub.add_parser(
         "envelope",
-        help="safe operating envelopes around the submarine (PNG, CSV, JSON); sweeps on Dask",
         description="Fly one UUV per grid cell for --duration seconds and colour each cell by its outcome "
         "(collision > close call > large stray > safe). Options describing conditions take several values; "
         "their combinations form a sweep.",
@@ -148,26 +147,6 @@ def configs_from_args(args) -> list:
 
 
 # --------------------------------------------------------------------------------- drawing
-def surrogate_window(vehicle: str) -> tuple[float, float] | None:
-    """R_lat range where the vehicle feels the submarine: table 4.2 cut by (4.4) and (4.5), at the
-    hull ratios the interaction uses (clipped to the trained range, `interaction_at`). None when
-    the hull fails (4.6) or (4.7) (the NPS AUV II fails (4.6)): the blend weight is then zero at
-    every position, and the surrogate never acts on that vehicle."""
-    from nearsub.common.physics.hull import D_SUB
-    from nearsub.common.physics.vehicles import get_vehicle
-    from nearsub.common.surrogate import domain
-
-    v = get_vehicle(vehicle)
-    d_ratio = float(np.clip(D_SUB / v.diameter, *domain.BOUNDS[4]))
-    ld_ratio = float(np.clip(v.length / v.diameter, *domain.BOUNDS[5]))
-    hull_only = domain.constraint_values(np.array([[0.0, 0.08, 3.0, 0.0, d_ratio, ld_ratio]]))[0, 2:]
-    if (hull_only < 0.0).any():  # (4.6), (4.7): no R_lat term
-        return None
-    low = (0.5048 + 0.5 / d_ratio + 9.425e-3 * ld_ratio / d_ratio) / 8.575  # (4.4), SPEC errata 3
-    high = (0.5 + 2.0 / d_ratio) / 8.575  # (4.5)
-    return max(low, domain.BOUNDS[1, 0]), min(high, domain.BOUNDS[1, 1])
-
-
 def _edges(centres: np.ndarray) -> np.ndarray:
     if len(centres) == 1:
         return np.array([centres[0] - 0.005, centres[0] + 0.005])
@@ -197,6 +176,8 @@ def draw_envelope(ax, summary: dict, title: str | None = None) -> None:
     )
     hx, hy = submarine_outline()
     ax.fill(hx / L_SUB, hy / L_SUB, color=HULL_COLOUR, zorder=3)
+    from nearsub.common.analysis.envelope import surrogate_window
+
     window = surrogate_window(summary["config"]["vehicle"])
     if window is None:
         note = "the surrogate never acts on this hull: it fails constraint (4.6) or (4.7)"

@@ -175,7 +175,7 @@ def maps_command(args) -> int:
 
 
 def add_parser(subparsers) -> None:
-    p = subparsers.add_parser("maps", help="colour maps of thesis figures 4-4 to 4-11 as PNGs")
+    p = subparsers.add_parser("maps")
     p.add_argument("model", nargs="?", help="model file (default: the shipped model)")
     p.add_argument("--out", default=str(DEFAULT_OUT), help=f"folder for the PNGs (default {DEFAULT_OUT})")
     p.set_defaults(func=maps_command)
