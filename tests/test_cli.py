@@ -11,7 +11,7 @@ from nearsub.tools.cli import TOOLS, build_parser
 
 HEAVY = ("numpy", "scipy", "zenoh", "matplotlib")
 # Tools whose parser and whose answer without a running mission need none of HEAVY.
-LIGHT_TOOLS = ("launch", "tap", "log", "swap", "clock", "router", "al-bench", "validate")
+LIGHT_TOOLS = ("launch", "tap", "log", "swap", "clock", "router", "al-bench", "envelope", "validate")
 
 
 def loaded_after(code: str) -> list[str]:
@@ -68,9 +68,17 @@ def test_an_unknown_subcommand_is_named():
         (["swap", "alpha", "helm", "--with", "period"], "nearsub swap: --with item 'period' is not key=value"),
         (["clock", "nobody", "status"], "nearsub clock: no running mission named 'nobody'"),
         (["launch", "missing.toml"], "nearsub launch: "),
+        (["envelope", "--behaviour", "drift"], "nearsub envelope: --behaviour 'drift' is not one of waypoints"),
+        (["al-bench", "sudoku"], "nearsub al-bench: unknown problem 'sudoku'"),
     ],
 )
 def test_bad_input_gets_one_line_and_exit_2(runtime_dir, argv, message):
     done = nearsub(*argv)
     assert done.returncode == 2, done.stderr
     assert done.stderr.startswith(message) and len(done.stderr.strip().splitlines()) == 1
+
+
+def test_a_malformed_option_value_is_named_by_argparse():
+    done = nearsub("envelope", "--grid", "forty")
+    assert done.returncode == 2
+    assert "argument --grid: wants NxM (e.g. 40x20), got 'forty'" in done.stderr and "Traceback" not in done.stderr

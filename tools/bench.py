@@ -18,6 +18,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from .envelope import grid_size
+
 DEFAULT_MISSION = Path(__file__).resolve().parents[1] / "missions" / "alpha.toml"
 
 
@@ -93,7 +95,7 @@ def bench_pipeline(args) -> int:
 def add_envelope_bench_parser(bench_subparsers) -> None:
     t = bench_subparsers.add_parser("envelope", help="envelope wall time, vehicle-steps/s, speed-up, thesis set")
     t.add_argument("--vehicle", default="remus100", help="vehicle of the timed envelope (default remus100)")
-    t.add_argument("--grid", default="40x20", metavar="NxM", help="cells (default 40x20 = 800)")
+    t.add_argument("--grid", type=grid_size, default=(40, 20), metavar="NxM", help="cells (default 40x20 = 800)")
     t.add_argument("--duration", type=float, default=120.0, help="simulated seconds per cell (default 120)")
     t.add_argument("--repeats", type=int, default=3, help="timed envelopes (default 3)")
     t.add_argument("--sample", type=int, default=10, help="cells flown one by one in-process (default 10)")
@@ -114,7 +116,7 @@ def bench_envelope(args) -> int:
     from nearsub.common.analysis.batch import OUTCOMES
     from nearsub.common.mission.cores import run_mission
 
-    n_long, n_lat = (int(v) for v in args.grid.lower().split("x"))
+    n_long, n_lat = args.grid
     config = env.EnvelopeConfig(vehicle=args.vehicle, grid=(n_long, n_lat), duration=args.duration)
     surrogate = env.cached_surrogate(config.model)
     env.compute_envelope(config.model_copy(update={"grid": (2, 2), "duration": 1.0}), surrogate)  # warm caches
