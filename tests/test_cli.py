@@ -11,7 +11,7 @@ from nearsub.tools.cli import TOOLS, build_parser
 
 HEAVY = ("numpy", "scipy", "zenoh", "matplotlib")
 # Tools whose parser and whose answer without a running mission need none of HEAVY.
-LIGHT_TOOLS = ("launch", "tap", "log", "swap", "clock", "router", "al-bench", "envelope", "validate")
+LIGHT_TOOLS = ("launch", "tap", "log", "swap", "clock", "router", "al-bench", "maps", "envelope", "validate")
 
 
 def loaded_after(code: str) -> list[str]:
