@@ -46,11 +46,7 @@ def swap_command(args) -> int:
         return 2
     if args.behaviour:
         overrides.append(f"behaviour={args.behaviour}")
-    try:
-        bus, community = open_bus(args)
-    except LookupError as exc:
-        print(f"nearsub swap: {exc}", file=sys.stderr)
-        return 2
+    bus, community = open_bus(args)  # no such mission: the command line reports it, exit 2
     import msgpack
 
     from nearsub.common.runtime import keys
