@@ -65,7 +65,6 @@ def test_an_unknown_subcommand_is_named():
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
-        (["swap", "alpha", "helm", "--with", "period"], "nearsub swap: --with item 'period' is not key=value"),
         (["clock", "nobody", "status"], "nearsub clock: no running mission named 'nobody'"),
         (["launch", "missing.toml"], "nearsub launch: "),
         (["envelope", "--behaviour", "drift"], "nearsub envelope: --behaviour 'drift' is not one of waypoints"),
@@ -78,7 +77,14 @@ def test_bad_input_gets_one_line_and_exit_2(runtime_dir, argv, message):
     assert done.stderr.startswith(message) and len(done.stderr.strip().splitlines()) == 1
 
 
-def test_a_malformed_option_value_is_named_by_argparse():
-    done = nearsub("envelope", "--grid", "forty")
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["envelope", "--grid", "forty"], "argument --grid: wants NxM (e.g. 40x20), got 'forty'"),
+        (["swap", "alpha", "helm", "--with", "period"], "argument --with: item 'period' is not key=value"),
+    ],
+)
+def test_a_malformed_option_value_is_named_by_argparse(argv, message):
+    done = nearsub(*argv)
     assert done.returncode == 2
-    assert "argument --grid: wants NxM (e.g. 40x20), got 'forty'" in done.stderr and "Traceback" not in done.stderr
+    assert message in done.stderr and "Traceback" not in done.stderr

@@ -9,6 +9,7 @@ old one and resumes.
 
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 
@@ -19,7 +20,14 @@ def add_parser(subparsers) -> None:
     p = subparsers.add_parser("swap")
     p.add_argument("community", help="mission name")
     p.add_argument("app", help="role to replace, e.g. helm")
-    p.add_argument("--with", dest="with_", metavar="SETTINGS", help="settings of the new app: key=value,key=value")
+    p.add_argument(
+        "--with",
+        dest="with_",
+        type=settings_list,
+        default=[],
+        metavar="SETTINGS",
+        help="settings of the new app: key=value,key=value",
+    )
     p.add_argument("--behaviour", help="shorthand for --with behaviour=NAME")
     p.add_argument("--at-step", type=int, help="swap when the clock reaches this step (default: now)")
     p.add_argument("--timeout", type=float, default=120.0, help="wall seconds to wait for the swap")
@@ -28,22 +36,17 @@ def add_parser(subparsers) -> None:
     p.set_defaults(func=swap_command)
 
 
-def parse_spec(spec: str | None) -> list[str]:
-    if not spec:
-        return []
+def settings_list(spec: str) -> list[str]:
+    """'a=1,b=2' -> ['a=1', 'b=2'], for argparse."""
     items = [item.strip() for item in spec.split(",") if item.strip()]
     for item in items:
         if "=" not in item:
-            raise ValueError(f"--with item {item!r} is not key=value")
+            raise argparse.ArgumentTypeError(f"item {item!r} is not key=value")
     return items
 
 
 def swap_command(args) -> int:
-    try:
-        overrides = parse_spec(args.with_)
-    except ValueError as exc:
-        print(f"nearsub swap: {exc}", file=sys.stderr)
-        return 2
+    overrides = list(args.with_)
     if args.behaviour:
         overrides.append(f"behaviour={args.behaviour}")
     bus, community = open_bus(args)  # no such mission: the command line reports it, exit 2
