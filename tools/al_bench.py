@@ -136,7 +136,9 @@ def al_bench_command(args) -> int:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
 
     from nearsub.common.learning.albench import run_benchmark, summarise
+    from nearsub.common.learning.testproblems import get_problem
 
+    get_problem(args.problem)  # an unknown name is reported before the progress bar starts
     settings = {"n_lookahead": args.lookahead, "n_restarts": args.restarts, "n_polish": args.polish}
     if args.learn_rho:
         settings["rho"] = None

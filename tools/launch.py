@@ -1,4 +1,4 @@
-"""`nearsub launch MISSION`: run a mission file as separate processes (the launcher is `launcher`)."""
+"""`nearsub launch MISSION`: run a mission file as separate processes, supervised by `launcher`."""
 
 from __future__ import annotations
 
