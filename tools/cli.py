@@ -3,7 +3,8 @@
 Subcommand X lives in the module named in TOOLS, which exports `add_parser(subparsers)`: it adds
 its parser and sets `func`, which runs it. Only the module of the subcommand being run is imported,
 and a tool imports its heavy modules (numpy, scipy, zenoh, matplotlib) only when it runs, so that
-`nearsub --help` and a tool's `--help` answer at once.
+`nearsub --help` and a tool's `--help` answer at once. A LookupError a tool raises (no such
+mission, problem or behaviour) is printed as one line naming it, with exit code 2.
 """
 
 from __future__ import annotations
