@@ -4,11 +4,6 @@ and a teardown that kills every process group they started."""
 from __future__ import annotations
 
 import os
-
-# One BLAS thread, as the `nearsub` command sets for its tools and apps (tools/cli.py): results that
-# pass through a dense solve then agree to the last bit between this process and those it starts.
-# Set before anything imports numpy.
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import signal
 import subprocess
 import sys
@@ -18,6 +13,12 @@ from pathlib import Path
 
 import pytest
 
+from nearsub.common.runtime.processes import single_blas_thread, stop
+
+# One BLAS thread, as the `nearsub` command sets for itself and what it starts, before anything
+# imports numpy (nothing above does): results that pass through a dense solve then agree to the
+# last bit between the tests and the processes they start.
+single_blas_thread()
 ROOT = Path(__file__).resolve().parents[1]
 ALPHA = ROOT / "missions" / "alpha.toml"
 
@@ -57,13 +58,7 @@ class Launches:
         return process.returncode, summary, err
 
     def kill_all(self) -> None:
-        for process in self.processes:
-            if process.poll() is None:
-                try:
-                    os.killpg(process.pid, signal.SIGKILL)
-                except ProcessLookupError:
-                    pass
-                process.wait(timeout=10)
+        stop(self.processes, ladder=(signal.SIGKILL,))
         # Apps run in their own process groups; they die with the launcher (PDEATHSIG), but make
         # sure: any process still running our modules under this log folder is killed.
         time.sleep(0.2)

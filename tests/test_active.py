@@ -10,8 +10,8 @@ from nearsub.common.learning.active import (
     run_campaign,
     select_point,
 )
+from nearsub.common.learning.albench import run_benchmark, summarise
 from nearsub.common.learning.testproblems import Problem, get_problem
-from nearsub.tools.albench import run_benchmark, summarise
 
 PARK = get_problem("park")
 # Small, fast settings: the logic under test does not depend on the search density.
@@ -172,7 +172,6 @@ def test_mf_beats_hf_only_on_park_at_30():
         jobs=2,
         seed=0,
         test_points=500,
-        progress=False,
         candidates_per_dim=250,
         n_polish=1,
     )

@@ -235,7 +235,6 @@ def test_drawn_surrogate_window_is_where_the_blend_weight_is_positive(vehicle):
     """The dashed box of the figures is where the interaction acts; no box for a hull that fails
     (4.6) or (4.7) (the NPS AUV II fails (4.6), so the surrogate never acts on it)."""
     from nearsub.common.surrogate.interaction import interaction_at
-    from nearsub.tools.envelope import surrogate_window
 
     r_lat = np.linspace(0.05, 0.12, 701)
     states = np.zeros((len(r_lat), 6))
@@ -243,7 +242,7 @@ def test_drawn_surrogate_window_is_where_the_blend_weight_is_positive(vehicle):
     weight = interaction_at(
         env.cached_surrogate(""), states, get_vehicle(vehicle), 1025.0, "replace"
     ).interaction.weight
-    window = surrogate_window(vehicle)
+    window = env.surrogate_window(vehicle)
     if vehicle == "nps_auv_ii":
         assert window is None and not weight.any()
         return

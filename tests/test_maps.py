@@ -6,7 +6,7 @@ import pytest
 from nearsub.common.surrogate.domain import constraint_values, constraints_ok
 from nearsub.common.surrogate.maps import THESIS_MAPS, evaluate_map, mid_window_r_lat, slice_grid
 from nearsub.common.surrogate.model import load_surrogate
-from nearsub.tools import maps
+from nearsub.tools import map_figures
 from nearsub.tools.cli import main
 from nearsub.tools.surrogate_cli import write_analytic_model
 
@@ -63,7 +63,7 @@ def test_the_shipped_model_shows_the_section_4_5_pattern(shipped):
 
 
 def test_a_figure_is_a_png_with_its_panels(shipped, tmp_path):
-    path = maps.plot_figure(shipped, "fig4-9", tmp_path, nx=21, ny=15)
+    path = map_figures.plot_figure(shipped, "fig4-9", tmp_path, nx=21, ny=15)
     assert path == tmp_path / "fig4-9.png" and path.read_bytes().startswith(PNG_MAGIC)
 
 
@@ -77,7 +77,9 @@ def test_maps_writes_every_figure_for_the_shipped_model(tmp_path, capsys):
 def test_maps_skips_the_lf_comparisons_of_a_single_fidelity_model(tmp_path, capsys, monkeypatch):
     model = write_analytic_model(tmp_path / "analytic.npz", n=30)
     drawn = []
-    monkeypatch.setattr(maps, "plot_figure", lambda surrogate, name, out_dir: drawn.append(name) or out_dir / name)
+    monkeypatch.setattr(
+        map_figures, "plot_figure", lambda surrogate, name, out_dir: drawn.append(name) or out_dir / name
+    )
     assert main(["maps", str(model), "--out", str(tmp_path / "maps")]) == 0
     assert drawn == ["fig4-4", "fig4-5", "fig4-7", "fig4-8"]
     out = capsys.readouterr().out

@@ -1,1 +1,6 @@
-"""tools package of nearsub."""
+"""The `nearsub` command line: `cli` dispatches to one module per subcommand (listed in `cli.TOOLS`).
+
+Beside them: `launcher` supervises a mission's processes, `connect` and `registry` find a running
+mission, `caller` sends control requests, `plot` and `map_figures` draw, `hydro_bench` measures the
+hydrodynamic fidelities, `free_stream` builds a model's free-stream table (`python -m`).
+"""

@@ -5,6 +5,8 @@ in one process, and reports lock-stepped steps per second and their ratio.
 
 `envelope` times one operating envelope in the batch engine (vehicle-steps per second), the same
 cells flown one by one in-process (a sample, extrapolated) and the whole `--thesis-figures` set.
+
+`surrogate` times the surrogate's predictions and queries; `hydro` the cost of the LF and HF models.
 """
 
 from __future__ import annotations
@@ -16,16 +18,32 @@ import tempfile
 import time
 from pathlib import Path
 
-from nearsub.common.mission.cores import build_cores
-from nearsub.common.mission.schema import load_mission
-from nearsub.common.runtime.lifecycle import Schedule, run_inprocess
-
-from .launch import Launcher
+from .envelope import grid_size
 
 DEFAULT_MISSION = Path(__file__).resolve().parents[1] / "missions" / "alpha.toml"
 
 
+def add_parser(subparsers) -> None:
+    from .surrogate_cli import add_bench_parser
+
+    p = subparsers.add_parser("bench")
+    b = p.add_subparsers(dest="bench_command", required=True)
+    t = b.add_parser("pipeline", help="lock-stepped steps per second of a mission at warp 0")
+    t.add_argument("--mission", default=None, help="mission file (default: missions/alpha.toml)")
+    t.add_argument("--repeats", type=int, default=3)
+    t.add_argument("--json", action="store_true")
+    t.set_defaults(func=bench_pipeline)
+    add_bench_parser(b)
+    add_envelope_bench_parser(b)
+    t = b.add_parser("hydro", help="cost per evaluation of the low- and high-fidelity hydrodynamic models")
+    t.set_defaults(func=bench_hydro)
+
+
 def inprocess_rate(mission_path: Path) -> tuple[float, int]:
+    from nearsub.common.mission.cores import build_cores
+    from nearsub.common.mission.schema import load_mission
+    from nearsub.common.runtime.lifecycle import Schedule, run_inprocess
+
     mission = load_mission(mission_path)
     start = time.perf_counter()
     result = run_inprocess(build_cores(mission), Schedule(mission.periods()), mission.dt, mission.max_steps)
@@ -33,6 +51,10 @@ def inprocess_rate(mission_path: Path) -> tuple[float, int]:
 
 
 def pipeline_rate(mission_path: Path, log_dir: str, index: int) -> tuple[float, int, str]:
+    from nearsub.common.mission.schema import load_mission
+
+    from .launcher import Launcher
+
     mission = load_mission(mission_path, [f"name=bench{index}_{int(time.time())}", "warp=0"])
     summary = Launcher(mission, str(mission_path), log_dir, quiet=True).run()
     return summary.steps_per_second, summary.steps, summary.outcome
@@ -71,10 +93,9 @@ def bench_pipeline(args) -> int:
 
 
 def add_envelope_bench_parser(bench_subparsers) -> None:
-    """Register `bench envelope`."""
     t = bench_subparsers.add_parser("envelope", help="envelope wall time, vehicle-steps/s, speed-up, thesis set")
     t.add_argument("--vehicle", default="remus100", help="vehicle of the timed envelope (default remus100)")
-    t.add_argument("--grid", default="40x20", metavar="NxM", help="cells (default 40x20 = 800)")
+    t.add_argument("--grid", type=grid_size, default=(40, 20), metavar="NxM", help="cells (default 40x20 = 800)")
     t.add_argument("--duration", type=float, default=120.0, help="simulated seconds per cell (default 120)")
     t.add_argument("--repeats", type=int, default=3, help="timed envelopes (default 3)")
     t.add_argument("--sample", type=int, default=10, help="cells flown one by one in-process (default 10)")
@@ -95,7 +116,7 @@ def bench_envelope(args) -> int:
     from nearsub.common.analysis.batch import OUTCOMES
     from nearsub.common.mission.cores import run_mission
 
-    n_long, n_lat = (int(v) for v in args.grid.lower().split("x"))
+    n_long, n_lat = args.grid
     config = env.EnvelopeConfig(vehicle=args.vehicle, grid=(n_long, n_lat), duration=args.duration)
     surrogate = env.cached_surrogate(config.model)
     env.compute_envelope(config.model_copy(update={"grid": (2, 2), "duration": 1.0}), surrogate)  # warm caches
@@ -164,5 +185,8 @@ def bench_envelope(args) -> int:
     return 0
 
 
-def bench_command(args) -> int:
-    return {"pipeline": bench_pipeline, "envelope": bench_envelope}[args.bench_command](args)
+def bench_hydro(args) -> int:
+    from .hydro_bench import benchmark_fidelities
+
+    benchmark_fidelities()
+    return 0

@@ -13,6 +13,7 @@ one Dask task per configuration with `--workers N` (a local cluster on loopback)
 
 from __future__ import annotations
 
+import argparse
 import csv
 import itertools
 import json
@@ -20,12 +21,8 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
-
-from nearsub.common.mission.schema import BEHAVIOURS
-
-# Imported when a command runs, so that `nearsub --help` stays fast: matplotlib, rich and the
-# envelope core (which loads scipy).
+# numpy, matplotlib, rich and the envelope core are imported when a command runs, so that the
+# parser builds at once.
 # Outcome colours (OUTCOMES order): safe green, large stray yellow, close call orange, collision
 # red, infeasible (starts in the hull) light grey; the traffic-light reading of the thesis figures.
 COLOURS = ("#4daf4a", "#ffd92f", "#ff7f00", "#e41a1c", "#d9d9d9")
@@ -37,15 +34,12 @@ THESIS_OUT = Path("docs") / "envelopes"
 def add_parser(sub) -> None:
     p = sub.add_parser(
         "envelope",
-        help="safe operating envelopes around the submarine (PNG, CSV, JSON); sweeps on Dask",
         description="Fly one UUV per grid cell for --duration seconds and colour each cell by its outcome "
         "(collision > close call > large stray > safe). Options describing conditions take several values; "
         "their combinations form a sweep.",
     )
     p.add_argument("--vehicle", nargs="+", default=["remus100"], help="remus100|nps_auv_ii|sdv or small|medium|large")
-    p.add_argument(
-        "--behaviour", nargs="+", default=["waypoints"], choices=BEHAVIOURS, metavar="NAME", help=", ".join(BEHAVIOURS)
-    )
+    p.add_argument("--behaviour", nargs="+", default=["waypoints"], metavar="NAME", help="helm behaviours")
     p.add_argument(
         "--d-lead", nargs="+", default=["3"], metavar="D", help="lead distance in UUV lengths (3 or 3L) or metres (4m)"
     )
@@ -54,9 +48,9 @@ def add_parser(sub) -> None:
     p.add_argument("--depth", nargs="+", type=float, default=[50.0], help="operating depth [m]")
     p.add_argument("--u-sub", nargs="+", type=float, default=[1.5], help="submarine speed [m/s]")
     p.add_argument("--u-ot", nargs="+", type=float, default=[0.0], help="overtaking speed [m/s]")
-    p.add_argument("--grid", default=None, metavar="NxM", help="cells along R_long x R_lat (default 40x20)")
-    p.add_argument("--r-long", default=None, metavar="LO,HI", help="R_long range (default -0.8,0.8)")
-    p.add_argument("--r-lat", default=None, metavar="LO,HI", help="R_lat range (default 0.05,0.12)")
+    p.add_argument("--grid", type=grid_size, metavar="NxM", help="cells along R_long x R_lat (default 40x20)")
+    p.add_argument("--r-long", type=range_pair, metavar="LO,HI", help="R_long range (default -0.8,0.8)")
+    p.add_argument("--r-lat", type=range_pair, metavar="LO,HI", help="R_lat range (default 0.05,0.12)")
     p.add_argument("--duration", type=float, default=None, help="simulated seconds per cell (default 120)")
     p.add_argument("--dt", type=float, default=None, help="base step [s] (default 0.1)")
     p.add_argument("--model", default="", help="surrogate model file (default: the shipped model)")
@@ -67,6 +61,7 @@ def add_parser(sub) -> None:
     p.add_argument("--thesis-figures", action="store_true", help="figures 5-10..5-14 and 6-7..6-11 into docs/envelopes")
     p.add_argument(
         "--cell-mission",
+        type=range_pair,
         metavar="R_LONG,R_LAT",
         help="write the mission file of the cell starting there (to replay it with nearsub launch) and stop",
     )
@@ -78,23 +73,21 @@ def add_parser(sub) -> None:
 
 
 # --------------------------------------------------------------------------------- options
-def _pair(text: str | None, name: str) -> tuple[float, float] | None:
-    if text is None:
-        return None
+def range_pair(text: str) -> tuple[float, float]:
+    """'LO,HI' -> (LO, HI), for argparse."""
     try:
         low, high = (float(v) for v in text.split(","))
     except ValueError:
-        raise SystemExit(f"nearsub envelope: {name} wants LO,HI, got {text!r}") from None
+        raise argparse.ArgumentTypeError(f"wants LO,HI, got {text!r}") from None
     return low, high
 
 
-def _grid(text: str | None) -> tuple[int, int] | None:
-    if text is None:
-        return None
+def grid_size(text: str) -> tuple[int, int]:
+    """'NxM' -> (N, M), for argparse."""
     try:
         n_long, n_lat = (int(v) for v in text.lower().split("x"))
     except ValueError:
-        raise SystemExit(f"nearsub envelope: --grid wants NxM (e.g. 40x20), got {text!r}") from None
+        raise argparse.ArgumentTypeError(f"wants NxM (e.g. 40x20), got {text!r}") from None
     return n_long, n_lat
 
 
@@ -111,9 +104,9 @@ def d_lead_lengths(text: str, vehicle: str) -> float:
 def shared_settings(args) -> dict:
     """Grid, duration, step and model: the same for every configuration of a run."""
     settings = {
-        "grid": _grid(args.grid),
-        "r_long": _pair(args.r_long, "--r-long"),
-        "r_lat": _pair(args.r_lat, "--r-lat"),
+        "grid": args.grid,
+        "r_long": args.r_long,
+        "r_lat": args.r_lat,
         "duration": args.duration,
         "dt": args.dt,
         "model": args.model or None,
@@ -124,8 +117,11 @@ def shared_settings(args) -> dict:
 def configs_from_args(args) -> list:
     """The cartesian product of the condition options (EnvelopeConfig each)."""
     from nearsub.common.analysis import envelope as env
+    from nearsub.common.mission.schema import BEHAVIOURS
     from nearsub.common.physics.vehicles import get_vehicle
 
+    if unknown := [b for b in args.behaviour if b not in BEHAVIOURS]:
+        raise LookupError(f"--behaviour {unknown[0]!r} is not one of {', '.join(BEHAVIOURS)}")
     shared = shared_settings(args)
     configs = []
     for vehicle, behaviour, d_lead, gamma, sea_state, depth, u_sub, u_ot in itertools.product(
@@ -148,27 +144,9 @@ def configs_from_args(args) -> list:
 
 
 # --------------------------------------------------------------------------------- drawing
-def surrogate_window(vehicle: str) -> tuple[float, float] | None:
-    """R_lat range where the vehicle feels the submarine: table 4.2 cut by (4.4) and (4.5), at the
-    hull ratios the interaction uses (clipped to the trained range, `interaction_at`). None when
-    the hull fails (4.6) or (4.7) (the NPS AUV II fails (4.6)): the blend weight is then zero at
-    every position, and the surrogate never acts on that vehicle."""
-    from nearsub.common.physics.hull import D_SUB
-    from nearsub.common.physics.vehicles import get_vehicle
-    from nearsub.common.surrogate import domain
+def _edges(centres):
+    import numpy as np
 
-    v = get_vehicle(vehicle)
-    d_ratio = float(np.clip(D_SUB / v.diameter, *domain.BOUNDS[4]))
-    ld_ratio = float(np.clip(v.length / v.diameter, *domain.BOUNDS[5]))
-    hull_only = domain.constraint_values(np.array([[0.0, 0.08, 3.0, 0.0, d_ratio, ld_ratio]]))[0, 2:]
-    if (hull_only < 0.0).any():  # (4.6), (4.7): no R_lat term
-        return None
-    low = (0.5048 + 0.5 / d_ratio + 9.425e-3 * ld_ratio / d_ratio) / 8.575  # (4.4), SPEC errata 3
-    high = (0.5 + 2.0 / d_ratio) / 8.575  # (4.5)
-    return max(low, domain.BOUNDS[1, 0]), min(high, domain.BOUNDS[1, 1])
-
-
-def _edges(centres: np.ndarray) -> np.ndarray:
     if len(centres) == 1:
         return np.array([centres[0] - 0.005, centres[0] + 0.005])
     mid = 0.5 * (centres[1:] + centres[:-1])
@@ -178,6 +156,7 @@ def _edges(centres: np.ndarray) -> np.ndarray:
 def draw_envelope(ax, summary: dict, title: str | None = None) -> None:
     """Cells coloured by outcome over the submarine's outline, in R_long, R_lat, with the window
     where the surrogate's interaction acts drawn dashed."""
+    import numpy as np
     from matplotlib.colors import BoundaryNorm, ListedColormap
 
     from nearsub.common.analysis.batch import OUTCOMES
@@ -197,6 +176,8 @@ def draw_envelope(ax, summary: dict, title: str | None = None) -> None:
     )
     hx, hy = submarine_outline()
     ax.fill(hx / L_SUB, hy / L_SUB, color=HULL_COLOUR, zorder=3)
+    from nearsub.common.analysis.envelope import surrogate_window
+
     window = surrogate_window(summary["config"]["vehicle"])
     if window is None:
         note = "the surrogate never acts on this hull: it fails constraint (4.6) or (4.7)"
@@ -242,7 +223,7 @@ def draw_panels(panels: list[tuple[str, dict]], columns: int, suptitle: str, pat
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    rows = int(np.ceil(len(panels) / columns))
+    rows = -(-len(panels) // columns)
     legend_height = 0.55  # [in]
     height = 2.9 * rows + 0.4 + legend_height
     fig, axes = plt.subplots(rows, columns, figsize=(7.0 * columns, height), squeeze=False)
@@ -346,7 +327,7 @@ def cell_mission_command(configs: list, args) -> int:
     from nearsub.common.analysis import envelope as env
     from nearsub.common.physics.hull import L_SUB
 
-    r_long, r_lat = _pair(args.cell_mission, "--cell-mission")
+    r_long, r_lat = args.cell_mission
     out = Path(args.out or "envelopes")
     for config in configs:
         path = out if out.suffix == ".toml" and len(configs) == 1 else out / f"{config.slug()}_cell.toml"

@@ -4,19 +4,20 @@
 
 MODEL defaults to the shipped surrogate, and the table goes next to the model as
 `<stem>-free-stream.npz` (for the shipped model: nearsub/data/surrogate-free-stream.npz). The table
-is the free stream of the high-fidelity panel model (common/hydro_hf.py), so the model must have
+is the free stream of the high-fidelity panel model (common/hydro/high_fidelity.py), so the model must have
 been trained on it: a model whose provenance names another high fidelity (a user's CFD, the
-analytic test fixture) is refused unless --force. Takes a few seconds (common/free_stream.py).
+analytic test fixture) is refused unless --force. Takes a few seconds (common/hydro/free_stream.py).
 """
 
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # as tools/cli.py: one BLAS thread per process
+from nearsub.common.runtime.processes import single_blas_thread
+
+single_blas_thread()  # before numpy loads
 
 from nearsub.common.hydro import free_stream as fs  # noqa: E402
 from nearsub.common.hydro import high_fidelity as hydro_hf  # noqa: E402

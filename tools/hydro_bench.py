@@ -1,5 +1,5 @@
-"""Cost per evaluation of the two hydrodynamic fidelities, and the HF panel-convergence study
-(issue 6; docs/hydro/). Functions only: the CLI wiring lives elsewhere."""
+"""Cost per evaluation of the two hydrodynamic fidelities (`nearsub bench hydro`), and the HF
+panel-convergence study written to docs/hydro/."""
 
 from __future__ import annotations
 

@@ -9,7 +9,6 @@ forces when the log has them. This is how the thesis figures 5-5, 6-2, 6-3 and 6
 from __future__ import annotations
 
 import json
-import sys
 from collections import defaultdict
 from pathlib import Path
 
@@ -147,13 +146,3 @@ def plot_log(path: str | Path, output: str | Path | None = None, title: str | No
     fig.savefig(output, dpi=110)
     plt.close(fig)
     return output
-
-
-def plot_command(args) -> int:
-    try:
-        out = plot_log(args.log, args.output, args.title)
-    except (OSError, ValueError) as exc:
-        print(f"nearsub log plot: {exc}", file=sys.stderr)
-        return 1
-    print(out)
-    return 0

@@ -12,7 +12,6 @@ import functools
 import json
 import math
 import os
-import signal
 import statistics
 import subprocess
 import sys
@@ -28,6 +27,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from nearsub.common.learning.gp import GaussianProcess, MultiOutputGP
 from nearsub.common.runtime import keys
 from nearsub.common.runtime.bus import Bus, Endpoints, free_tcp_port
+from nearsub.common.runtime.processes import single_blas_thread, spawn_app, stop
 from nearsub.common.surrogate.domain import BOUNDS, CONSTRAINT_NAMES, INPUT_NAMES, constraint_values, sample_feasible
 from nearsub.common.surrogate.model import (
     Surrogate,
@@ -45,16 +45,13 @@ from nearsub.common.surrogate.validation import (
     validation_summary,
 )
 
-# Child processes (router, server, fixture fit) use one BLAS thread: on a busy 2-core machine
-# OpenBLAS's threads made an n = 100 fit 25x and a 10,000-point batch 5x slower (measured).
-SINGLE_THREAD_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
-# Targets of the surrogate issue (issue 4): in-process point and batch, query round trip, fit.
+# Speed targets of the surrogate: in-process point and batch, query round trip, fit.
 TARGETS = {"point_us": 50.0, "batch_ms": 50.0, "query_median_us": 500.0, "query_p99_us": 2000.0, "fit_s": 1.0}
 
 
 def child_env() -> dict[str, str]:
     """This environment with single-threaded BLAS, for the child processes we start."""
-    return {**os.environ, **SINGLE_THREAD_ENV}
+    return single_blas_thread(dict(os.environ))
 
 
 def write_analytic_model(path: str | os.PathLike, n: int = 100, seed: int = 0) -> Path:
@@ -67,18 +64,6 @@ def write_analytic_model(path: str | os.PathLike, n: int = 100, seed: int = 0) -
     return Path(path)
 
 
-def _stop(process: subprocess.Popen) -> None:
-    """SIGTERM the process group we started, SIGKILL it if it has not gone after 5 s."""
-    for signum, wait in ((signal.SIGTERM, 5.0), (signal.SIGKILL, 10.0)):
-        if process.poll() is not None:
-            return
-        try:
-            os.killpg(process.pid, signum)
-            process.wait(timeout=wait)
-        except (ProcessLookupError, subprocess.TimeoutExpired):
-            pass
-
-
 @contextmanager
 def local_server(model_path: str | os.PathLike, community: str, timeout: float = 30.0) -> Iterator[tuple[Bus, str]]:
     """A router on a free loopback port and a surrogate server (separate processes); yields a client
@@ -89,19 +74,10 @@ def local_server(model_path: str | os.PathLike, community: str, timeout: float =
     with tempfile.TemporaryFile() as output:
         try:
             for argv in (
-                ["nearsub.apps.router", "--listen", endpoint, "--with-parent"],
-                ["nearsub.apps.surrogate", "--model", str(model_path), "--community", community, "--connect", endpoint],
+                ["router", "--listen", endpoint, "--with-parent"],
+                ["surrogate", "--model", str(model_path), "--community", community, "--connect", endpoint],
             ):
-                started.append(
-                    subprocess.Popen(
-                        [sys.executable, "-m", *argv],
-                        stdout=output,
-                        stderr=subprocess.STDOUT,
-                        stdin=subprocess.DEVNULL,
-                        env=child_env(),
-                        process_group=0,
-                    )
-                )
+                started.append(spawn_app(argv[0], argv[1:], output))
             with Bus(Endpoints("client", (endpoint,))) as bus:
                 token = keys.alive(community, "surrogate", "*")
                 end = time.monotonic() + timeout
@@ -113,8 +89,7 @@ def local_server(model_path: str | os.PathLike, community: str, timeout: float =
                     time.sleep(0.05)
                 yield bus, endpoint
         finally:
-            for process in reversed(started):
-                _stop(process)
+            stop(started)
 
 
 # ---------------------------------------------------------------------------------- info

@@ -1,6 +1,6 @@
-"""`nearsub swap COMMUNITY APP --with SPEC`: replace a running app without stopping the mission.
+"""`nearsub swap COMMUNITY APP --with SETTINGS`: replace a running app without stopping the mission.
 
-SPEC is a comma-separated list of settings of the new app, e.g. `behaviour=waypoints,period=5`;
+SETTINGS is a comma-separated list of settings of the new app, e.g. `behaviour=waypoints,period=5`;
 keys are relative to the app's mission section (`apps.helm`) unless they start with `apps.`.
 The launcher pauses the clock at the next step boundary (or at `--at-step N`), starts the new
 instance, which takes over the old one's progress (the current waypoint) and inputs, retires the
@@ -9,40 +9,51 @@ old one and resumes.
 
 from __future__ import annotations
 
+import argparse
 import json
 import sys
-import uuid
 
-import msgpack
-
-from nearsub.common.runtime import keys
-
-from .connect import Caller, open_bus
+from .connect import add_router_argument, open_bus
 
 
-def parse_spec(spec: str | None) -> list[str]:
-    if not spec:
-        return []
+def add_parser(subparsers) -> None:
+    p = subparsers.add_parser("swap")
+    p.add_argument("community", help="mission name")
+    p.add_argument("app", help="role to replace, e.g. helm")
+    p.add_argument(
+        "--with",
+        dest="with_",
+        type=settings_list,
+        default=[],
+        metavar="SETTINGS",
+        help="settings of the new app: key=value,key=value",
+    )
+    p.add_argument("--behaviour", help="shorthand for --with behaviour=NAME")
+    p.add_argument("--at-step", type=int, help="swap when the clock reaches this step (default: now)")
+    p.add_argument("--timeout", type=float, default=120.0, help="wall seconds to wait for the swap")
+    p.add_argument("--json", action="store_true")
+    add_router_argument(p)
+    p.set_defaults(func=swap_command)
+
+
+def settings_list(spec: str) -> list[str]:
+    """'a=1,b=2' -> ['a=1', 'b=2'], for argparse."""
     items = [item.strip() for item in spec.split(",") if item.strip()]
     for item in items:
         if "=" not in item:
-            raise ValueError(f"--with item {item!r} is not key=value")
+            raise argparse.ArgumentTypeError(f"item {item!r} is not key=value")
     return items
 
 
 def swap_command(args) -> int:
-    try:
-        overrides = parse_spec(args.with_)
-    except ValueError as exc:
-        print(f"nearsub swap: {exc}", file=sys.stderr)
-        return 2
+    overrides = list(args.with_)
     if args.behaviour:
         overrides.append(f"behaviour={args.behaviour}")
-    try:
-        bus, community = open_bus(args)
-    except LookupError as exc:
-        print(f"nearsub swap: {exc}", file=sys.stderr)
-        return 2
+    bus, community = open_bus(args)  # no such mission: the command line reports it, exit 2
+    import msgpack
+
+    from nearsub.common.runtime import keys
+
     request = msgpack.packb({"cmd": "swap", "app": args.app, "set": overrides, "at_step": args.at_step})
     with bus:
         replies = bus.request(keys.launcher_control(community), request, timeout=args.timeout)
@@ -55,25 +66,4 @@ def swap_command(args) -> int:
         return 1
     result = msgpack.unpackb(payload)
     print(json.dumps(result) if args.json else f"swapped {result['old']} -> {result['new']} at step {result['step']}")
-    return 0
-
-
-def clock_command(args) -> int:
-    """`nearsub clock COMMUNITY status|pause|resume`."""
-    try:
-        bus, community = open_bus(args)
-    except LookupError as exc:
-        print(f"nearsub clock: {exc}", file=sys.stderr)
-        return 2
-    extra = {"at": args.at_step} if args.action == "pause" and args.at_step is not None else {}
-    with bus:
-        caller = Caller(bus, community, f"tool-{uuid.uuid4().hex[:8]}")
-        reply = caller.call("clock", args.action, timeout=600.0 if extra else 10.0, **extra)
-    if reply is None:
-        print(f"nearsub clock: the clock of {community!r} did not answer", file=sys.stderr)
-        return 1
-    if not reply.ok:
-        print(f"nearsub clock: {reply.error}", file=sys.stderr)
-        return 1
-    print(json.dumps(reply.data))
     return 0

@@ -7,13 +7,38 @@ import sys
 import time
 from collections import defaultdict, deque
 
-import msgpack
+from .connect import add_connect_arguments, open_bus
 
-from nearsub.common.runtime import keys
-from nearsub.common.runtime.bus import Mailbox
-from nearsub.common.runtime.messages import MessageError, decode, encode, model_for_key
 
-from .connect import open_bus
+def add_parser(subparsers) -> None:
+    p = subparsers.add_parser("tap")
+    tap = p.add_subparsers(dest="tap_command", required=True)
+    t = tap.add_parser("list", help="apps and topics alive now")
+    add_connect_arguments(t)
+    t.add_argument("--json", action="store_true")
+    t.set_defaults(func=tap_list)
+    t = tap.add_parser("echo", help="print messages of a key expression (wildcards * and **)")
+    t.add_argument("key")
+    t.add_argument("--field", help="print only this field (dotted path)")
+    t.add_argument("--count", type=int, help="stop after N messages")
+    t.add_argument("--timeout", type=float, help="stop after S wall seconds")
+    t.add_argument("--json", action="store_true", help="JSON lines (the default when piped)")
+    add_connect_arguments(t)
+    t.set_defaults(func=tap_echo)
+    t = tap.add_parser("hz", help="message rates per key, in simulated time")
+    t.add_argument("key")
+    t.add_argument("--window", type=int, default=100, help="samples per rate estimate")
+    t.add_argument("--duration", type=float, default=5.0, help="wall seconds to listen")
+    t.add_argument("--json", action="store_true")
+    add_connect_arguments(t)
+    t.set_defaults(func=tap_hz)
+    t = tap.add_parser("pub", help="publish one message by hand, validated against its schema")
+    t.add_argument("key")
+    t.add_argument("value", nargs="?", default="{}", help="JSON object of fields")
+    t.add_argument("--no-validate", action="store_true", help="send the JSON as msgpack without checking it")
+    t.add_argument("--raw-hex", help="send these bytes instead (fault injection)")
+    add_connect_arguments(t)
+    t.set_defaults(func=tap_pub)
 
 
 def _project(value: dict, field: str | None):
@@ -30,6 +55,10 @@ def _project(value: dict, field: str | None):
 
 
 def _decode_any(key: str, payload: bytes) -> tuple[dict | None, str | None]:
+    import msgpack
+
+    from nearsub.common.runtime.messages import MessageError, decode, model_for_key
+
     model = model_for_key(key)
     try:
         if model is not None:
@@ -40,6 +69,8 @@ def _decode_any(key: str, payload: bytes) -> tuple[dict | None, str | None]:
 
 
 def tap_list(args) -> int:
+    from nearsub.common.runtime import keys
+
     bus, community = open_bus(args)
     with bus:
         prefix = keys.community_root(community) if community else "nearsub"
@@ -64,6 +95,8 @@ def tap_list(args) -> int:
 def tap_echo(args) -> int:
     as_json = args.json or not sys.stdout.isatty()
     bus, _ = open_bus(args, args.key)
+    from nearsub.common.runtime.bus import Mailbox
+
     printed = 0
     deadline = time.monotonic() + args.timeout if args.timeout else None
     with bus:
@@ -100,6 +133,8 @@ def tap_echo(args) -> int:
 def tap_hz(args) -> int:
     """Message rates per key, in simulated time (the message's t), like `ros2 topic hz`."""
     bus, _ = open_bus(args, args.key)
+    from nearsub.common.runtime.bus import Mailbox
+
     times: dict[str, deque] = defaultdict(lambda: deque(maxlen=args.window))
     deadline = time.monotonic() + args.duration
     next_report = time.monotonic() + 1.0
@@ -131,6 +166,10 @@ def _print_rates(times, as_json: bool) -> None:
 def tap_pub(args) -> int:
     """Publish one message by hand (uPokeDB). It is validated against the topic's schema unless
     --no-validate; --raw-hex sends arbitrary bytes (for fault injection)."""
+    import msgpack
+
+    from nearsub.common.runtime.messages import MessageError, decode, encode, model_for_key
+
     if args.raw_hex is not None:
         payload = bytes.fromhex(args.raw_hex)
     else:
@@ -154,7 +193,7 @@ def tap_pub(args) -> int:
                 return 2
     bus, _ = open_bus(args, args.key)
     with bus:
-        # A fresh session drops data put before it knows a subscriber (zenoh-notes.md P8).
+        # A fresh session drops data put before it knows a subscriber (docs/design.md, "Transport").
         if not bus.put_when_matched(args.key, payload, wait=5.0):
             print(f"nearsub tap pub: nobody subscribes to {args.key}; published anyway", file=sys.stderr)
         time.sleep(0.1)  # let the session flush before it closes

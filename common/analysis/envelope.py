@@ -35,8 +35,10 @@ from pydantic import BaseModel, ConfigDict, Field
 from nearsub.common.analysis.batch import OUTCOMES, BatchResult, run_batch
 from nearsub.common.mission.schema import BEHAVIOURS, Mission, mission_from_dict
 from nearsub.common.physics import proximity as events
-from nearsub.common.physics.hull import L_SUB
+from nearsub.common.physics.hull import D_SUB, L_SUB
 from nearsub.common.physics.vehicles import get_vehicle
+from nearsub.common.surrogate import domain
+from nearsub.common.surrogate.maps import r_lat_window
 from nearsub.common.surrogate.model import Surrogate, load_surrogate
 
 # The track-line runs this far ahead of the start: the lead point never reaches its end in a sweep.
@@ -182,6 +184,21 @@ def starts_and_tracks(config: EnvelopeConfig, x: np.ndarray, y: np.ndarray):
 
 
 @lru_cache(maxsize=4)
+def surrogate_window(vehicle: str) -> tuple[float, float] | None:
+    """R_lat range where the vehicle feels the submarine: table 4.2 cut by (4.4) and (4.5), at the
+    hull ratios the interaction uses (clipped to the trained range, `interaction_at`). None when
+    the hull fails (4.6) or (4.7) (the NPS AUV II fails (4.6)): the blend weight is then zero at
+    every position, and the surrogate never acts on that vehicle."""
+    v = get_vehicle(vehicle)
+    d_ratio = float(np.clip(D_SUB / v.diameter, *domain.BOUNDS[4]))
+    ld_ratio = float(np.clip(v.length / v.diameter, *domain.BOUNDS[5]))
+    hull_only = domain.constraint_values(np.array([[0.0, 0.08, 3.0, 0.0, d_ratio, ld_ratio]]))[0, 2:]
+    if (hull_only < 0.0).any():  # (4.6), (4.7): no R_lat term
+        return None
+    low, high = r_lat_window(d_ratio, ld_ratio)
+    return float(low), float(high)
+
+
 def cached_surrogate(model: str) -> Surrogate:
     """The surrogate of a model file (empty: the shipped one), loaded once per process."""
     return load_surrogate(model or None)

@@ -6,4 +6,5 @@
 - lifecycle: the app core protocol (start-up, new mail, iterate), the schedule, the inbox and the in-process runner.
 - clock: the clock's grant, pause and stall bookkeeping, free of transport.
 - logfile: MCAP mission logs (write and read).
+- processes: the processes nearsub starts: one BLAS thread, spawning apps, the stop ladder.
 """

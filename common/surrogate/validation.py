@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import math
 import multiprocessing
-import os
 import time
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -21,6 +20,7 @@ import numpy as np
 from scipy.stats import qmc
 
 from nearsub.common.physics.vehicles import REMUS100, Vehicle
+from nearsub.common.runtime.processes import single_blas_thread
 from nearsub.common.surrogate.domain import BOUNDS, INPUT_NAMES, OUTPUT_NAMES, constraints_ok
 
 # Thesis table 4.3: MAE of X', Y', N' on 500 test points, and its error equivalents
@@ -29,7 +29,6 @@ THESIS_MAE = np.array([7.492e-4, 7.220e-4, 7.629e-4])
 THESIS_EQUIVALENTS = np.array([10.26, 1.78, 3.95])
 EQUIVALENT_UNITS = ("% X_prop", "deg rudder", "deg rudder")
 THESIS_TEST_POINTS = 500  # section 4.6
-_THREAD_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 
 
 def latin_hypercube_feasible(n: int, seed: int = 0) -> np.ndarray:
@@ -79,8 +78,7 @@ def evaluate_rows(
             if on_row is not None:
                 on_row(i)
     else:
-        for var in _THREAD_VARS:  # inherited by the spawned workers
-            os.environ.setdefault(var, "1")
+        single_blas_thread()  # inherited by the spawned workers
         with ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
             futures = {pool.submit(_timed_rows, function, row[None, :]): i for i, row in enumerate(X)}
             for future in as_completed(futures):

@@ -1,4 +1,4 @@
-"""`nearsub log`: inspect and export mission logs (MCAP)."""
+"""`nearsub log info|export|plot`: inspect, export and draw mission logs (MCAP)."""
 
 from __future__ import annotations
 
@@ -7,8 +7,30 @@ import json
 import sys
 from collections import Counter, defaultdict
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from nearsub.common.runtime.logfile import INVALID_SUFFIX, LogContents, read_log
+if TYPE_CHECKING:
+    from nearsub.common.runtime.logfile import LogContents
+
+
+def add_parser(subparsers) -> None:
+    p = subparsers.add_parser("log")
+    lg = p.add_subparsers(dest="log_command", required=True)
+    t = lg.add_parser("info", help="topics, counts, rates and outcome of a log")
+    t.add_argument("log")
+    t.add_argument("--json", action="store_true")
+    t.set_defaults(func=info_command)
+    t = lg.add_parser("export", help="export as csv, json lines or MOOS alog")
+    t.add_argument("log")
+    t.add_argument("--format", choices=("csv", "json", "alog"), default="json")
+    t.add_argument("--topic", help="key expression to select (wildcards allowed)")
+    t.add_argument("-o", "--output", help="output file (json, alog) or folder (csv)")
+    t.set_defaults(func=export_command)
+    t = lg.add_parser("plot", help="trajectory in the submarine frame and time series (PNG)")
+    t.add_argument("log")
+    t.add_argument("-o", "--output", help="PNG file (default: next to the log)")
+    t.add_argument("--title")
+    t.set_defaults(func=plot_command)
 
 
 def flatten(value: dict) -> dict:
@@ -46,6 +68,8 @@ def _matches(pattern: str, topic: str) -> bool:
 
 
 def info_command(args) -> int:
+    from nearsub.common.runtime.logfile import read_log
+
     contents = read_log(args.log)
     counts = Counter(r.topic for r in contents.records)
     spans = defaultdict(list)
@@ -83,6 +107,8 @@ def info_command(args) -> int:
 
 
 def export_command(args) -> int:
+    from nearsub.common.runtime.logfile import read_log
+
     contents = read_log(args.log)
     records = list(_select(contents, args.topic))
     out = open(args.output, "w", newline="") if args.output and args.format != "csv" else sys.stdout
@@ -101,7 +127,10 @@ def export_command(args) -> int:
 
 
 def _write_alog(records, contents: LogContents, out) -> None:
-    """MOOS alog: a %% header, then `time VARIABLE SOURCE VALUE` per message (moos-notes.md 7)."""
+    """MOOS alog: a %% header, then `time VARIABLE SOURCE VALUE` per message (docs/design.md,
+    "MOOS-IvP conventions")."""
+    from nearsub.common.runtime.logfile import INVALID_SUFFIX
+
     mission = contents.metadata.get("mission", {}).get("name", "")
     out.write(f"%% LOG FILE:       nearsub mission {mission}\n%% LOGSTART        0.0\n")
     for r in records:
@@ -114,6 +143,8 @@ def _write_alog(records, contents: LogContents, out) -> None:
 
 
 def _write_csv(records, output: str | None) -> int:
+    from nearsub.common.runtime.logfile import INVALID_SUFFIX
+
     by_topic = defaultdict(list)
     for r in records:
         if not r.topic.endswith(INVALID_SUFFIX):
@@ -139,4 +170,16 @@ def _write_csv(records, output: str | None) -> int:
         writer.writerows(rows)
         if target is not sys.stdout:
             target.close()
+    return 0
+
+
+def plot_command(args) -> int:
+    from .plot import plot_log
+
+    try:
+        out = plot_log(args.log, args.output, args.title)
+    except (OSError, ValueError) as exc:
+        print(f"nearsub log plot: {exc}", file=sys.stderr)
+        return 1
+    print(out)
     return 0

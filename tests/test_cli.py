@@ -1,0 +1,90 @@
+"""The `nearsub` command line: every subcommand registers from its module, the listing and the light
+tools' parsers load no numerical or transport library, and bad input gets one line and exit 2."""
+
+import subprocess
+import sys
+
+import pytest
+
+from conftest import nearsub
+from nearsub.tools.cli import TOOLS, build_parser
+
+HEAVY = ("numpy", "scipy", "zenoh", "matplotlib")
+# Tools whose parser and whose answer without a running mission need none of HEAVY.
+LIGHT_TOOLS = ("launch", "tap", "log", "swap", "clock", "router", "al-bench", "maps", "envelope", "validate")
+
+
+def loaded_after(code: str) -> list[str]:
+    """The HEAVY modules a fresh interpreter has loaded after running `code`."""
+    probe = f"import sys\n{code}\nprint('loaded:', *(m for m in {HEAVY!r} if m in sys.modules))"
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    return done.stdout.splitlines()[-1].split()[1:]
+
+
+def test_help_lists_every_subcommand_without_loading_numpy_scipy_zenoh_or_matplotlib():
+    code = "from nearsub.tools.cli import main\ntry:\n    main(['--help'])\nexcept SystemExit:\n    pass"
+    assert loaded_after(code) == []
+    listing = nearsub("--help").stdout
+    assert all(name in listing for name in TOOLS)
+
+
+@pytest.mark.parametrize("command", LIGHT_TOOLS)
+def test_a_light_tools_parser_loads_no_heavy_module(command):
+    assert loaded_after(f"from nearsub.tools.cli import build_parser\nbuild_parser({command!r})") == []
+
+
+def test_tap_list_with_nothing_running_says_so_without_loading_zenoh(runtime_dir):
+    code = (
+        "from nearsub.tools.cli import main\n"
+        "assert main(['tap', 'list']) == 2, 'exit code'"  # the registry is empty
+    )
+    env_code = f"import os\nos.environ['NEARSUB_RUNTIME_DIR'] = {str(runtime_dir)!r}\n{code}"
+    assert loaded_after(env_code) == []
+    done = nearsub("tap", "list")
+    assert done.returncode == 2
+    assert done.stderr.strip() == (
+        "nearsub tap: no mission is running (start one with `nearsub launch`, or pass --connect)"
+    )
+
+
+@pytest.mark.parametrize("command", sorted(TOOLS))
+def test_every_subcommand_builds_its_parser_from_its_module(command):
+    parser = build_parser(command)
+    with pytest.raises(SystemExit) as stop:
+        parser.parse_args([command, "--help"])
+    assert stop.value.code == 0
+
+
+def test_an_unknown_subcommand_is_named():
+    done = nearsub("nope")
+    assert done.returncode == 2
+    assert "invalid choice: 'nope'" in done.stderr and "Traceback" not in done.stderr
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["clock", "nobody", "status"], "nearsub clock: no running mission named 'nobody'"),
+        (["launch", "missing.toml"], "nearsub launch: "),
+        (["envelope", "--behaviour", "drift"], "nearsub envelope: --behaviour 'drift' is not one of waypoints"),
+        (["al-bench", "sudoku"], "nearsub al-bench: unknown problem 'sudoku'"),
+    ],
+)
+def test_bad_input_gets_one_line_and_exit_2(runtime_dir, argv, message):
+    done = nearsub(*argv)
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.startswith(message) and len(done.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["envelope", "--grid", "forty"], "argument --grid: wants NxM (e.g. 40x20), got 'forty'"),
+        (["swap", "alpha", "helm", "--with", "period"], "argument --with: item 'period' is not key=value"),
+    ],
+)
+def test_a_malformed_option_value_is_named_by_argparse(argv, message):
+    done = nearsub(*argv)
+    assert done.returncode == 2
+    assert message in done.stderr and "Traceback" not in done.stderr

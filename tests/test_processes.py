@@ -1,0 +1,78 @@
+"""The process policies: one BLAS thread in what nearsub starts, app spawning, the stop ladder."""
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+
+from nearsub.common.runtime import processes
+
+# A child that ignores SIGINT and SIGTERM, says so, and would otherwise sleep for a minute.
+STUBBORN = (
+    "import signal, time; signal.signal(signal.SIGINT, signal.SIG_IGN); "
+    "signal.signal(signal.SIGTERM, signal.SIG_IGN); print('ready', flush=True); time.sleep(60)"
+)
+
+
+def test_single_blas_thread_sets_the_variables_and_keeps_a_users_choice():
+    env = processes.single_blas_thread({"OMP_NUM_THREADS": "4"})
+    assert env == {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "4", "MKL_NUM_THREADS": "1"}
+
+
+def test_single_blas_thread_reaches_a_child(monkeypatch):
+    for name in processes.BLAS_THREAD_VARIABLES:
+        monkeypatch.delenv(name, raising=False)
+    processes.single_blas_thread()
+    code = f"import os; print(' '.join(os.environ[n] for n in {processes.BLAS_THREAD_VARIABLES!r}))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.split() == ["1", "1", "1"]
+
+
+def test_spawned_app_has_one_blas_thread_and_a_process_group_of_its_own(monkeypatch):
+    for name in processes.BLAS_THREAD_VARIABLES:
+        monkeypatch.delenv(name, raising=False)
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    process = processes.spawn_app("router", ["--listen", f"tcp/127.0.0.1:{port}", "--with-parent"], subprocess.DEVNULL)
+    try:
+        while b"nearsub.apps.router" not in open(f"/proc/{process.pid}/cmdline", "rb").read():
+            time.sleep(0.01)  # until the child has exec'd: before, /proc shows the parent's environment
+        text = open(f"/proc/{process.pid}/environ").read()
+        environ = dict(item.split("=", 1) for item in text.split("\0") if "=" in item)
+        group = os.getpgid(process.pid)
+    finally:
+        processes.stop([process], wait=2.0)
+    assert {name: environ.get(name) for name in processes.BLAS_THREAD_VARIABLES} == dict.fromkeys(
+        processes.BLAS_THREAD_VARIABLES, "1"
+    )
+    assert group == process.pid
+    assert "OPENBLAS_NUM_THREADS" not in os.environ  # the parent's own environment is left alone
+
+
+def test_stop_escalates_to_sigkill_for_a_process_ignoring_sigint_and_sigterm():
+    process = subprocess.Popen([sys.executable, "-c", STUBBORN], stdout=subprocess.PIPE, text=True, process_group=0)
+    assert process.stdout.readline().strip() == "ready"
+    start = time.monotonic()
+    processes.stop([process], wait=0.5)
+    elapsed = time.monotonic() - start
+    assert process.returncode == -signal.SIGKILL
+    assert 1.0 <= elapsed < 5.0  # two ignored rungs of 0.5 s each, then the kill
+
+
+def test_stop_returns_at_once_when_the_first_rung_is_heeded():
+    process = subprocess.Popen(
+        [sys.executable, "-c", "import time; time.sleep(60)"], stderr=subprocess.DEVNULL, process_group=0
+    )
+    start = time.monotonic()
+    processes.stop([process], wait=10.0)
+    assert process.returncode == -signal.SIGINT  # Python leaves by SIGINT on an uncaught KeyboardInterrupt
+    assert time.monotonic() - start < 5.0
+
+
+def test_stop_waits_out_the_grace_for_a_process_that_leaves_on_its_own():
+    process = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(0.3)"], process_group=0)
+    processes.stop([process], grace=10.0, wait=0.1)
+    assert process.returncode == 0

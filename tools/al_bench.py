@@ -1,0 +1,195 @@
+"""`nearsub al-bench PROBLEM`: the thesis's active-learning comparisons, as files and tables.
+
+The runner and its statistics are `nearsub.common.learning.albench`; this module draws and writes.
+Outputs in --out: PROBLEM.csv (MAPE (2.18) in percent per method, repeat, HF count and output),
+PROBLEM.png (median and interquartile band against the number of HF samples), PROBLEM.json
+(median, quartiles, mean +/- 95 % CI, the paired win rate of the reference method over each
+baseline, the crossover HF counts and the wall time). Everything follows from --seed.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+from typing import Any
+
+_LABELS = {
+    "nmmf": "NMMF",
+    "myopic": "myopic MF",
+    "myopic-lf0": "myopic MF, LF only at HF points",
+    "hf-us": "HF-only US",
+    "max-variance": "maximum variance (2.31)",
+    "round-robin": "round robin (2.30)",
+    "weighted": "weighted (2.32)",
+}
+# The thesis's statements about each figure, printed next to the measured crossovers.
+THESIS_CLAIMS = {
+    "park": "figure 2-5: NMMF most accurate after about 18 HF samples",
+    "borehole": "figure 2-8: NMMF worst at first, most accurate after about 30-40 HF samples",
+    "trebuchet": "figure 2-7: NMMF more accurate with fewer HF samples; benefit not substantial",
+    "wing": "figure 2-9: NMMF lowest error as HF samples are added",
+    "multi-output": "figure 2-10: maximum variance slightly best (except y1 below 20 samples)",
+}
+
+
+# ---------------------------------------------------------------------- outputs
+def write_outputs(result: dict[str, Any], summary: dict[str, Any], out: Path) -> dict[str, Path]:
+    """CSV of every MAPE, JSON summary and PNG figure in `out`; returns their paths."""
+    from nearsub.common.learning.albench import repeat_seed
+
+    out.mkdir(parents=True, exist_ok=True)
+    stem = out / result["problem"]
+    paths = {
+        "csv": stem.with_suffix(".csv"),
+        "json": stem.with_suffix(".json"),
+        "png": stem.with_suffix(".png"),
+    }
+    with open(paths["csv"], "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["problem", "method", "repeat", "seed", "n_hf", "output", "mape_percent"])
+        for m in result["methods"]:
+            a = result["mape"][m]
+            for r in range(a.shape[0]):
+                for i, n_hf in enumerate(result["n_hf"]):
+                    for j, name in enumerate(result["outputs"]):
+                        w.writerow(
+                            [
+                                result["problem"],
+                                m,
+                                r,
+                                repeat_seed(result["seed"], r),
+                                n_hf,
+                                name,
+                                repr(float(a[r, i, j])),
+                            ]
+                        )
+    meta = {k: v for k, v in result.items() if k != "mape"}
+    meta["thesis_claim"] = THESIS_CLAIMS.get(result["problem"], "")
+    with open(paths["json"], "w") as fh:
+        json.dump({**meta, "summary": summary}, fh, indent=1)
+    _plot(result, summary, paths["png"])
+    return paths
+
+
+def _plot(result: dict[str, Any], summary: dict[str, Any], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    outputs = list(summary["outputs"])
+    cols = min(2, len(outputs))
+    rows = -(-len(outputs) // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(5.6 * cols, 4.2 * rows), squeeze=False)
+    counts = result["n_hf"]
+    for ax, name in zip(axes.flat, outputs, strict=True):
+        for m in result["methods"]:
+            s = summary["outputs"][name]["stats"][m]
+            (line,) = ax.plot(counts, s["median"], label=_LABELS.get(m, m))
+            ax.fill_between(counts, s["q25"], s["q75"], color=line.get_color(), alpha=0.2)
+        ax.set_yscale("log")
+        ax.set_xlabel("number of HF samples")
+        ax.set_ylabel("MAPE [%] (median, IQR band)")
+        ax.set_title(name if len(outputs) > 1 else result["problem"])
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend()
+    fig.suptitle(f"{result['problem']}: {result['repeats']} paired repeats, seed {result['seed']}")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def _print_report(result: dict[str, Any], summary: dict[str, Any], paths: dict[str, Path]) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    console = Console(width=max(Console().width, 150))  # wide tables stay legible in logs
+    counts, ref = result["n_hf"], summary["reference"]
+    step = max(1, (counts[-1] - counts[0]) // 9)
+    shown = [i for i, n in enumerate(counts) if (n - counts[0]) % step == 0 or n == counts[-1]]
+    for name, out in summary["outputs"].items():
+        table = Table(title=f"{result['problem']} / {name}: MAPE [%] median (mean ± 95 % CI)")
+        table.add_column("HF")
+        for m in result["methods"]:
+            table.add_column(_LABELS.get(m, m))
+        for b in out["win_rate"]:
+            table.add_column(f"P({ref} < {b})")
+        for i in shown:
+            row = [str(counts[i])]
+            for m in result["methods"]:
+                s = out["stats"][m]
+                row.append(f"{s['median'][i]:.3g} ({s['mean'][i]:.3g} ± {s['ci95_half_width'][i]:.2g})")
+            row += [f"{out['win_rate'][b][i]:.2f}" for b in out["win_rate"]]
+            table.add_row(*row)
+        console.print(table)
+        for b, n in out["crossover"].items():
+            when = f"from {n} HF samples on" if n is not None else "not by the end"
+            console.print(f"  {ref} median below {b}: {when}")
+    console.print(f"thesis: {THESIS_CLAIMS.get(result['problem'], '')}")
+    console.print(f"wall time {result['wall_seconds']:.1f} s with {result['jobs']} job(s); files:")
+    for p in paths.values():
+        console.print(f"  {p}")
+
+
+def al_bench_command(args) -> int:
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
+
+    from nearsub.common.learning.albench import run_benchmark, summarise
+    from nearsub.common.learning.testproblems import get_problem
+
+    get_problem(args.problem)  # an unknown name is reported before the progress bar starts
+    settings = {"n_lookahead": args.lookahead, "n_restarts": args.restarts, "n_polish": args.polish}
+    if args.learn_rho:
+        settings["rho"] = None
+    columns = ("[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
+    with Progress(*columns) as bar:
+        job = bar.add_task(f"al-bench {args.problem}", total=None)
+        result = run_benchmark(
+            args.problem,
+            args.repeats,
+            args.hf_samples,
+            args.jobs,
+            args.seed,
+            n_lf0=args.n_lf0,
+            n_hf0=args.n_hf0,
+            methods=tuple(args.methods.split(",")) if args.methods else None,
+            test_points=args.test_points,
+            on_task_done=lambda done, total: bar.update(job, completed=done, total=total),
+            **settings,
+        )
+    summary = summarise(result)
+    out = Path(args.out)
+    if args.learn_rho:
+        out = out / "learned-rho"
+    if args.methods:
+        out = out / args.methods.replace(",", "_")
+    paths = write_outputs(result, summary, out)
+    _print_report(result, summary, paths)
+    return 0
+
+
+def add_parser(subparsers) -> None:
+    """Register `al-bench` on the `nearsub` command line."""
+    p = subparsers.add_parser("al-bench")
+    p.add_argument(
+        "problem", help="benchmark of thesis sections 2.4-2.5: park, borehole, trebuchet, wing or multi-output"
+    )
+    p.add_argument("--repeats", type=int, default=10, help="paired repeats (default 10)")
+    p.add_argument("--hf-samples", type=int, default=50, help="HF budget incl. the initial design")
+    p.add_argument("--jobs", type=int, default=1, help="worker processes")
+    p.add_argument("--seed", type=int, default=0, help="base seed: designs, candidates, test set")
+    p.add_argument("--n-lf0", type=int, help="initial LF design size (default 4 (d + 1))")
+    p.add_argument("--n-hf0", type=int, help="initial HF design size (default d + 1)")
+    p.add_argument("--lookahead", type=int, default=10, help="NMMF temporary LF points (thesis: 10)")
+    p.add_argument("--restarts", type=int, default=2, help="optimiser starts per GP refit")
+    p.add_argument("--polish", type=int, default=3, help="candidates polished by L-BFGS-B")
+    p.add_argument("--test-points", type=int, default=2000, help="fixed test set size")
+    p.add_argument(
+        "--methods",
+        help="comma list, reference first (default nmmf,myopic,hf-us; multi-output: "
+        "max-variance,round-robin,weighted); extra baseline: myopic-lf0",
+    )
+    p.add_argument("--learn-rho", action="store_true", help="ablation: learn rho instead of 1")
+    p.add_argument("--out", default="al-bench", help="output folder (default: al-bench)")
+    p.set_defaults(func=al_bench_command)

@@ -1,0 +1,438 @@
+"""The launcher of `nearsub launch`: a mission as separate processes (the pAntler of nearsub).
+
+Start order: router, logger, sim, pid, helm, clock; each app is waited for (liveliness) before the
+next group starts, so nothing is published before the logger listens. The launcher supervises:
+an app that exits or crashes is reported with the step within a fraction of a second, the
+mission is ended (the logger closes its file), and the rest is stopped. Stopping escalates per
+process group: SIGINT, then SIGTERM, then SIGKILL, 5 s apart (ros2 launch's ladder).
+
+It also serves `nearsub swap` (see `swap`): pause the clock at a step boundary, start the new app
+instance, let it take over from the old one, retire the old one, resume.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections import Counter
+from dataclasses import dataclass, field
+from datetime import datetime
+from pathlib import Path
+
+import msgpack
+
+from nearsub.common.mission.schema import (
+    Mission,
+    MissionError,
+    RunConfig,
+    apply_overrides,
+    mission_from_dict,
+)
+from nearsub.common.runtime import keys
+from nearsub.common.runtime.bus import Bus, Endpoints, Mailbox, free_tcp_port
+from nearsub.common.runtime.lifecycle import ORDER
+from nearsub.common.runtime.messages import (
+    Event,
+    MessageError,
+    MissionEnd,
+    decode,
+    encode,
+    model_for_key,
+)
+from nearsub.common.runtime.processes import spawn_app, stop
+
+from . import registry
+from .caller import Caller
+
+NORMAL_OUTCOMES = ("completed", "time_limit", "collision")
+EXIT_GRACE = 2.0  # wall seconds to wait for the mission end after an app left with code 0
+
+
+class LaunchError(RuntimeError):
+    pass
+
+
+@dataclass
+class Child:
+    instance: str
+    role: str
+    process: subprocess.Popen
+    output: Path
+    retiring: bool = False
+
+    def tail(self, lines: int = 12) -> str:
+        try:
+            text = self.output.read_text(errors="replace").splitlines()
+        except OSError:
+            return ""
+        return "\n".join(f"    {line}" for line in text[-lines:])
+
+
+@dataclass
+class Summary:
+    community: str
+    outcome: str = "error"
+    reason: str = ""
+    steps: int = 0
+    sim_time: float = 0.0
+    wall_time: float = 0.0
+    run_wall_time: float = 0.0
+    waypoints_reached: int = 0
+    events: Counter = field(default_factory=Counter)
+    log: str = ""
+    failed_app: str | None = None
+    swaps: list[dict] = field(default_factory=list)
+
+    @property
+    def steps_per_second(self) -> float:
+        """Lock-stepped steps per wall second from the first tick to the mission end."""
+        return self.steps / self.run_wall_time if self.run_wall_time > 0 else 0.0
+
+    def as_dict(self) -> dict:
+        return {
+            "community": self.community,
+            "outcome": self.outcome,
+            "reason": self.reason,
+            "steps": self.steps,
+            "sim_time": self.sim_time,
+            "wall_time": round(self.wall_time, 3),
+            "run_wall_time": round(self.run_wall_time, 3),
+            "steps_per_second": round(self.steps_per_second, 1),
+            "waypoints_reached": self.waypoints_reached,
+            "events": dict(self.events),
+            "log": self.log,
+            "failed_app": self.failed_app,
+            "swaps": self.swaps,
+        }
+
+    def text(self) -> str:
+        events = ", ".join(f"{k} {v}" for k, v in sorted(self.events.items())) or "none"
+        lines = [
+            f"mission {self.community}: {self.outcome}" + (f" ({self.reason})" if self.reason else ""),
+            f"  steps {self.steps}, simulated {self.sim_time:.2f} s, wall {self.wall_time:.2f} s "
+            f"({self.run_wall_time:.2f} s running, {self.steps_per_second:.0f} steps/s)",
+            f"  waypoints reached {self.waypoints_reached}; events: {events}",
+        ]
+        if self.swaps:
+            lines.append("  swaps: " + "; ".join(f"{s['old']} -> {s['new']} at step {s['step']}" for s in self.swaps))
+        if self.log:
+            lines.append(f"  log {self.log}")
+        return "\n".join(lines)
+
+
+class Launcher:
+    def __init__(self, mission: Mission, mission_path: str | None, log_root: str, quiet: bool = False):
+        self.mission = mission
+        self.mission_path = mission_path
+        self.community = mission.name
+        self.quiet = quiet
+        stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
+        self.run_dir = Path(log_root) / f"{self.community}-{stamp}-{os.getpid()}"
+        self.children: dict[str, Child] = {}
+        self.summary = Summary(self.community)
+        self.stop_requested: int | None = None
+        self.instance_counter = Counter()
+        self.router: subprocess.Popen | None = None
+        self.stopping = False
+        self.clock_started = time.monotonic()
+
+    # -- processes ----------------------------------------------------------------------------
+    def spawn(self, module: str, instance: str, role: str, extra: list[str] = ()) -> Child:
+        output = self.run_dir / f"{instance}.out"
+        with open(output, "wb") as out:
+            process = spawn_app(module, ["--run", str(self.run_file), "--instance", instance, *extra], out)
+        child = Child(instance, role, process, output)
+        self.children[instance] = child
+        return child
+
+    def next_instance(self, role: str) -> str:
+        self.instance_counter[role] += 1
+        return f"{role}-{self.instance_counter[role]}"
+
+    def ended_clock(self, instance: str) -> bool:
+        """A clock that exited with code 0 has published the mission end (an app can end the
+        mission at step 0, before the clock's token is seen): supervise() reads it."""
+        child = self.children.get(instance)
+        return child is not None and child.role == "clock" and child.process.poll() == 0
+
+    def wait_alive(self, bus: Bus, wanted: list[tuple[str, str]], timeout: float) -> None:
+        """Wait for the liveliness tokens of (role, instance) pairs; fail naming the missing ones."""
+        deadline = time.monotonic() + timeout
+        while True:
+            alive = set(bus.alive(keys.all_alive(self.community), timeout=0.5))
+            missing = [
+                inst
+                for role, inst in wanted
+                if keys.alive(self.community, role, inst) not in alive and not self.ended_clock(inst)
+            ]
+            if not missing:
+                return
+            for inst in missing:
+                child = self.children.get(inst)
+                if child is not None and child.process.poll() is not None:
+                    raise LaunchError(
+                        f"app {inst} exited with code {child.process.returncode} during start-up\n{child.tail()}"
+                    )
+            if time.monotonic() > deadline:
+                raise LaunchError(f"apps did not come up within {timeout:g} s: {', '.join(missing)}")
+            if self.stop_requested:
+                raise KeyboardInterrupt
+            time.sleep(0.02)
+
+    def stop_all(self) -> None:
+        """Let apps leave on their own (the lock-stepped ones exit on the mission end), then
+        escalate; the surrogate server serves until told; the logger closes its file last."""
+        stop([c.process for c in self.children.values() if c.role == "surrogate"], grace=0.0)
+        stop([c.process for c in self.children.values() if c.role not in ("logger", "surrogate")], grace=3.0)
+        stop([c.process for c in self.children.values() if c.role == "logger"], grace=5.0)
+
+    # -- the run ------------------------------------------------------------------------------
+    def run(self) -> Summary:
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        self.run_file = self.run_dir / "run.json"
+        start_wall = time.monotonic()
+        previous_handlers = {s: signal.signal(s, self._on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+        try:
+            connect = self.start_router()
+            RunConfig(mission=self.mission, connect=connect, log_dir=str(self.run_dir)).save(self.run_file)
+            log_path = self.run_dir / f"{self.community}.mcap"
+            with Bus(Endpoints("client", tuple(connect))) as bus:
+                self.bus = bus
+                self.mailbox = Mailbox()
+                c = self.community
+                bus.subscribe(keys.all_events(c), self.mailbox)
+                bus.subscribe(keys.mission_end(c), self.mailbox)
+                bus.queryable(keys.launcher_control(c), self.mailbox)
+                self.caller = Caller(bus, c, "launcher")
+                bus.watch_liveliness(keys.all_alive(c), self.mailbox, history=False)
+                self.event_pub = bus.publisher(keys.events(c, "launcher"))
+                self.end_pub = bus.publisher(keys.mission_end(c))
+                bus.token(keys.alive(c, "launcher", "launcher"))
+                try:
+                    self.start_apps(bus, log_path)
+                    registry.register(self.community, connect, str(log_path))  # tools can find it now
+                    self.supervise()
+                except LaunchError as exc:
+                    self.fail(str(exc))
+                except KeyboardInterrupt:
+                    self.abort("interrupted", "stopped by the user")
+                self.stopping = True
+                self.stop_all()
+                self.drain_mailbox()
+        finally:
+            self.stopping = True
+            for signum, handler in previous_handlers.items():
+                signal.signal(signum, handler)
+            self.stop_all()
+            if self.router is not None:
+                stop([self.router], grace=0.0)
+            (registry.runtime_dir() / f"{self.community}.json").unlink(missing_ok=True)
+        self.summary.wall_time = time.monotonic() - start_wall
+        return self.summary
+
+    def _on_signal(self, signum, frame) -> None:
+        first = self.stop_requested is None
+        self.stop_requested = signum
+        if first and not self.stopping:
+            raise KeyboardInterrupt
+
+    def start_router(self) -> list[str]:
+        network = self.mission.network
+        if network.connect:
+            return list(network.connect)
+        for _ in range(5):
+            endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+            with open(self.run_dir / "router.out", "wb") as out:
+                self.router = spawn_app("router", ["--listen", endpoint, "--with-parent"], out)
+            time.sleep(0.1)
+            if self.router.poll() is None:
+                return [endpoint]
+        raise LaunchError("could not start the router on a free loopback port")
+
+    def start_apps(self, bus: Bus, log_path: Path) -> None:
+        timeout = self.mission.startup_timeout
+        if self.mission.apps.logger.enabled:
+            extra = ["--output", str(log_path)]
+            if self.mission_path:
+                extra += ["--mission-file", self.mission_path]
+            self.spawn("logger", "logger", "logger", extra)
+            self.wait_alive(bus, [("logger", "logger")], timeout)
+            self.summary.log = str(log_path)
+        if self.mission.needs_surrogate:
+            self.spawn("surrogate", "surrogate", "surrogate")
+            self.wait_alive(bus, [("surrogate", "surrogate")], timeout)
+        wanted = []
+        for role in reversed(ORDER):
+            instance = self.next_instance(role)
+            self.spawn(role, instance, role)
+            wanted.append((role, instance))
+        self.wait_alive(bus, wanted, timeout)
+        self.spawn("clock", "clock", "clock")
+        self.clock_started = time.monotonic()
+        self.wait_alive(bus, [("clock", "clock")], timeout)  # so control requests can reach it
+
+    def supervise(self) -> None:
+        while True:
+            mail = self.mailbox.get(timeout=0.05)
+            if mail is not None and self.handle(mail):
+                return
+            for child in self.children.values():
+                code = child.process.poll()
+                if code is not None and not child.retiring and child.role != "logger":
+                    if self.ended_clock(child.instance):
+                        continue
+                    # Apps leave when the mission ends; the end may still be on its way to us.
+                    if self.mission_end_within(EXIT_GRACE if code == 0 else 0.2):
+                        return
+                    step = self.current_step()
+                    raise LaunchError(
+                        f"app {child.instance} exited with code {code} at step {step}\n{child.tail()}",
+                    )
+
+    def mission_end_within(self, seconds: float) -> bool:
+        """Handle mail for up to `seconds`; True as soon as the mission end is among it."""
+        deadline = time.monotonic() + seconds
+        while (left := deadline - time.monotonic()) > 0:
+            mail = self.mailbox.get(timeout=min(left, 0.05))
+            if mail is not None and self.handle(mail):
+                return True
+        return False
+
+    def handle(self, mail) -> bool:
+        """One mailbox item; True when the mission is over."""
+        if mail.kind == "query":
+            self.on_control(mail)
+            return False
+        if mail.kind in ("alive", "gone"):
+            instance = mail.key.rsplit("/", 1)[-1]
+            if instance != "launcher":
+                kind = "app_joined" if mail.kind == "alive" else "app_left"
+                self.publish_event(kind, f"{instance} {'joined' if kind == 'app_joined' else 'left'}")
+            return False
+        model = model_for_key(mail.key)
+        if model is None:
+            return False
+        try:
+            message = decode(mail.payload, model, mail.key)
+        except MessageError:
+            return False  # the receiving app reports it; the launcher only watches
+        if isinstance(message, MissionEnd):
+            self.summary.run_wall_time = time.monotonic() - self.clock_started
+            self.summary.outcome = message.outcome
+            self.summary.reason = message.reason
+            self.summary.steps = message.step
+            self.summary.sim_time = message.t
+            return True
+        if isinstance(message, Event):
+            self.summary.events[message.kind] += 1
+            if message.kind == "waypoint":
+                self.summary.waypoints_reached += 1
+            if not self.quiet and message.kind in ("waypoint", "collision", "swap", "error"):
+                print(f"  t={message.t:8.2f}  {message.kind:<10} {message.detail}", file=sys.stderr, flush=True)
+        return False
+
+    def drain_mailbox(self) -> None:
+        while (mail := self.mailbox.get(timeout=0.0)) is not None:
+            if mail.kind == "sample":
+                self.handle(mail)
+
+    def current_step(self) -> str:
+        reply = self.caller.call("clock", "status", timeout=1.0)
+        if reply is not None and reply.ok:
+            return str(reply.data["step"])
+        return "unknown (the clock did not answer)"
+
+    def publish_event(self, kind: str, detail: str, step: int = 0, data: dict | None = None) -> None:
+        event = Event(step=step, t=step * self.mission.dt, source="launcher", kind=kind, detail=detail, data=data or {})
+        self.event_pub.put(encode(event))
+
+    def abort(self, outcome: str, reason: str) -> None:
+        """End the mission from outside the clock, so every app and the logger wind down."""
+        self.summary.outcome, self.summary.reason = outcome, reason
+        try:
+            step = int(self.current_step())
+        except ValueError:
+            step = 0
+        self.summary.steps, self.summary.sim_time = step, step * self.mission.dt
+        self.end_pub.put(
+            encode(MissionEnd(step=step, t=step * self.mission.dt, source="launcher", outcome=outcome, reason=reason))
+        )
+
+    def fail(self, text: str) -> None:
+        first_line = text.splitlines()[0]
+        print(f"nearsub launch: {text}", file=sys.stderr, flush=True)
+        self.summary.failed_app = first_line.split()[1] if first_line.startswith("app ") else None
+        self.abort("error", first_line)
+
+    # -- swap ---------------------------------------------------------------------------------
+    def on_control(self, mail) -> None:
+        try:
+            request = msgpack.unpackb(mail.payload)
+            command = request["cmd"]
+        except Exception:
+            mail.reply_error("launcher: control request is not a msgpack map with 'cmd'")
+            return
+        if command != "swap":
+            mail.reply_error(f"launcher: unknown command {command!r}")
+            return
+        try:
+            at = request.get("at_step")
+            result = self.swap(
+                str(request.get("app", "")), list(request.get("set", [])), None if at is None else int(at)
+            )
+        except LaunchError as exc:
+            mail.reply_error(str(exc))
+            return
+        mail.reply(msgpack.packb(result))
+
+    def swap(self, role: str, overrides: list[str], at_step: int | None = None) -> dict:
+        if role not in ORDER:
+            raise LaunchError(f"cannot swap {role!r}: only {', '.join(ORDER)} can be swapped")
+        old = next(
+            (c for c in self.children.values() if c.role == role and not c.retiring and c.process.poll() is None), None
+        )
+        if old is None:
+            raise LaunchError(f"no running {role} to swap")
+        prefixed = [o if o.startswith("apps.") else f"apps.{role}.{o}" for o in overrides]
+        try:
+            mission_from_dict(apply_overrides(self.mission.model_dump(mode="json"), prefixed), "swap")
+        except MissionError as exc:
+            raise LaunchError(str(exc)) from None
+        wait = self.mission.step_timeout + 5
+        if at_step is not None:
+            wait += 600.0  # the clock answers when it reaches the step
+        paused = self.caller.call("clock", "pause", timeout=wait, **({} if at_step is None else {"at": at_step}))
+        if paused is None:
+            raise LaunchError("the clock did not pause")
+        if not paused.ok:
+            raise LaunchError(paused.error)
+        step = int(paused.data["step"])
+        instance = self.next_instance(role)
+        extra = ["--takeover", old.instance, "--resume-step", str(step)]
+        for override in prefixed:
+            extra += ["--set", override]
+        new = self.spawn(role, instance, role, extra)
+        try:
+            self.wait_alive(self.bus, [(role, instance)], self.mission.startup_timeout)
+        except LaunchError:
+            stop([new.process], grace=0.0)
+            new.retiring = True
+            self.caller.call("clock", "resume", timeout=5.0)
+            raise
+        old.retiring = True
+        self.caller.call(old.instance, "retire", timeout=5.0)
+        stop([old.process], grace=5.0)
+        detail = f"{old.instance} -> {instance} at step {step}" + (f" with {', '.join(prefixed)}" if prefixed else "")
+        self.publish_event("swap", detail, step, {"old": old.instance, "new": instance, "step": step, "set": prefixed})
+        self.summary.swaps.append({"old": old.instance, "new": instance, "step": step})
+        self.caller.call("clock", "resume", timeout=5.0)
+        return {"ok": True, "old": old.instance, "new": instance, "step": step}
+
+
+def exit_code(summary: Summary) -> int:
+    if summary.outcome in NORMAL_OUTCOMES:
+        return 0
+    return 130 if summary.outcome == "interrupted" else 1
