@@ -102,17 +102,17 @@ def _live(community: str, connect: list[str] | None, port: int) -> int:
     from .view_server import LiveSource, serve_viewer
 
     if connect:
-        endpoints, mission = tuple(connect), None
+        endpoints, mission, log = tuple(connect), None, None
     else:
         try:
             entry = registry.lookup(community)
         except LookupError as exc:
             print(f"nearsub view: {exc}", file=sys.stderr)
             return 2
-        endpoints, mission = tuple(entry["connect"]), mission_of_run(entry)
+        endpoints, mission, log = tuple(entry["connect"]), mission_of_run(entry), entry.get("log")
 
     async def main() -> None:
         with Bus(Endpoints("client", endpoints)) as bus:
-            await serve_viewer(LiveSource(bus, community, mission), port, _ready)
+            await serve_viewer(LiveSource(bus, community, mission, log), port, _ready)
 
     return _serve(main(), port)

@@ -52,7 +52,7 @@ class LiveSource:
 
     mode = "live"
 
-    def __init__(self, bus: Bus, community: str, mission):
+    def __init__(self, bus: Bus, community: str, mission, history: str | Path | None = None):
         self.bus = bus
         self.community = community
         self.mission = mission
@@ -64,6 +64,11 @@ class LiveSource:
             bus.subscribe(keys.vehicle_topic(c, "*", leaf), self.mailbox)
         bus.subscribe(keys.all_events(c), self.mailbox)
         bus.subscribe(keys.mission_end(c), self.mailbox)
+        if history is not None and Path(history).is_file():
+            # What happened before the viewer joined: the log the mission is writing (complete
+            # chunks only); the subscriptions above are already declared, so nothing falls between.
+            for record in read_log(history).records:
+                feed_payload(self.model, record.topic, record.data)
         self.caller = Caller(bus, c, f"viewer-{uuid.uuid4().hex[:8]}")
         self.calls = asyncio.Lock()  # one request at a time: Caller matches replies by id
         self.last_state_wall = time.monotonic()

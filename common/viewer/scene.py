@@ -200,9 +200,11 @@ class SceneModel:
         if isinstance(message, State):
             self._add_pose(message, wall)
         elif isinstance(message, Forces):
-            _insert(self.force_times, self.forces, message.t, message)
+            if not _has_time(self.force_times, message.t):
+                _insert(self.force_times, self.forces, message.t, message)
         elif isinstance(message, HelmProgress):
-            _insert(self.helm_times, self.helm, message.t, message)
+            if not _has_time(self.helm_times, message.t):
+                _insert(self.helm_times, self.helm, message.t, message)
         elif isinstance(message, Event):
             self._add_event(message)
         elif isinstance(message, MissionEnd):
@@ -210,6 +212,8 @@ class SceneModel:
                 self.end = message
 
     def _add_pose(self, state: State, wall: float | None) -> None:
+        if _has_time(self.pose_times, state.t):
+            return  # seen twice: from the log read at start and from the bus
         pose = Pose(state.step, state.t, state.x, state.y, state.psi, state.u, state.v, state.r)
         if self.poses and state.t < self.pose_times[-1]:  # out of order (rare): keep the list sorted
             index = bisect.bisect_right(self.pose_times, state.t)
@@ -242,6 +246,8 @@ class SceneModel:
             "y": None if y is None else round(float(y), 3),
             "marked": event.kind in MARKED_EVENTS,
         }
+        if item in self.events[bisect.bisect_left(self.event_times, event.t) :]:
+            return  # seen twice: from the log read at start and from the bus
         _insert(self.event_times, self.events, event.t, item)
 
     # -- queries ------------------------------------------------------------------------------
@@ -355,6 +361,11 @@ def _insert(times: list[float], items: list, t: float, item) -> None:
         index = bisect.bisect_right(times, t)
         times.insert(index, t)
         items.insert(index, item)
+
+
+def _has_time(times: list[float], t: float) -> bool:
+    index = bisect.bisect_left(times, t)
+    return index < len(times) and times[index] == t
 
 
 def _latest(times: list[float], items: list, t: float | None):

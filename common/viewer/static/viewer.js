@@ -366,7 +366,7 @@ $("swap").onclick = () => send({ cmd: "swap", behaviour: $("behaviour").value })
 $("fit").onclick = fit;
 $("follow").onclick = () => {
   state.follow = true;
-  if (state.scene) state.view.scale = Math.max(state.view.scale, canvas.clientWidth / (25 * state.scene.vehicle.length));
+  if (state.scene) state.view.scale = Math.max(state.view.scale, canvas.clientWidth / (12 * state.scene.vehicle.length));
   draw();
 };
 $("play").onclick = () => send({ cmd: state.frame && state.frame.replay && state.frame.replay.playing ? "stop" : "play" });
