@@ -6,6 +6,7 @@ nearsub) is the CDP transport, so no driver binary or extra package is needed.
 from __future__ import annotations
 
 import base64
+import contextlib
 import itertools
 import json
 import shutil
@@ -43,6 +44,7 @@ class Browser:
         self.profile = tempfile.mkdtemp(prefix="nearsub-chromium-")
         self.process: subprocess.Popen | None = None
         self.socket = None
+        self._stack = contextlib.ExitStack()
         self._ids = itertools.count(1)
 
     def __enter__(self) -> Browser:
@@ -75,14 +77,15 @@ class Browser:
         with urllib.request.urlopen(f"http://127.0.0.1:{port}/json/list", timeout=self.timeout) as reply:
             targets = json.load(reply)
         page = next(t for t in targets if t.get("type") == "page")
-        self.socket = connect(page["webSocketDebuggerUrl"], max_size=64 * 1024 * 1024, open_timeout=self.timeout)
+        self.socket = self._stack.enter_context(
+            connect(page["webSocketDebuggerUrl"], max_size=64 * 1024 * 1024, open_timeout=self.timeout)
+        )
         self.call("Page.enable")
         self.call("Runtime.enable")
         return self
 
     def __exit__(self, *exc) -> None:
-        if self.socket is not None:
-            self.socket.close()
+        self._stack.close()
         if self.process is not None:
             self.process.terminate()
             try:
@@ -115,10 +118,14 @@ class Browser:
         return result["result"].get("value")
 
     def wait_for(self, expression: str, timeout: float, poll: float = 0.1):
-        """Poll until the expression is truthy; its value, or TimeoutError naming it."""
+        """Poll until the expression is truthy (an exception, e.g. before the page has loaded, counts
+        as false); its value, or TimeoutError naming it."""
         deadline = time.monotonic() + timeout
         while True:
-            value = self.evaluate(expression)
+            try:
+                value = self.evaluate(expression)
+            except RuntimeError:
+                value = None
             if value:
                 return value
             if time.monotonic() > deadline:

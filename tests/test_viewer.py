@@ -1,0 +1,184 @@
+"""`nearsub view` in a real browser: headless Chromium (Debian's package) loads the page of a live
+mission and of a replayed log. The page exposes what it drew last (`window.nearsub.drawn`, and a
+history of drawn states); the test compares it with the state topic (`nearsub tap echo`) and the
+log, and pauses and resumes the mission from the page's buttons.
+
+`tools/test.sh` installs Chromium where it is missing; the test skips only on a machine without
+apt-get, where it could not be installed.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import queue
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+import pytest
+from browser import Browser, chromium_path
+
+from conftest import ALPHA
+from helpers import finish, wait_registered
+from nearsub.common.mission.schema import load_mission
+from nearsub.common.runtime.logfile import read_log
+
+MISSION = load_mission(ALPHA)
+# Every wait below is derived from the mission's own timeouts: start-up, and one step.
+STARTUP = MISSION.startup_timeout
+STEP = MISSION.step_timeout
+
+pytestmark = pytest.mark.timeout(int(6 * STARTUP + 10 * STEP))
+
+
+@pytest.fixture
+def chromium():
+    if chromium_path() is None:
+        if shutil.which("apt-get") is None:
+            pytest.skip("no chromium, and no apt-get to install Debian's chromium package on this machine")
+        pytest.fail("chromium is missing: tools/test.sh installs it (apt-get install chromium chromium-driver)")
+    with Browser(timeout=STARTUP) as browser:
+        yield browser
+
+
+class Viewer:
+    """A `nearsub view TARGET` subprocess and the URL it prints."""
+
+    def __init__(self, target: str):
+        self.process = subprocess.Popen(
+            [sys.executable, "-m", "nearsub", "view", target],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            process_group=0,
+        )
+        lines: queue.Queue[str] = queue.Queue()
+        threading.Thread(target=lambda: [lines.put(line) for line in self.process.stdout], daemon=True).start()
+        try:
+            line = lines.get(timeout=STARTUP)
+        except queue.Empty:
+            self.stop()
+            raise AssertionError(f"nearsub view printed no URL within {STARTUP:g} s") from None
+        assert line.startswith("nearsub view: http://127.0.0.1:"), line
+        self.url = line.split(": ", 1)[1].strip()
+
+    def stop(self) -> None:
+        if self.process.poll() is None:
+            os.killpg(self.process.pid, signal.SIGTERM)
+            self.process.wait(timeout=STEP)
+
+
+@pytest.fixture
+def viewers():
+    started: list[Viewer] = []
+    yield lambda target: started.append(Viewer(target)) or started[-1]
+    for viewer in started:
+        viewer.stop()
+
+
+def nearsub_json(*args: str) -> dict:
+    done = subprocess.run(
+        [sys.executable, "-m", "nearsub", *args], capture_output=True, text=True, timeout=STARTUP + STEP
+    )
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def clock_status(community: str) -> dict:
+    return nearsub_json("clock", community, "status")
+
+
+def wait_clock(community: str, paused: bool) -> dict:
+    deadline = time.monotonic() + STEP + STARTUP
+    while time.monotonic() < deadline:
+        status = clock_status(community)
+        if status["paused"] == paused:
+            return status
+        time.sleep(0.2)
+    raise AssertionError(f"the clock of {community} did not report paused={paused}")
+
+
+def test_live_view_follows_the_state_topic_and_pauses_and_resumes_from_the_page(launches, community, chromium, viewers):
+    launch = launches.start(ALPHA, "--set", f"name={community}", "--warp", "1", "--until", "300")
+    wait_registered(community, timeout=STARTUP + STEP)
+    viewer = viewers(community)
+    # The state topic as `nearsub tap echo` prints it, while the page draws the same mission.
+    key = f"nearsub/{community}/{MISSION.vehicle_name}/state"
+    tap = subprocess.Popen(
+        [sys.executable, "-m", "nearsub", "tap", "echo", key, "--count", "60", "--json"],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    chromium.open(viewer.url)
+    chromium.wait_for("window.nearsub.drawn !== null", timeout=STARTUP)
+    tapped_out, _ = tap.communicate(timeout=STARTUP + 60 * MISSION.dt / MISSION.warp if MISSION.warp else STARTUP)
+    tapped = {line["value"]["step"]: line["value"] for line in map(json.loads, tapped_out.splitlines())}
+    drawn = {d["step"]: d for d in chromium.evaluate("window.nearsub.history")}
+    common = sorted(set(tapped) & set(drawn))
+    assert len(common) >= 5, f"page drew steps {sorted(drawn)[:5]}..., tap saw {sorted(tapped)[:5]}..."
+    for step in common:
+        assert (drawn[step]["x"], drawn[step]["y"], drawn[step]["psi"]) == (
+            tapped[step]["x"],
+            tapped[step]["y"],
+            tapped[step]["psi"],
+        ), f"step {step}"
+    steps = [d["step"] for d in chromium.evaluate("window.nearsub.history")]
+    assert steps == sorted(steps) and steps[-1] > steps[0]  # it follows the mission forwards
+
+    chromium.evaluate("document.getElementById('pause').click()")
+    paused = wait_clock(community, paused=True)
+    chromium.wait_for("window.nearsub.frame.status.paused === true", timeout=STEP)
+    chromium.wait_for(
+        "document.getElementById('st-state').textContent === 'paused'", timeout=STEP
+    )  # what a person sees
+    held = chromium.evaluate("window.nearsub.drawn.step")
+    time.sleep(1.0)
+    assert chromium.evaluate("window.nearsub.drawn.step") == held  # nothing moves while paused
+    assert clock_status(community)["step"] == paused["step"]
+    replies = chromium.evaluate("window.nearsub.replies")
+    assert any(r["cmd"] == "pause" and r["ok"] for r in replies)
+
+    chromium.evaluate("document.getElementById('resume').click()")
+    wait_clock(community, paused=False)
+    chromium.wait_for(f"window.nearsub.drawn.step > {held}", timeout=STEP)
+
+    launch.send_signal(signal.SIGINT)
+    code, summary, _ = finish(launch, timeout=STARTUP + STEP)
+    controls = [r for r in read_log(summary["log"]).records if r.topic == f"nearsub/{community}/control/clock"]
+    commands = [r.value()["cmd"] for r in controls]
+    assert "pause" in commands and "resume" in commands  # the page's actions are in the log
+
+
+def test_replay_scrubs_to_a_time_and_draws_the_logged_state(launches, community, chromium, viewers, tmp_path):
+    code, summary, err = launches.run(
+        ALPHA, "--set", f"name={community}", "--warp", "0", "--until", "30", timeout=STARTUP + 30 * STEP
+    )
+    assert code == 0, err
+    states = {r.value()["step"]: r.value() for r in read_log(summary["log"]).records if r.topic.endswith("/state")}
+    viewer = viewers(summary["log"])
+    chromium.open(viewer.url)
+    chromium.wait_for("window.nearsub.drawn !== null", timeout=STARTUP)
+    assert chromium.evaluate("document.getElementById('timeline').hidden") is False
+    chromium.evaluate("const s = document.getElementById('scrub'); s.value = 12.5; s.oninput()")
+    step = chromium.wait_for("window.nearsub.drawn.t === 12.5 && window.nearsub.drawn.step", timeout=STEP)
+    drawn = chromium.evaluate("window.nearsub.drawn")
+    logged = states[step]
+    assert (drawn["x"], drawn["y"], drawn["psi"]) == (logged["x"], logged["y"], logged["psi"])
+    chromium.evaluate("document.getElementById('play').click()")
+    chromium.wait_for("window.nearsub.drawn.t > 12.5", timeout=STEP)
+
+
+def test_view_rejects_a_missing_log_and_an_unknown_mission(runtime_dir, tmp_path):
+    for target, words in (
+        (str(tmp_path / "gone.mcap"), "does not exist"),
+        ("nosuchmission", "no running mission named"),
+    ):
+        done = subprocess.run(
+            [sys.executable, "-m", "nearsub", "view", target], capture_output=True, text=True, timeout=STARTUP
+        )
+        assert done.returncode == 2
+        assert len(done.stderr.strip().splitlines()) == 1 and words in done.stderr, done.stderr
