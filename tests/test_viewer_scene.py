@@ -137,7 +137,7 @@ def test_applied_force_arrow_is_weighted_rotated_and_scaled(overtake):
         )
     )
     forces = model.frame()["forces"]
-    assert forces["Y_s"] == pytest.approx(reference, rel=1e-6)  # weight times the prediction
+    assert forces["Y_s"] == pytest.approx(reference, abs=1e-3)  # weight times the prediction
     (x0, y0), (x1, y1) = forces["arrow"]
     length = overtake.vehicle_model.length
     assert (x0, y0) == (-20.0, 6.0)
@@ -187,3 +187,25 @@ def test_feed_payload_skips_malformed_and_unused_messages(overtake):
     assert not feed_payload(model, key, b"\xc1 not msgpack")
     assert not feed_payload(model, "nearsub/overtake_stern_standard/clock/tick", b"")
     assert len(model.poses) == 1
+
+
+def test_the_outcome_shows_from_the_last_state_on(overtake):
+    """The mission end is labelled with the step after the last state; a replay scrubbed to the
+    last state shows the outcome."""
+    model = SceneModel.for_mission(overtake)
+    for step in range(10):
+        model.feed(state(step, -60.0, 5.89))
+    model.feed(MissionEnd(step=10, t=0.5, source="clock", outcome="collision"))
+    assert model.frame(9 * 0.05)["status"]["outcome"] == "collision"
+    assert model.frame(8 * 0.05)["status"]["outcome"] is None
+    assert model.frame()["status"]["outcome"] == "collision"
+
+
+def test_page_assets_ship_with_the_package_and_fetch_nothing_else():
+    from nearsub.tools.view_server import static_files
+
+    files = static_files()
+    assert {"/", "/index.html", "/viewer.js", "/viewer.css"} <= set(files)
+    for body, _ in files.values():
+        text = body.decode()
+        assert "http://" not in text and "https://" not in text  # no network fetches

@@ -21,6 +21,7 @@ from pathlib import Path
 import msgpack
 from websockets.asyncio.server import ServerConnection, broadcast, serve
 from websockets.datastructures import Headers
+from websockets.exceptions import ConnectionClosed
 from websockets.http11 import Request, Response
 
 from nearsub.common.runtime import keys
@@ -236,6 +237,8 @@ async def serve_viewer(source, port: int, ready=None, stop: asyncio.Event | None
                     continue
                 reply = await source.command(request)
                 await connection.send(json.dumps(reply))
+        except ConnectionClosed:
+            pass  # the page went away (closed, reloaded) while a command ran
         finally:
             clients.discard(connection)
 

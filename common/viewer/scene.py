@@ -33,7 +33,7 @@ LISTED_EVENTS = (*MARKED_EVENTS, "error", "info", "saturation")
 MAX_LISTED = 200  # newest events kept in a frame's list
 HULL_POINTS = 160  # stations per side of the submarine outline (smooth at any zoom on a page)
 UUV_POINTS = 24
-ARROW_COEFFICIENT = 0.01  # an arrow one UUV length long stands for X' or Y' = 0.01 (thesis section 5.2 scaling)
+ARROW_COEFFICIENT = 0.002  # an arrow one UUV length long stands for X' or Y' = 0.002 (thesis section 5.2)
 WARP_WINDOW = 2.0  # wall seconds over which the achieved warp is measured
 
 
@@ -84,7 +84,7 @@ def acting_band(mission) -> dict:
 
 
 def force_reference(mission) -> float:
-    """Force [N] drawn as an arrow one UUV length long: X' = 0.01 at the fastest leg's speed
+    """Force [N] drawn as an arrow one UUV length long: X' = ARROW_COEFFICIENT at the fastest leg's speed
     (coefficients scale with 0.5 rho u^2 L_uuv^2, thesis section 5.2)."""
     if mission is None:
         return 100.0
@@ -296,7 +296,12 @@ class SceneModel:
         helm = _latest(self.helm_times, self.helm, t)
         events_end = bisect.bisect_right(self.event_times, until)
         events = self.events[:events_end]
-        end = self.end if (self.end is not None and (t is None or self.end.t <= t)) else None
+        end = None
+        if self.end is not None:
+            # The end is labelled with the step after the last state: show it from that state on.
+            last_pose = self.pose_times[-1] if self.pose_times else math.inf
+            if t is None or t >= min(self.end.t, last_pose):
+                end = self.end
         warp = self.achieved_warp() if t is None else None
         if warp is not None and now is not None and self._wall and now - self._wall[-1][0] > 1.0:
             warp = 0.0  # no state for a second of wall time: the run is not advancing

@@ -96,6 +96,8 @@ function updatePanel(frame) {
   $("st-outcome").title = s.reason || "";
   const label = $("st-state");
   if (state.scene && state.scene.mode === "replay") {
+    $("st-warp").textContent = `replay ${frame.replay.rate}x`;
+    $("st-warp").title = "playback speed of the replay";
     label.textContent = frame.replay.playing ? "playing" : "replay";
     label.className = frame.replay.playing ? "running" : "";
     $("play").textContent = frame.replay.playing ? "Pause" : "Play";
@@ -243,7 +245,9 @@ function draw() {
     path(frame.trail, false);
     ctx.strokeStyle = "#ff5c5c"; ctx.lineWidth = 1.8; ctx.stroke();
   }
-  for (const e of frame.events) {
+  const v = frame.vehicle;
+  if (v) drawVehicle(v, frame.forces, scene);
+  for (const e of frame.events) {  // on top of the UUV: a collision marks where it is
     const style = EVENT_STYLE[e.kind];
     if (!e.marked || !style || e.x === null) continue;
     const [px, py] = toScreen(e.x, e.y);
@@ -251,8 +255,6 @@ function draw() {
     ctx.strokeStyle = style.color; ctx.fillStyle = style.color; ctx.lineWidth = 2;
     if (style.shape === "x") ctx.stroke(); else { ctx.globalAlpha = 0.75; ctx.fill(); ctx.globalAlpha = 1; }
   }
-  const v = frame.vehicle;
-  if (v) drawVehicle(v, frame.forces, scene);
   drawScaleBar(w, h);
   drawLegend(w);
 }
