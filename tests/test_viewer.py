@@ -102,7 +102,9 @@ def wait_clock(community: str, paused: bool) -> dict:
     raise AssertionError(f"the clock of {community} did not report paused={paused}")
 
 
-def test_live_view_follows_the_state_topic_and_pauses_and_resumes_from_the_page(launches, community, chromium, viewers):
+def test_live_view_follows_the_state_topic_pauses_resumes_and_swaps_from_the_page(
+    launches, community, chromium, viewers
+):
     launch = launches.start(ALPHA, "--set", f"name={community}", "--warp", "1", "--until", "300")
     wait_registered(community, timeout=STARTUP + STEP)
     viewer = viewers(community)
@@ -146,11 +148,20 @@ def test_live_view_follows_the_state_topic_and_pauses_and_resumes_from_the_page(
     wait_clock(community, paused=False)
     chromium.wait_for(f"window.nearsub.drawn.step > {held}", timeout=STEP)
 
+    # Swap the helm from the page (alpha has no submarine, so the standard behaviour is the one
+    # that validates): the launcher's swap answers and its event reaches the page's list.
+    chromium.evaluate("document.getElementById('behaviour').value = 'waypoints'")
+    chromium.evaluate("document.getElementById('swap').click()")
+    swap = chromium.wait_for("window.nearsub.replies.find(r => r.cmd === 'swap')", timeout=STARTUP + 2 * STEP)
+    assert swap["ok"], swap
+    chromium.wait_for("window.nearsub.frame.events.some(e => e.kind === 'swap')", timeout=STEP)
+
     launch.send_signal(signal.SIGINT)
     code, summary, _ = finish(launch, timeout=STARTUP + STEP)
     controls = [r for r in read_log(summary["log"]).records if r.topic == f"nearsub/{community}/control/clock"]
     commands = [r.value()["cmd"] for r in controls]
     assert "pause" in commands and "resume" in commands  # the page's actions are in the log
+    assert summary["swaps"], summary
 
 
 def test_replay_scrubs_to_a_time_and_draws_the_logged_state(launches, community, chromium, viewers, tmp_path):
