@@ -106,18 +106,19 @@ def test_live_view_follows_the_state_topic_pauses_resumes_and_swaps_from_the_pag
     launches, community, chromium, viewers
 ):
     launch = launches.start(ALPHA, "--set", f"name={community}", "--warp", "1", "--until", "300")
-    wait_registered(community, timeout=STARTUP + STEP)
+    wait_registered(community, timeout=2 * STARTUP + STEP)  # every app up, each within STARTUP
     viewer = viewers(community)
-    # The state topic as `nearsub tap echo` prints it, while the page draws the same mission.
+    chromium.open(viewer.url)
+    chromium.wait_for("window.nearsub.drawn !== null", timeout=STARTUP)
+    # The state topic as `nearsub tap echo` prints it, while the page (loaded: it has drawn)
+    # draws the same mission.
     key = f"nearsub/{community}/{MISSION.vehicle_name}/state"
     tap = subprocess.Popen(
         [sys.executable, "-m", "nearsub", "tap", "echo", key, "--count", "60", "--json"],
         stdout=subprocess.PIPE,
         text=True,
     )
-    chromium.open(viewer.url)
-    chromium.wait_for("window.nearsub.drawn !== null", timeout=STARTUP)
-    tapped_out, _ = tap.communicate(timeout=STARTUP + 60 * MISSION.dt / MISSION.warp if MISSION.warp else STARTUP)
+    tapped_out, _ = tap.communicate(timeout=STARTUP + 60 * MISSION.dt)  # 60 states at warp 1
     tapped = {line["value"]["step"]: line["value"] for line in map(json.loads, tapped_out.splitlines())}
     drawn = {d["step"]: d for d in chromium.evaluate("window.nearsub.history")}
     common = sorted(set(tapped) & set(drawn))
