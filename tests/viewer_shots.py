@@ -92,6 +92,9 @@ def main() -> int:
             browser.wait_for(f"window.nearsub.drawn.t >= {t}", 30)
             time.sleep(0.3)
             print(browser.screenshot(out / "replay-overtake.png"))
+            browser.evaluate("document.getElementById('follow').click()")
+            time.sleep(0.5)
+            print(browser.screenshot(out / "replay-overtake-follow.png"))
     finally:
         for process in [launch, *viewers]:
             if process.poll() is None:
