@@ -18,14 +18,18 @@ import subprocess
 import sys
 import threading
 import time
+import urllib.request
+from pathlib import Path
 
 import pytest
 from browser import Browser, chromium_path
+from websockets.sync.client import connect
 
 from conftest import ALPHA
 from helpers import finish, wait_registered
 from nearsub.common.mission.schema import load_mission
 from nearsub.common.runtime.logfile import read_log
+from nearsub.tools.view import start_viewer
 
 MISSION = load_mission(ALPHA)
 # Every wait below is derived from the mission's own timeouts: start-up, and one step.
@@ -194,3 +198,24 @@ def test_view_rejects_a_missing_log_and_an_unknown_mission(runtime_dir, tmp_path
         )
         assert done.returncode == 2
         assert len(done.stderr.strip().splitlines()) == 1 and words in done.stderr, done.stderr
+
+
+def test_start_viewer_serves_the_mission_of_a_launcher_run_file(launches, community):
+    """How `nearsub launch --view` starts the viewer: from the run file, before any registry lookup."""
+    launches.start(ALPHA, "--set", f"name={community}", "--warp", "1", "--until", "300")
+    entry = wait_registered(community, timeout=2 * STARTUP + STEP)
+    process, url = start_viewer(Path(entry["log"]).parent / "run.json", timeout=STARTUP)
+    try:
+        with urllib.request.urlopen(url, timeout=STEP) as page:
+            assert b"viewer.js" in page.read()
+        with connect(url.replace("http://", "ws://") + "ws", open_timeout=STEP) as socket:
+            scene = json.loads(socket.recv(timeout=STEP))
+            assert scene["type"] == "scene" and scene["community"] == community
+            assert [leg["name"] for leg in scene["legs"]] == ["survey", "return"]  # the mission's legs
+            deadline = time.monotonic() + STARTUP
+            while (frame := json.loads(socket.recv(timeout=STEP)))["vehicle"] is None:
+                assert time.monotonic() < deadline, "no state reached the viewer"
+            assert frame["type"] == "frame" and frame["vehicle"]["step"] >= 0
+    finally:
+        os.killpg(process.pid, signal.SIGTERM)
+        process.wait(timeout=STEP)

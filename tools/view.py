@@ -18,7 +18,38 @@ def add_parser(subparsers) -> None:
     p.add_argument("target", metavar="MISSION_NAME|LOG.mcap", help="a running mission's name, or a log file")
     p.add_argument("--port", type=int, default=0, help="TCP port on 127.0.0.1 (default: a free one)")
     p.add_argument("--connect", action="append", metavar="ENDPOINT", help="router endpoint instead of the registry")
+    p.add_argument(
+        "--run",
+        metavar="RUN.json",
+        help="the launcher's run file (mission, endpoints, log folder) instead of the registry",
+    )
     p.set_defaults(func=view_command)
+
+
+def start_viewer(run_file: str | Path, port: int = 0, timeout: float = 30.0):
+    """Start `nearsub view` for the mission of a launcher's run file in its own process; returns
+    (process, URL). For `nearsub launch --view`: call it once the apps are up, stop the process
+    with the other children."""
+    import queue
+    import subprocess
+    import threading
+
+    from nearsub.common.mission.schema import RunConfig
+
+    community = RunConfig.load(run_file).mission.name
+    argv = [sys.executable, "-m", "nearsub", "view", community, "--run", str(run_file), "--port", str(port)]
+    process = subprocess.Popen(argv, stdout=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL, process_group=0)
+    lines: queue.Queue = queue.Queue()
+    threading.Thread(target=lambda: [lines.put(line) for line in process.stdout], daemon=True).start()
+    try:
+        line = lines.get(timeout=timeout)
+    except queue.Empty:
+        process.kill()
+        raise RuntimeError(f"nearsub view did not start within {timeout:g} s") from None
+    if not line.startswith("nearsub view: http"):
+        process.kill()
+        raise RuntimeError(f"nearsub view: {line.strip()}")
+    return process, line.split(": ", 1)[1].strip()
 
 
 def is_log(target: str) -> bool:
@@ -57,7 +88,7 @@ def view_command(args) -> int:
             print(f"nearsub view: log {args.target!r} does not exist", file=sys.stderr)
             return 2
         return _replay(path, args.port)
-    return _live(args.target, args.connect, args.port)
+    return _live(args.target, args.connect, args.run, args.port)
 
 
 def _ready(url: str) -> None:
@@ -95,13 +126,25 @@ def _replay(path: Path, port: int) -> int:
     return _serve(serve_viewer(source, port, _ready), port)
 
 
-def _live(community: str, connect: list[str] | None, port: int) -> int:
+def _live(community: str, connect: list[str] | None, run_file: str | None, port: int) -> int:
     from nearsub.common.runtime.bus import Bus, Endpoints
 
     from . import registry
     from .view_server import LiveSource, serve_viewer
 
-    if connect:
+    if run_file:
+        from nearsub.common.mission.schema import RunConfig
+
+        try:
+            run = RunConfig.load(run_file)
+        except (OSError, ValueError) as exc:
+            print(
+                f"nearsub view: --run {run_file}: not a readable run file ({exc.__class__.__name__})", file=sys.stderr
+            )
+            return 2
+        log = Path(run.log_dir) / f"{run.mission.name}.mcap"  # where the launcher's logger writes
+        endpoints, mission = tuple(connect or run.connect), run.mission
+    elif connect:
         endpoints, mission, log = tuple(connect), None, None
     else:
         try:

@@ -114,6 +114,8 @@ class LiveSource:
                 self.model.paused = False
             elif reply.ok:
                 self.model.paused = bool(reply.data.get("paused"))
+                if isinstance(reply.data.get("warp"), (int, float)):  # a clock that reports its warp
+                    self.model.requested_warp = float(reply.data["warp"])
             text = f"{cmd}: step {reply.data.get('step')}" if reply.ok else reply.error
             return {"type": "reply", "cmd": cmd, "ok": reply.ok, "text": text, "data": reply.data}
         if cmd == "warp":
