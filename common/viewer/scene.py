@@ -118,7 +118,9 @@ def static_scene(mission, source: str = "") -> dict:
         "source": source,
         "community": mission.name if mission is not None else "",
         "description": mission.description if mission is not None else "",
-        "frame": "submarine frame (moving with it)" if moving else "earth-fixed frame",
+        "frame": "submarine frame (moving with it): x towards the bow, y to port"
+        if moving
+        else "earth-fixed frame: x and y as in the mission file",
         "hull": hull,
         "legs": legs,
         "start": None if mission is None else [mission.start.x, mission.start.y],

@@ -43,8 +43,9 @@ function connect() {
 function onScene(scene) {
   state.scene = scene;
   $("title").textContent = `nearsub ${scene.mode === "replay" ? "replay" : "live"}: ${scene.community || scene.source}`;
-  $("frame-label").textContent = `${scene.frame}; x towards the bow, y to port`;
-  $("band-note").textContent = scene.band.note + `. Arrow: one UUV length = ${scene.force_reference.toFixed(0)} N.`;
+  $("frame-label").textContent = scene.frame;
+  const arrow = scene.band.rects.length ? `. Arrow: one UUV length = ${scene.force_reference.toFixed(0)} N.` : ".";
+  $("band-note").textContent = scene.band.note + arrow;
   const select = $("behaviour");
   select.innerHTML = "";
   for (const name of scene.behaviours) {
