@@ -28,7 +28,7 @@ from websockets.sync.client import connect
 from conftest import ALPHA
 from helpers import finish, wait_registered
 from nearsub.common.mission.schema import load_mission
-from nearsub.common.runtime.logfile import read_log
+from nearsub.common.runtime.logfile import LogWriter, read_log
 from nearsub.tools.view import start_viewer
 
 MISSION = load_mission(ALPHA)
@@ -188,15 +188,22 @@ def test_replay_scrubs_to_a_time_and_draws_the_logged_state(launches, community,
     chromium.wait_for("window.nearsub.drawn.t > 12.5", timeout=STEP)
 
 
-def test_view_rejects_a_missing_log_and_an_unknown_mission(runtime_dir, tmp_path):
-    for target, words in (
-        (str(tmp_path / "gone.mcap"), "does not exist"),
-        ("nosuchmission", "no running mission named"),
-    ):
+def test_view_rejects_bad_targets_and_options_with_one_line(runtime_dir, tmp_path):
+    (tmp_path / "text.mcap").write_text("not a log\n")
+    LogWriter(tmp_path / "empty.mcap").finish()
+    cases = [
+        ([str(tmp_path / "empty.mcap")], "has no state messages"),
+        ([str(tmp_path / "gone.mcap")], "does not exist"),
+        ([str(tmp_path / "text.mcap")], "is not an MCAP file"),
+        (["nosuchmission"], "no running mission named"),
+        (["alpha", "--port", "70000"], "is not a TCP port"),
+        (["alpha", "--run", str(tmp_path / "run.json")], "not a readable run file"),
+    ]
+    for args, words in cases:
         done = subprocess.run(
-            [sys.executable, "-m", "nearsub", "view", target], capture_output=True, text=True, timeout=STARTUP
+            [sys.executable, "-m", "nearsub", "view", *args], capture_output=True, text=True, timeout=STARTUP
         )
-        assert done.returncode == 2
+        assert done.returncode == 2, args
         assert len(done.stderr.strip().splitlines()) == 1 and words in done.stderr, done.stderr
 
 

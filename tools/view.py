@@ -12,6 +12,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+
 
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("view", help="live map of a running mission, or replay of a log, in a browser")
@@ -87,6 +89,10 @@ def view_command(args) -> int:
         if not path.is_file():
             print(f"nearsub view: log {args.target!r} does not exist", file=sys.stderr)
             return 2
+        with open(path, "rb") as f:
+            if f.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
+                print(f"nearsub view: log {args.target!r} is not an MCAP file", file=sys.stderr)
+                return 2
         return _replay(path, args.port)
     return _live(args.target, args.connect, args.run, args.port)
 
@@ -117,6 +123,9 @@ def _replay(path: Path, port: int) -> int:
     try:
         mission = mission_of_log(path)
         source = ReplaySource(path, mission)
+        if not source.model.poses:
+            print(f"nearsub view: log {str(path)!r} has no state messages to replay", file=sys.stderr)
+            return 2
     except MissionError as exc:
         print(f"nearsub view: {exc}", file=sys.stderr)
         return 2
