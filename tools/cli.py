@@ -171,6 +171,9 @@ def build_parser() -> argparse.ArgumentParser:
     from . import envelope
 
     envelope.add_parser(sub)
+    from . import view
+
+    view.add_parser(sub)
 
     p = sub.add_parser("validate", help="physics validation cases (thesis 5.10) and scenario checks")
     p.add_argument("--json", action="store_true")
