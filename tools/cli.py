@@ -31,6 +31,7 @@ TOOLS = {
     "envelope": ("envelope", "safe operating envelopes around the submarine (PNG, CSV, JSON)"),
     "validate": ("validate", "physics validation cases (thesis 5.10) and scenario checks"),
     "bench": ("bench", "benchmarks that print measured figures"),
+    "view": ("view", "live map of a running mission, or replay of a log, in the browser"),
 }
 
 

@@ -2,6 +2,16 @@
 # Set everything up in .venv and run the default test suite (the README's second command).
 set -euo pipefail
 cd "$(dirname "$0")/.."
+# The viewer's browser test (tests/test_viewer.py) drives Debian's headless Chromium: install it
+# where it is missing and apt-get exists (CI and the developers' machines run as root).
+if [ ! -x /usr/bin/chromium ] && command -v apt-get >/dev/null 2>&1; then
+    if [ "$(id -u)" -eq 0 ]; then
+        echo "tools/test.sh: installing Debian's chromium for the viewer's browser test" >&2
+        apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium chromium-driver >/dev/null
+    else
+        echo "tools/test.sh: chromium is missing; install it as root: apt-get install chromium chromium-driver" >&2
+    fi
+fi
 python3 -m venv .venv
 .venv/bin/python -m pip install --quiet --upgrade pip
 .venv/bin/python -m pip install --quiet -e '.[dev]'

@@ -1,0 +1,107 @@
+"""Screenshots of `nearsub view` for docs/viewer: a live overtake near the submarine's stern, and
+the replay of its log at the collision. Run from the repository: `.venv/bin/python tests/viewer_shots.py`.
+
+The mission pauses itself just before the collision (pause_at_step), so the live picture is the
+same on every run; the page's Resume button then lets it finish and the log is replayed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from browser import Browser
+
+ROOT = Path(__file__).resolve().parents[1]
+MISSION = ROOT / "missions" / "overtake_stern_standard.toml"
+PAUSE_STEP = 2700  # t = 135 s, 4.5 s before the collision with standard waypoints
+
+
+def nearsub(*args: str) -> subprocess.Popen:
+    return subprocess.Popen(
+        [sys.executable, "-m", "nearsub", *args], stdout=subprocess.PIPE, text=True, process_group=0
+    )
+
+
+def url_of(process: subprocess.Popen) -> str:
+    line = process.stdout.readline()
+    if not line.startswith("nearsub view: "):
+        raise RuntimeError(f"nearsub view printed {line!r}")
+    return line.split(": ", 1)[1].strip()
+
+
+def clock_paused(community: str) -> bool:
+    done = subprocess.run(
+        [sys.executable, "-m", "nearsub", "clock", community, "status"], capture_output=True, text=True
+    )
+    return done.returncode == 0 and json.loads(done.stdout)["paused"]
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", default=str(ROOT / "docs" / "viewer"))
+    args = parser.parse_args()
+    out = Path(args.out)
+    work = Path(tempfile.mkdtemp(prefix="nearsub-shots-"))
+    os.environ["NEARSUB_RUNTIME_DIR"] = str(work / "runtime")
+    launch = subprocess.Popen(
+        [sys.executable, "-m", "nearsub", "launch", str(MISSION), "--warp", "0", "--json"]
+        + ["--set", f"pause_at_step={PAUSE_STEP}", "--log", str(work / "logs")],
+        stdout=subprocess.PIPE,
+        text=True,
+        process_group=0,
+    )
+    viewers = []
+    try:
+        sys.path.insert(0, str(ROOT / "tests"))
+        from helpers import wait_registered
+
+        wait_registered("overtake_stern_standard", timeout=300)
+        # Follow from the start: a viewer that joins a paused mission sees only what the log has
+        # flushed so far (whole chunks) until the mission moves again.
+        live = nearsub("view", "overtake_stern_standard")
+        viewers.append(live)
+        while not clock_paused("overtake_stern_standard"):
+            if launch.poll() is not None:
+                raise RuntimeError("the mission ended before it paused")
+            time.sleep(0.5)
+        with Browser(width=1400, height=800) as browser:
+            browser.open(url_of(live))
+            browser.wait_for(f"window.nearsub.drawn && window.nearsub.drawn.step >= {PAUSE_STEP - 5}", 30)
+            browser.wait_for("document.getElementById('st-state').textContent === 'paused'", 30)
+            print(browser.screenshot(out / "live-overtake.png"))
+            browser.evaluate("document.getElementById('follow').click()")
+            time.sleep(0.5)
+            print(browser.screenshot(out / "live-overtake-follow.png"))
+            browser.evaluate("document.getElementById('resume').click()")
+        summary = json.loads(launch.communicate(timeout=120)[0].strip().splitlines()[-1])
+        replay = nearsub("view", summary["log"])
+        viewers.append(replay)
+        with Browser(width=1400, height=800) as browser:
+            browser.open(url_of(replay))
+            browser.wait_for("window.nearsub.drawn", 30)
+            t = browser.evaluate("window.nearsub.scene.range[1]")  # the last state: the collision
+            browser.evaluate(f"const s = document.getElementById('scrub'); s.value = {t}; s.oninput()")
+            browser.wait_for(f"window.nearsub.drawn.t >= {t}", 30)
+            time.sleep(0.3)
+            print(browser.screenshot(out / "replay-overtake.png"))
+            browser.evaluate("document.getElementById('follow').click()")
+            time.sleep(0.5)
+            print(browser.screenshot(out / "replay-overtake-follow.png"))
+    finally:
+        for process in [launch, *viewers]:
+            if process.poll() is None:
+                os.killpg(process.pid, signal.SIGTERM)
+                process.wait(timeout=30)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

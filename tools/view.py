@@ -1,0 +1,170 @@
+"""`nearsub view MISSION_NAME | LOG.mcap`: the live map in a browser (the pMarineViewer of nearsub).
+
+With a mission name it follows the running mission (found through the launcher's registry, or
+`--connect ENDPOINT`); with a log file it replays the log with a timeline to scrub. Either way it
+serves one page on http://127.0.0.1:PORT/ (a free port unless `--port` is given) and prints the
+URL. The mission (waypoints, vehicle, submarine) comes from the launcher's run file, which the
+registry entry points to, or from the log's metadata.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+
+
+def add_parser(subparsers) -> None:
+    p = subparsers.add_parser("view", help="live map of a running mission, or replay of a log, in a browser")
+    p.add_argument("target", metavar="MISSION_NAME|LOG.mcap", help="a running mission's name, or a log file")
+    p.add_argument("--port", type=int, default=0, help="TCP port on 127.0.0.1 (default: a free one)")
+    p.add_argument("--connect", action="append", metavar="ENDPOINT", help="router endpoint instead of the registry")
+    p.add_argument(
+        "--run",
+        metavar="RUN.json",
+        help="the launcher's run file (mission, endpoints, log folder) instead of the registry",
+    )
+    p.set_defaults(func=view_command)
+
+
+def start_viewer(run_file: str | Path, port: int = 0, timeout: float = 30.0):
+    """Start `nearsub view` for the mission of a launcher's run file in its own process; returns
+    (process, URL). For `nearsub launch --view`: call it once the apps are up, stop the process
+    with the other children."""
+    import queue
+    import subprocess
+    import threading
+
+    from nearsub.common.mission.schema import RunConfig
+
+    community = RunConfig.load(run_file).mission.name
+    argv = [sys.executable, "-m", "nearsub", "view", community, "--run", str(run_file), "--port", str(port)]
+    process = subprocess.Popen(argv, stdout=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL, process_group=0)
+    lines: queue.Queue = queue.Queue()
+    threading.Thread(target=lambda: [lines.put(line) for line in process.stdout], daemon=True).start()
+    try:
+        line = lines.get(timeout=timeout)
+    except queue.Empty:
+        process.kill()
+        raise RuntimeError(f"nearsub view did not start within {timeout:g} s") from None
+    if not line.startswith("nearsub view: http"):
+        process.kill()
+        raise RuntimeError(f"nearsub view: {line.strip()}")
+    return process, line.split(": ", 1)[1].strip()
+
+
+def is_log(target: str) -> bool:
+    return target.endswith(".mcap") or Path(target).is_file()
+
+
+def mission_of_log(path: Path):
+    """The resolved mission stored in a log's metadata, or None."""
+    import json
+
+    from nearsub.common.mission.schema import mission_from_dict
+    from nearsub.common.runtime.logfile import read_log
+
+    resolved = read_log(path).metadata.get("mission", {}).get("resolved")
+    return mission_from_dict(json.loads(resolved), f"{path} metadata") if resolved else None
+
+
+def mission_of_run(entry: dict):
+    """The mission of a running launcher: its run file sits beside the log it writes."""
+    from nearsub.common.mission.schema import RunConfig
+
+    run_file = Path(entry.get("log", "")).parent / "run.json"
+    try:
+        return RunConfig.load(run_file).mission
+    except (OSError, ValueError):
+        return None
+
+
+def view_command(args) -> int:
+    if not 0 <= args.port <= 65535:
+        print(f"nearsub view: --port {args.port} is not a TCP port (0-65535)", file=sys.stderr)
+        return 2
+    if is_log(args.target):
+        path = Path(args.target)
+        if not path.is_file():
+            print(f"nearsub view: log {args.target!r} does not exist", file=sys.stderr)
+            return 2
+        with open(path, "rb") as f:
+            if f.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
+                print(f"nearsub view: log {args.target!r} is not an MCAP file", file=sys.stderr)
+                return 2
+        return _replay(path, args.port)
+    return _live(args.target, args.connect, args.run, args.port)
+
+
+def _ready(url: str) -> None:
+    print(f"nearsub view: {url}", flush=True)
+
+
+def _serve(main, port: int) -> int:
+    """Run the server coroutine until Ctrl-C; a port that cannot be bound is bad input."""
+    import asyncio
+
+    try:
+        asyncio.run(main)
+    except OSError as exc:
+        print(f"nearsub view: cannot serve on 127.0.0.1:{port} ({exc.strerror})", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 0
+    return 0
+
+
+def _replay(path: Path, port: int) -> int:
+    from nearsub.common.mission.schema import MissionError
+
+    from .view_server import ReplaySource, serve_viewer
+
+    try:
+        mission = mission_of_log(path)
+        source = ReplaySource(path, mission)
+        if not source.model.poses:
+            print(f"nearsub view: log {str(path)!r} has no state messages to replay", file=sys.stderr)
+            return 2
+    except MissionError as exc:
+        print(f"nearsub view: {exc}", file=sys.stderr)
+        return 2
+    except Exception as exc:  # not an MCAP file, or an unreadable one
+        print(f"nearsub view: {path}: not a readable log ({exc})", file=sys.stderr)
+        return 2
+    return _serve(serve_viewer(source, port, _ready), port)
+
+
+def _live(community: str, connect: list[str] | None, run_file: str | None, port: int) -> int:
+    from nearsub.common.runtime.bus import Bus, Endpoints
+
+    from . import registry
+    from .view_server import LiveSource, serve_viewer
+
+    if run_file:
+        from nearsub.common.mission.schema import RunConfig
+
+        try:
+            run = RunConfig.load(run_file)
+        except (OSError, ValueError) as exc:
+            print(
+                f"nearsub view: --run {run_file}: not a readable run file ({exc.__class__.__name__})", file=sys.stderr
+            )
+            return 2
+        log = Path(run.log_dir) / f"{run.mission.name}.mcap"  # where the launcher's logger writes
+        endpoints, mission = tuple(connect or run.connect), run.mission
+    elif connect:
+        endpoints, mission, log = tuple(connect), None, None
+    else:
+        try:
+            entry = registry.lookup(community)
+        except LookupError as exc:
+            print(f"nearsub view: {exc}", file=sys.stderr)
+            return 2
+        endpoints, mission, log = tuple(entry["connect"]), mission_of_run(entry), entry.get("log")
+
+    async def main() -> None:
+        with Bus(Endpoints("client", endpoints)) as bus:
+            await serve_viewer(LiveSource(bus, community, mission, log), port, _ready)
+
+    return _serve(main(), port)
