@@ -20,15 +20,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from nearsub.common.runtime.lifecycle import DONE_TOPIC, NEXT_STEP_TOPICS, ORDER, Schedule, more_severe
+from nearsub.common.runtime.lifecycle import DONE_TOPIC, NEXT_STEP_TOPICS, ORDER, EndRequest, Schedule, first_end
 from nearsub.common.runtime.messages import Ack, Message
-
-
-@dataclass
-class EndRequest:
-    step: int
-    outcome: str
-    reason: str
 
 
 @dataclass
@@ -52,10 +45,7 @@ class Progress:
     def record_ack(self, ack: Ack) -> None:
         self._mark(ack.source, ack.step)
         if ack.end is not None:
-            if self.end is None or ack.step < self.end.step:
-                self.end = EndRequest(ack.step, ack.end, ack.reason)
-            elif ack.step == self.end.step and more_severe(ack.end, self.end.outcome) != self.end.outcome:
-                self.end = EndRequest(ack.step, ack.end, ack.reason)
+            self.end = first_end(self.end, EndRequest(ack.step, ack.end, ack.reason))
 
     def _mark(self, role: str, step: int) -> None:
         if step > self.completed:
