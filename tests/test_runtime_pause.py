@@ -12,21 +12,23 @@ from nearsub.common.mission.schema import load_mission
 from nearsub.common.runtime.lifecycle import Schedule, run_inprocess
 from nearsub.common.runtime.messages import encode
 
-pytestmark = pytest.mark.timeout(900)  # above the bound of the finish below
+pytestmark = pytest.mark.timeout(1500)  # above the sum of the bounds below
 
 
 def test_a_pause_longer_than_the_step_timeout_then_resume(launches, community):
     overrides = [f"name={community}", "step_timeout=3", "pause_at_step=200", "time_limit=20"]
     mission = load_mission(ALPHA, overrides)
     process = launches.start(ALPHA, *(arg for item in overrides for arg in ("--set", item)))
-    wait_registered(community, timeout=mission.startup_timeout)
-    assert wait_paused(community, timeout=mission.startup_timeout) == {"step": 200, "paused": True}
+    assert mission.warp == 0  # the pause comes as soon as the apps have run 200 steps
+    # the launcher starts its router, then gives the logger and the apps startup_timeout each
+    wait_registered(community, timeout=3 * mission.startup_timeout)
+    # each step within step_timeout, or the clock ends the mission as stalled
+    assert wait_paused(community, timeout=200 * mission.step_timeout) == {"step": 200, "paused": True}
     time.sleep(2 * mission.step_timeout)
     assert process.poll() is None
     resumed = nearsub("clock", community, "resume")
     assert resumed.returncode == 0, resumed.stderr
-    # after the resume the apps have step_timeout per step, and 200 steps to go
-    code, summary, err = finish(process, timeout=mission.startup_timeout + 200 * mission.step_timeout)
+    code, summary, err = finish(process, timeout=200 * mission.step_timeout)  # 200 steps to go
     assert code == 0, err
     assert summary["outcome"] == "time_limit" and summary["steps"] == 400, summary
 
