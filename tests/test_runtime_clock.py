@@ -112,6 +112,14 @@ def test_pause_at_a_given_step():
     assert reply.data == {"step": 40} and core.paused
 
 
+@pytest.mark.parametrize("at", ["20", 2.5, True, None])
+def test_a_pause_at_something_not_a_step_is_refused(at):
+    core = clock()
+    [(_, reply)] = core.on_control(request("pause", at=at), 0.0)
+    assert not reply.ok and "'at' must be a step number" in reply.error
+    assert core.pause_before is None
+
+
 def test_an_unknown_command_is_refused():
     [(_, reply)] = clock().on_control(request("jump"), 0.0)
     assert not reply.ok and "jump" in reply.error

@@ -148,7 +148,7 @@ class ClockCore:
         self.step_timeout = step_timeout
         self.granted = -1
         self.pause_before = pause_at_step
-        self.pause_requests: list[Control] = []
+        self.pause_requests: list[tuple[int, Control]] = []  # (pause before step, request)
         self.paused = False
         self.owed_since: float | None = None  # when the apps last progressed on a granted step
         self.owed_completed = -1
@@ -167,12 +167,14 @@ class ClockCore:
         if request.cmd == "status":
             return [self.reply(request, data={"step": self.step, "paused": self.paused})]
         if request.cmd == "pause":
-            at = int(request.args.get("at", self.granted + 1))
+            at = request.args.get("at", self.granted + 1)
+            if not isinstance(at, int) or isinstance(at, bool):
+                return [self.reply(request, ok=False, error=f"pause: 'at' must be a step number, got {at!r}")]
             if at <= self.granted:
                 error = f"step {at} has passed or is granted (granted up to {self.granted})"
                 return [self.reply(request, ok=False, error=error)]
             self.pause_before = at if self.pause_before is None else min(self.pause_before, at)
-            self.pause_requests.append(request)
+            self.pause_requests.append((at, request))
             return []
         if request.cmd == "resume":
             self.paused = False
@@ -194,9 +196,9 @@ class ClockCore:
         if self.pause_before is not None and completed == self.pause_before - 1:
             self.paused = True
         if self.paused:  # answer the requests due now, also those that came after the pause began
-            due = [r for r in self.pause_requests if int(r.args.get("at", self.step)) <= self.step]
-            advance.replies = [self.reply(request, data={"step": self.step}) for request in due]
-            self.pause_requests = [r for r in self.pause_requests if r not in due]
+            step = self.step
+            advance.replies = [self.reply(r, data={"step": step}) for at, r in self.pause_requests if at <= step]
+            self.pause_requests = [(at, r) for at, r in self.pause_requests if at > step]
         else:
             advance.tick = self.grant(completed, now)
         if self.stalled(completed, now):
