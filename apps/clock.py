@@ -1,4 +1,5 @@
-"""The clock app: grants lock-stepped steps to the helm, pid and sim (common/clock.py has the rules).
+"""The clock app: a thin shell around `runtime.clock.ClockCore`, which grants lock-stepped steps
+to the helm, pid and sim and holds every rule.
 
 The clock is off the critical path: it drains its stream in batches (a short sleep between
 polls), so it wakes a few hundred times a second rather than once per message.
@@ -22,16 +23,13 @@ from nearsub.apps.shell import prepare_process
 from nearsub.common.mission.schema import RunConfig
 from nearsub.common.runtime import keys
 from nearsub.common.runtime.bus import Bus, Endpoints, signal_self
-from nearsub.common.runtime.clock import GrantPolicy, Progress
+from nearsub.common.runtime.clock import ClockCore, Reply
 from nearsub.common.runtime.lifecycle import DONE_TOPIC, ORDER, Schedule
 from nearsub.common.runtime.messages import (
     VEHICLE_TOPICS,
     Ack,
     Control,
-    ControlReply,
     MessageError,
-    MissionEnd,
-    Tick,
     decode,
     encode,
 )
@@ -44,8 +42,14 @@ class Clock:
     def __init__(self, run: RunConfig, bus: Bus):
         mission = self.mission = run.mission
         c = self.community = mission.name
-        self.progress = Progress(Schedule(mission.periods()))
-        self.policy = GrantPolicy(mission.dt, mission.warp, mission.max_steps)
+        self.core = ClockCore(
+            Schedule(mission.periods()),
+            mission.dt,
+            mission.warp,
+            mission.max_steps,
+            mission.step_timeout,
+            mission.pause_at_step,
+        )
         self.bus = bus
         self.stream = bus.stream(keys.everything(c))
         bus.on_liveliness_lost(keys.alive(c, "launcher", "*"), signal_self())
@@ -55,10 +59,6 @@ class Clock:
         self.control_key = keys.control(c, "clock")
         self.end_key = keys.mission_end(c)
         self.done_topics = {keys.vehicle_topic(c, mission.vehicle_name, leaf): leaf for leaf in DONE_TOPIC.values()}
-        self.granted = -1
-        self.pause_before: int | None = mission.pause_at_step
-        self.pause_requests: list[Control] = []
-        self.paused = False
         self.ended = False
 
     def wait_for_apps(self) -> str | None:
@@ -74,113 +74,48 @@ class Clock:
                 return f"apps did not start within {self.mission.startup_timeout:g} s: {', '.join(missing)}"
             time.sleep(0.02)
 
-    @property
-    def step(self) -> int:
-        """The next step to complete."""
-        return self.progress.completed + 1
-
-    def finish(self, step: int, outcome: str, reason: str) -> None:
-        end = MissionEnd(step=step, t=step * self.mission.dt, source="clock", outcome=outcome, reason=reason)
-        self.end_pub.put(encode(end))
-        self.ended = True
-
-    def reply(self, request: Control, ok: bool = True, error: str = "", **data) -> None:
-        answer = ControlReply(
-            step=self.step,
-            t=self.step * self.mission.dt,
-            source="clock",
-            request_id=request.request_id,
-            ok=ok,
-            data=data,
-            error=error,
-        )
-        self.bus.put_when_matched(keys.reply(self.community, request.reply_to), encode(answer))
+    def send(self, replies: list[Reply]) -> None:
+        for requester, reply in replies:
+            self.bus.put_when_matched(keys.reply(self.community, requester), encode(reply))
 
     def handle(self, key: str, payload: bytes) -> None:
         """One stream item: progress, a control request, or someone else's mission end."""
         leaf = self.done_topics.get(key)
         try:
             if leaf is not None:
-                self.progress.record_output(leaf, decode(payload, VEHICLE_TOPICS[leaf], key))
+                self.core.progress.record_output(leaf, decode(payload, VEHICLE_TOPICS[leaf], key))
             elif key.startswith(self.ack_prefix):
-                self.progress.record_ack(decode(payload, Ack, key))
+                self.core.progress.record_ack(decode(payload, Ack, key))
             elif key == self.control_key:
-                self.on_control(decode(payload, Control, key))
+                self.send(self.core.on_control(decode(payload, Control, key), time.monotonic()))
             elif key == self.end_key:
                 self.ended = True
         except MessageError as exc:
             if leaf is None:  # consumers report malformed data; the clock only reports its own mail
                 print(f"[clock] error: rejected message: {exc}", file=sys.stderr)
 
-    def on_control(self, request: Control) -> None:
-        if request.cmd == "status":
-            self.reply(request, step=self.step, paused=self.paused)
-        elif request.cmd == "pause":
-            at = int(request.args.get("at", self.granted + 1))
-            if at <= self.granted:
-                self.reply(
-                    request, ok=False, error=f"step {at} has passed or is granted (granted up to {self.granted})"
-                )
-                return
-            self.pause_before = at if self.pause_before is None else min(self.pause_before, at)
-            self.pause_requests.append(request)
-        elif request.cmd == "resume":
-            self.paused = False
-            self.pause_before = None
-            self.policy.rebase(time.monotonic(), self.step)
-            self.reply(request, step=self.step)
-        else:
-            self.reply(request, ok=False, error=f"clock: unknown command {request.cmd!r}")
-
     def run(self) -> int:
         error = self.wait_for_apps()
         if error:
-            self.finish(0, "error", error)
+            self.end_pub.put(encode(self.core.mission_end(0, "error", error)))
             print(f"[clock] {error}", file=sys.stderr)
             return 1
-        self.policy.rebase(time.monotonic(), 0)
-        timeout = self.mission.step_timeout
-        last_completed, last_progress = -1, time.monotonic()
+        self.core.start(time.monotonic())
         while not self.ended:
             while (item := self.stream.try_recv()) is not None:
                 self.handle(*item)
-            now = time.monotonic()
-            completed, end = self.progress.completed, self.progress.end
-            if completed != last_completed:
-                last_completed, last_progress = completed, now
-            if end is not None and completed >= end.step:
-                self.finish(end.step + 1, end.outcome, end.reason)
+            advance = self.core.advance(time.monotonic())
+            self.send(advance.replies)
+            if advance.end is not None:
+                self.end_pub.put(encode(advance.end))
+                if advance.end.outcome == "stalled":
+                    print(f"[clock] stalled: {advance.end.reason}", file=sys.stderr)
+                    return 1
                 return 0
-            if completed >= self.mission.max_steps - 1:
-                self.finish(
-                    self.mission.max_steps, "time_limit", f"reached the time limit of {self.mission.time_limit:g} s"
-                )
-                return 0
-            if self.pause_before is not None and completed == self.pause_before - 1:
-                self.paused = True
-            if self.paused:  # answer the requests due now, also those that came after the pause began
-                due = [r for r in self.pause_requests if int(r.args.get("at", self.step)) <= self.step]
-                for request in due:
-                    self.reply(request, step=self.step)
-                    self.pause_requests.remove(request)
-            if not self.paused:
-                self.grant(completed, now)
-            if self.granted > completed and now - last_progress > timeout:
-                reason = self.progress.stall_reason(timeout)
-                print(f"[clock] stalled: {reason}", file=sys.stderr)
-                self.finish(completed + 1, "stalled", reason)
-                return 1
-            time.sleep(POLL if self.granted > completed else IDLE_POLL)
+            if advance.tick is not None:
+                self.tick_pub.put(encode(advance.tick))
+            time.sleep(POLL if self.core.granted > self.core.progress.completed else IDLE_POLL)
         return 0
-
-    def grant(self, completed: int, now: float) -> None:
-        """Extend the grant in chunks of half the window (fewer ticks), or up to a cap."""
-        limit = self.policy.limit(completed, now, self.pause_before, self.progress.end)
-        if limit > self.granted and (
-            limit - self.granted >= self.policy.window // 2 or limit - completed < self.policy.window
-        ):
-            self.granted = limit
-            self.tick_pub.put(encode(Tick(step=limit, t=limit * self.mission.dt, source="clock")))
 
 
 def main(argv=None) -> int:

@@ -1,4 +1,4 @@
-"""The helm app: a thin process shell around `common.cores.HelmCore`."""
+"""The helm app: a thin process shell around `common.mission.cores.HelmCore`."""
 
 from nearsub.apps.shell import main_for
 from nearsub.common.mission.cores import HelmCore

@@ -1,4 +1,4 @@
-"""The pid app: a thin process shell around `common.cores.PidCore`."""
+"""The pid app: a thin process shell around `common.mission.cores.PidCore`."""
 
 from nearsub.apps.shell import main_for
 from nearsub.common.mission.cores import PidCore

@@ -3,12 +3,12 @@
 Start-up: open the session, subscribe one FIFO stream to the community (nearsub/<c>/**), declare
 publishers, optionally take over from a running instance, publish "running", declare the
 liveliness token. Then the loop drains the stream in arrival order:
-- a tick grants the steps up to the one it carries (common/clock.py);
-- an input is validated and offered to the inbox (malformed or out-of-protocol messages are
+- a tick grants the steps up to the one it carries (runtime/clock.py);
+- an input is validated and offered to the stepper (malformed or out-of-protocol messages are
   reported as error events and dropped; the app keeps running);
 - an end request (an Ack with `end`) from any app at step k: this app runs no step after k;
-- the app then runs, in order, every granted step it has the inputs for: the core gets its new
-  mail and iterates; an end request, the outputs and the events are published, in that order;
+- the stepper (runtime/lifecycle.py) then runs every step it may, and the shell publishes what
+  it returns, in order;
 - control requests (handover, retire) are answered between steps;
 - the mission end leaves the loop.
 
@@ -26,13 +26,11 @@ import sys
 import uuid
 from collections.abc import Callable
 
-import msgpack
-
 from nearsub.apps.services import RemoteSurrogate
 from nearsub.common.mission.schema import MissionError, RunConfig, apply_overrides, mission_from_dict
 from nearsub.common.runtime import keys
 from nearsub.common.runtime.bus import Bus, DeadlineExceeded, Endpoints, deadline, signal_self
-from nearsub.common.runtime.lifecycle import DONE_TOPIC, Core, Inbox, Iteration, Schedule
+from nearsub.common.runtime.lifecycle import ACK, EVENTS, Core, Schedule, Stepper, control_reply
 from nearsub.common.runtime.messages import (
     VEHICLE_TOPICS,
     Ack,
@@ -95,16 +93,11 @@ class AppShell:
         c = self.community = mission.name
         self.vehicle = mission.vehicle_name
         self.dt = mission.dt
-        self.schedule = Schedule(mission.periods())
         self.tick_key = keys.tick(c)
         self.end_key = keys.mission_end(c)
         self.control_key = keys.control(c, instance)
         self.reply_key = keys.reply(c, instance)
         self.ack_prefix = keys.ack(c, "")
-        self.granted = -1
-        self.stop_after = mission.max_steps - 1
-        self.started = False
-        self.step = 0  # the next step this app will run
         self.handover_request: Control | None = None
         self.backlog: list[tuple[str, bytes]] = []
 
@@ -116,15 +109,18 @@ class AppShell:
             mission = self.run.mission
             surrogate = RemoteSurrogate(bus, c) if mission.needs_surrogate else None
             self.core = self.core_factory(mission, surrogate)
-            self.inbox = Inbox(self.core.inputs, self.schedule)
+            # A surrogate server that stops answering ends the mission, naming it.
+            self.stepper = Stepper(
+                self.core, Schedule(mission.periods()), self.dt, mission.max_steps, recoverable=(ServiceError,)
+            )
             self.input_of_key = {keys.vehicle_topic(c, self.vehicle, leaf): leaf for leaf in self.core.inputs}
             self.stream = bus.stream(keys.everything(c))
             bus.on_liveliness_lost(keys.alive(c, "launcher", "*"), signal_self())
-            self.outputs = {
+            self.publishers = {
                 leaf: bus.publisher(keys.vehicle_topic(c, self.vehicle, leaf)) for leaf in self.core.outputs
             }
-            self.ack_pub = bus.publisher(keys.ack(c, self.core.role))
-            self.event_pub = bus.publisher(keys.events(c, self.instance))
+            self.publishers[ACK] = bus.publisher(keys.ack(c, self.core.role))
+            self.publishers[EVENTS] = bus.publisher(keys.events(c, self.instance))
             self.status_pub = bus.publisher(keys.status(c, self.instance))
             if takeover is not None:
                 self.take_over(takeover, resume_step)
@@ -162,17 +158,11 @@ class AppShell:
             ) from None
         if not reply.ok:
             raise SystemExit(f"{self.instance}: handover from {old_instance} failed: {reply.error}")
-        handover = msgpack.unpackb(bytes.fromhex(reply.data["handover"]))
-        self.core.restore(handover["progress"])
-        for leaf, raw in handover["held"].items():
-            self.inbox.held[leaf] = decode(raw, VEHICLE_TOPICS[leaf], f"handover {leaf}")
-        self.inbox.delivered = dict(handover["delivered"])
-        self.started = True
-        self.step = resume_step
-        self.granted = resume_step - 1
+        self.stepper.take_over(bytes.fromhex(reply.data["handover"]), resume_step)
 
     # -- the loop -----------------------------------------------------------------------------
     def loop(self) -> int:
+        stepper = self.stepper
         while True:
             key, payload = self.backlog.pop(0) if self.backlog else self.stream.recv()
             if key in self.input_of_key:
@@ -180,11 +170,11 @@ class AppShell:
             elif key == self.tick_key:
                 tick = self.decode_or_report(payload, Tick, key)
                 if tick is not None:
-                    self.granted = max(self.granted, tick.step)
+                    stepper.grant(tick.step)
             elif key.startswith(self.ack_prefix):
                 ack = self.decode_or_report(payload, Ack, key)
                 if ack is not None and ack.end is not None:
-                    self.stop_after = min(self.stop_after, ack.step)
+                    stepper.end_after(ack.step)
             elif key == self.control_key:
                 request = self.decode_or_report(payload, Control, key)
                 if request is not None and self.on_control(request):
@@ -193,51 +183,19 @@ class AppShell:
                 return 0
             else:
                 continue
-            self.run_granted_steps()
+            for channel, message in stepper.run():
+                if channel == EVENTS and message.kind == "error":
+                    print(f"[{self.instance}] error: {message.detail}", file=sys.stderr, flush=True)
+                self.publishers[channel].put(encode(message))
             self.try_handover()
-
-    def run_granted_steps(self) -> None:
-        """Run every granted step, in order, as far as the inputs have arrived."""
-        role = self.core.role
-        while self.step <= min(self.granted, self.stop_after):
-            if not self.started:
-                for leaf, message in self.core.startup():
-                    self.outputs[leaf].put(encode(message))
-                self.started = True
-            if self.schedule.runs(role, self.step):
-                if self.inbox.waiting_for(self.step):
-                    return
-                self.iterate(self.step)
-            self.step += 1
 
     def on_input(self, leaf: str, payload: bytes) -> None:
         key = keys.vehicle_topic(self.community, self.vehicle, leaf)
         message = self.decode_or_report(payload, VEHICLE_TOPICS[leaf], key)
         if message is not None:
-            error = self.inbox.offer(leaf, message)
+            error = self.stepper.offer(leaf, message)
             if error:
                 self.report_error(error)
-
-    def iterate(self, step: int) -> None:
-        self.core.new_mail(self.inbox.take(step))
-        t = step * self.dt
-        try:
-            result = self.core.iterate(step, t)
-        except ServiceError as exc:  # e.g. the surrogate server stopped answering: end, naming it
-            self.report_error(str(exc))
-            result = Iteration(end="error", reason=str(exc))
-        done_topic = DONE_TOPIC[self.core.role]
-        if result.end is not None or all(leaf != done_topic for leaf, _ in result.outputs):
-            # The done-topic output normally acknowledges the step; say it explicitly otherwise.
-            # An end request goes first, so every app hears of it before it could run step + 1.
-            ack = Ack(step=step, t=t, source=self.core.role, end=result.end, reason=result.reason)
-            self.ack_pub.put(encode(ack))
-            if result.end is not None:
-                self.stop_after = min(self.stop_after, step)
-        for leaf, message in result.outputs:
-            self.outputs[leaf].put(encode(message))
-        for event in result.events:
-            self.event_pub.put(encode(event))
 
     # -- control: handover and retire (swap) -------------------------------------------------
     def on_control(self, request: Control) -> bool:
@@ -246,34 +204,23 @@ class AppShell:
             self.handover_request = request
             return False
         if request.cmd == "retire":
-            self.reply(request, True, {"instance": self.instance})
+            self.reply(request, data={"instance": self.instance})
             return True
-        self.reply(request, False, error=f"{self.instance}: unknown control command {request.cmd!r}")
+        self.reply(request, ok=False, error=f"{self.instance}: unknown control command {request.cmd!r}")
         return False
 
     def try_handover(self) -> None:
         request = self.handover_request
         if request is None:
             return
-        step = int(request.args["step"])
-        if self.step != step or self.inbox.waiting_for(step):
-            return
-        held = {leaf: encode(message) for leaf, message in self.inbox.held.items()}
-        handover = msgpack.packb({"progress": self.core.progress(), "held": held, "delivered": self.inbox.delivered})
-        self.reply(request, True, {"handover": handover.hex()})
-        self.handover_request = None
+        handover = self.stepper.handover(int(request.args["step"]))
+        if handover is not None:
+            self.reply(request, data={"handover": handover.hex()})
+            self.handover_request = None
 
-    def reply(self, request: Control, ok: bool, data: dict | None = None, error: str = "") -> None:
-        answer = ControlReply(
-            step=self.step,
-            t=self.step * self.dt,
-            source=self.instance,
-            request_id=request.request_id,
-            ok=ok,
-            data=data or {},
-            error=error,
-        )
-        self.bus.put_when_matched(keys.reply(self.community, request.reply_to), encode(answer))
+    def reply(self, request: Control, **answer) -> None:
+        reply = control_reply(request, self.instance, self.stepper.step, self.dt, **answer)
+        self.bus.put_when_matched(keys.reply(self.community, request.reply_to), encode(reply))
 
     # -- reporting ----------------------------------------------------------------------------
     def decode_or_report(self, payload: bytes, model: type[Message], key: str) -> Message | None:
@@ -285,17 +232,14 @@ class AppShell:
 
     def report_error(self, text: str) -> None:
         print(f"[{self.instance}] error: {text}", file=sys.stderr, flush=True)
-        event = Event(step=self.step, t=self.step * self.dt, source=self.core.role, kind="error", detail=text)
-        self.event_pub.put(encode(event))
+        step = self.stepper.step
+        event = Event(step=step, t=step * self.dt, source=self.core.role, kind="error", detail=text)
+        self.publishers[EVENTS].put(encode(event))
 
     def publish_status(self, state: str) -> None:
+        step = self.stepper.step
         status = AppStatus(
-            step=self.step,
-            t=self.step * self.dt,
-            source=self.core.role,
-            app=self.core.role,
-            instance=self.instance,
-            state=state,
+            step=step, t=step * self.dt, source=self.core.role, app=self.core.role, instance=self.instance, state=state
         )
         self.status_pub.put(encode(status))
 

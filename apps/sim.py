@@ -1,4 +1,4 @@
-"""The sim app: a thin process shell around `common.cores.SimCore`."""
+"""The sim app: a thin process shell around `common.mission.cores.SimCore`."""
 
 from nearsub.apps.shell import main_for
 from nearsub.common.mission.cores import SimCore

@@ -3,8 +3,8 @@
 - bus: the only Zenoh code (sessions, publishers, FIFO mailboxes, queries).
 - keys: build and parse every key expression.
 - messages: wire messages (pydantic models, msgpack codec, topic -> model registry).
-- lifecycle: the app core protocol (start-up, new mail, iterate), the schedule, the inbox and the in-process runner.
-- clock: the clock's grant, pause and stall bookkeeping, free of transport.
+- lifecycle: the app core protocol (start-up, new mail, iterate), schedule, step runner and in-process runner.
+- clock: the clock's grants, pauses and stall timer (ClockCore), free of transport and of the wall clock.
 - logfile: MCAP mission logs (write and read).
 - processes: the processes nearsub starts: one BLAS thread, spawning apps, the stop ladder.
 """

@@ -1,4 +1,4 @@
-"""The lock-stepped clock's protocol, free of transport (SPEC section 4).
+"""The lock-stepped clock's protocol and bookkeeping, free of transport and of the wall clock.
 
 The clock grants steps; the apps run them. A tick carrying step G means "you may run every step
 up to and including G". Within the grant the apps are driven by their data: the helm runs step k
@@ -11,8 +11,12 @@ The clock follows progress through the apps' done outputs (lifecycle.DONE_TOPIC:
 desired state, the pid's input, the sim's next state), or an explicit Ack when an app asks to end
 the mission. An end requested at step k stops every app after step k: the request is published
 before the outputs of step k, so every app learns of it before it could start step k + 1. If the
-progress stalls for `step_timeout`, the clock names the first app in loop order that has not
-finished the step; the apps later in the loop wait on it.
+apps owe a granted step and make no progress for `step_timeout`, the clock names the first app
+in loop order that has not finished the step; the apps later in the loop wait on it. Only time in
+which a step is owed counts: not a pause, nor the wait for a paced step's release time.
+
+`ClockCore` holds every decision; the caller passes the monotonic time, so the bookkeeping is
+tested without processes (docs/design.md, "The lock-step protocol").
 """
 
 from __future__ import annotations
@@ -20,15 +24,17 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from nearsub.common.runtime.lifecycle import DONE_TOPIC, NEXT_STEP_TOPICS, ORDER, Schedule, more_severe
-from nearsub.common.runtime.messages import Ack, Message
-
-
-@dataclass
-class EndRequest:
-    step: int
-    outcome: str
-    reason: str
+from nearsub.common.runtime.lifecycle import (
+    DONE_TOPIC,
+    NEXT_STEP_TOPICS,
+    ORDER,
+    EndRequest,
+    Schedule,
+    control_reply,
+    first_end,
+    time_limit_end,
+)
+from nearsub.common.runtime.messages import Ack, Control, ControlReply, Message, MissionEnd, Tick
 
 
 @dataclass
@@ -52,10 +58,7 @@ class Progress:
     def record_ack(self, ack: Ack) -> None:
         self._mark(ack.source, ack.step)
         if ack.end is not None:
-            if self.end is None or ack.step < self.end.step:
-                self.end = EndRequest(ack.step, ack.end, ack.reason)
-            elif ack.step == self.end.step and more_severe(ack.end, self.end.outcome) != self.end.outcome:
-                self.end = EndRequest(ack.step, ack.end, ack.reason)
+            self.end = first_end(self.end, EndRequest(ack.step, ack.end, ack.reason))
 
     def _mark(self, role: str, step: int) -> None:
         if step > self.completed:
@@ -102,3 +105,125 @@ class GrantPolicy:
         if end is not None:
             grant = min(grant, end.step)
         return grant
+
+
+# A control reply and the requester it goes to.
+Reply = tuple[str, ControlReply]
+
+
+@dataclass
+class Advance:
+    """What the clock does now: publish a tick granting up to `tick`, send `replies`, or end
+    the mission with `end` (then nothing else)."""
+
+    tick: Tick | None = None
+    replies: list[Reply] = field(default_factory=list)
+    end: MissionEnd | None = None
+
+
+class ClockCore:
+    """The clock's state: progress, grants, pause and stall timer. `on_control` answers control
+    requests (status, pause, resume); `advance` is called after each batch of mail.
+
+    A pause takes effect at a step boundary: with pause before step P (the mission's
+    `pause_at_step`, or a request's `at`, by default the step after the grant) the clock grants up
+    to P - 1, is paused once the apps have completed P - 1, and then answers the pause requests
+    that are due. `resume` grants again, the warp's wall clock restarting at the paused step.
+    """
+
+    def __init__(
+        self,
+        schedule: Schedule,
+        dt: float,
+        warp: float,
+        max_steps: int,
+        step_timeout: float,
+        pause_at_step: int | None = None,
+        window: int = 20,
+    ):
+        self.progress = Progress(schedule)
+        self.policy = GrantPolicy(dt, warp, max_steps, window)
+        self.dt = dt
+        self.max_steps = max_steps
+        self.step_timeout = step_timeout
+        self.granted = -1
+        self.pause_before = pause_at_step
+        self.pause_requests: list[tuple[int, Control]] = []  # (pause before step, request)
+        self.paused = False
+        self.owed_since: float | None = None  # when the apps last progressed on a granted step
+        self.owed_completed = -1
+
+    @property
+    def step(self) -> int:
+        """The next step to complete."""
+        return self.progress.completed + 1
+
+    def start(self, now: float) -> None:
+        """The apps are up: step 0 is due now."""
+        self.policy.rebase(now, 0)
+
+    def on_control(self, request: Control, now: float) -> list[Reply]:
+        """The immediate answers to a control request (a pause is answered when it is reached)."""
+        if request.cmd == "status":
+            return [self.reply(request, data={"step": self.step, "paused": self.paused})]
+        if request.cmd == "pause":
+            at = request.args.get("at", self.granted + 1)
+            if not isinstance(at, int) or isinstance(at, bool):
+                return [self.reply(request, ok=False, error=f"pause: 'at' must be a step number, got {at!r}")]
+            if at <= self.granted:
+                error = f"step {at} has passed or is granted (granted up to {self.granted})"
+                return [self.reply(request, ok=False, error=error)]
+            self.pause_before = at if self.pause_before is None else min(self.pause_before, at)
+            self.pause_requests.append((at, request))
+            return []
+        if request.cmd == "resume":
+            self.paused = False
+            self.pause_before = None
+            self.policy.rebase(now, self.step)
+            return [self.reply(request, data={"step": self.step})]
+        return [self.reply(request, ok=False, error=f"clock: unknown command {request.cmd!r}")]
+
+    def reply(self, request: Control, **answer) -> Reply:
+        return request.reply_to, control_reply(request, "clock", self.step, self.dt, **answer)
+
+    def advance(self, now: float) -> Advance:
+        completed, end = self.progress.completed, self.progress.end
+        if end is None and completed >= self.max_steps - 1:
+            end = time_limit_end(self.max_steps, self.dt)
+        if end is not None and completed >= end.step:
+            return Advance(end=self.mission_end(end.step + 1, end.outcome, end.reason))
+        advance = Advance()
+        if self.pause_before is not None and completed == self.pause_before - 1:
+            self.paused = True
+        if self.paused:  # answer the requests due now, also those that came after the pause began
+            step = self.step
+            advance.replies = [self.reply(r, data={"step": step}) for at, r in self.pause_requests if at <= step]
+            self.pause_requests = [(at, r) for at, r in self.pause_requests if at > step]
+        else:
+            advance.tick = self.grant(completed, now)
+        if self.stalled(completed, now):
+            reason = self.progress.stall_reason(self.step_timeout)
+            return Advance(replies=advance.replies, end=self.mission_end(completed + 1, "stalled", reason))
+        return advance
+
+    def grant(self, completed: int, now: float) -> Tick | None:
+        """Extend the grant in chunks of half the window (fewer ticks), or up to a cap."""
+        limit = self.policy.limit(completed, now, self.pause_before, self.progress.end)
+        window = self.policy.window
+        if limit > self.granted and (limit - self.granted >= window // 2 or limit - completed < window):
+            self.granted = limit
+            return Tick(step=limit, t=limit * self.dt, source="clock")
+        return None
+
+    def stalled(self, completed: int, now: float) -> bool:
+        """True once a granted step has been owed for `step_timeout` without progress. The timer
+        runs only while a step is owed, so a pause or a paced wait does not count."""
+        if self.granted <= completed:
+            self.owed_since = None
+        elif self.owed_since is None or completed != self.owed_completed:
+            self.owed_since = now
+        self.owed_completed = completed
+        return self.owed_since is not None and now - self.owed_since > self.step_timeout
+
+    def mission_end(self, step: int, outcome: str, reason: str) -> MissionEnd:
+        return MissionEnd(step=step, t=step * self.dt, source="clock", outcome=outcome, reason=reason)

@@ -1,13 +1,14 @@
-"""One app lifecycle, in the MOOS-IvP manner, and the lock-step schedule that drives it.
+"""One app lifecycle, in the MOOS-IvP manner, and the lock-step rules that drive it.
 
 Every lock-stepped app is a `Core` with three phases:
 - `startup()`: called once; returns the messages to publish at the first step (the sim's x_0);
 - `new_mail(mail)`: the inputs that are new since the last run, one per topic;
 - `iterate(step, t)`: compute and return this step's outputs, events and an optional end request.
 
-Transport is not the core's business: the process shell (`apps/shell.py`) feeds a core from Zenoh,
-and `run_inprocess` feeds the same cores from a dict. Both follow `Schedule`, so they produce the
-same messages in the same order (SPEC section 4).
+Transport is not the core's business. A `Stepper` runs one core under the lock-step rules; the
+process shell (`apps/shell.py`) feeds it from Zenoh, and `run_inprocess` feeds one stepper per
+core from the others, so both produce the same messages in the same order (docs/design.md,
+"The lock-step protocol").
 
 The schedule: within one step the order is helm, pid, sim (the thesis loop). An app with period p
 runs at steps that are multiples of p. Every output carries the step it is valid at; a consumer at
@@ -21,7 +22,18 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Protocol
 
-from nearsub.common.runtime.messages import Event, Message
+import msgpack
+
+from nearsub.common.runtime.messages import (
+    VEHICLE_TOPICS,
+    Ack,
+    Control,
+    ControlReply,
+    Event,
+    Message,
+    decode,
+    encode,
+)
 
 ORDER = ("helm", "pid", "sim")
 
@@ -30,7 +42,7 @@ PRODUCER = {"desired": "helm", "input": "pid", "state": "sim"}
 
 # The output that tells the clock an app has finished a step: its acknowledgement. An app sends
 # an explicit Ack only when it asks to end the mission or did not publish this output (e.g. the
-# sim on divergence); that halves the messages per step (see common/clock.py).
+# sim on divergence); that halves the messages per step (see runtime/clock.py).
 DONE_TOPIC = {"helm": "desired", "pid": "input", "sim": "state"}
 
 # Topics labelled with the step they lead to (the sim's x_{k+1} after step k).
@@ -81,16 +93,6 @@ class Schedule:
         return (step // period) * period
 
 
-def more_severe(a: str | None, b: str | None) -> str | None:
-    """The more severe of two end requests (None means no request)."""
-    if a is None:
-        return b
-    if b is None:
-        return a
-    rank = {name: i for i, name in enumerate(OUTCOME_SEVERITY)}
-    return a if rank.get(a, 0) <= rank.get(b, 0) else b
-
-
 class Inbox:
     """The latest accepted message per input topic of one app, and what its core has seen.
 
@@ -138,6 +140,144 @@ class Inbox:
         return mail
 
 
+@dataclass(frozen=True)
+class EndRequest:
+    """An app's request to end the mission after step `step` with `outcome`."""
+
+    step: int
+    outcome: str
+    reason: str = ""
+
+
+def first_end(held: EndRequest | None, request: EndRequest) -> EndRequest:
+    """The end request that wins: the earliest step, then the most severe outcome."""
+    if held is None or request.step < held.step:
+        return request
+    rank = {name: i for i, name in enumerate(OUTCOME_SEVERITY)}
+    if request.step == held.step and rank.get(request.outcome, 0) < rank.get(held.outcome, 0):
+        return request
+    return held
+
+
+def time_limit_end(max_steps: int, dt: float) -> EndRequest:
+    """The end every mission reaches when no app asks earlier: after its last step."""
+    return EndRequest(max_steps - 1, "time_limit", f"reached the time limit of {max_steps * dt:g} s")
+
+
+def control_reply(
+    request: Control, source: str, step: int, dt: float, ok: bool = True, data: dict | None = None, error: str = ""
+) -> ControlReply:
+    """The answer to a control request, sent by `source` at `step`."""
+    return ControlReply(
+        step=step, t=step * dt, source=source, request_id=request.request_id, ok=ok, data=data or {}, error=error
+    )
+
+
+# Channels a stepper publishes on besides its core's output topics.
+ACK = "ack"
+EVENTS = "events"
+
+
+class Stepper:
+    """Runs one core under the lock-step rules, free of transport: the process shell and
+    `run_inprocess` feed it inputs, grants and end requests, and publish what `run` returns.
+
+    The rules: step k runs once it is granted, not past an end request, and its inputs have
+    arrived; a slower app (period p) runs only at multiples of p and its consumers hold its
+    latest output. The start-up outputs go out with the first granted step. An end request goes
+    out on `ACK` before the outputs of its step, so every app hears of it before it could run
+    the next one; so does an explicit Ack when the core did not publish its done topic.
+    Exceptions of the `recoverable` types from `iterate` (a service that stopped answering) end
+    the mission with "error" and an error event instead of crashing the app.
+    """
+
+    def __init__(
+        self,
+        core: Core,
+        schedule: Schedule,
+        dt: float,
+        max_steps: int,
+        recoverable: tuple[type[Exception], ...] = (),
+    ):
+        self.core = core
+        self.schedule = schedule
+        self.dt = dt
+        self.recoverable = recoverable
+        self.inbox = Inbox(core.inputs, schedule)
+        self.granted = -1
+        self.stop_after = max_steps - 1
+        self.started = False
+        self.step = 0  # the next step this app will run
+
+    def offer(self, leaf: str, message: Message) -> str | None:
+        """Accept an input (see `Inbox.offer`); an error text when it is refused."""
+        return self.inbox.offer(leaf, message)
+
+    def grant(self, step: int) -> None:
+        self.granted = max(self.granted, step)
+
+    def end_after(self, step: int) -> None:
+        self.stop_after = min(self.stop_after, step)
+
+    def blocked(self) -> list[str]:
+        """The inputs this app waits for at a step it may run; empty when it has nothing to do."""
+        if self.step > min(self.granted, self.stop_after):
+            return []
+        return self.inbox.waiting_for(self.step)
+
+    def run(self) -> list[tuple[str, Message]]:
+        """Run every permitted step whose inputs have arrived; (channel, message) in publish order."""
+        published: list[tuple[str, Message]] = []
+        while self.step <= min(self.granted, self.stop_after):
+            if not self.started:
+                published.extend(self.core.startup())
+                self.started = True
+            if self.schedule.runs(self.core.role, self.step):
+                if self.inbox.waiting_for(self.step):
+                    break
+                published.extend(self._iterate(self.step))
+            self.step += 1
+        return published
+
+    def _iterate(self, step: int) -> list[tuple[str, Message]]:
+        role = self.core.role
+        t = step * self.dt
+        self.core.new_mail(self.inbox.take(step))
+        try:
+            result = self.core.iterate(step, t)
+        except self.recoverable as exc:
+            error = Event(step=step, t=t, source=role, kind="error", detail=str(exc))
+            result = Iteration(events=[error], end="error", reason=str(exc))
+        published: list[tuple[str, Message]] = []
+        if result.end is not None or all(leaf != DONE_TOPIC[role] for leaf, _ in result.outputs):
+            published.append((ACK, Ack(step=step, t=t, source=role, end=result.end, reason=result.reason)))
+            if result.end is not None:
+                self.end_after(step)
+        published.extend(result.outputs)
+        published.extend((EVENTS, event) for event in result.events)
+        return published
+
+    # -- swap: hand the app over to a new instance at a step boundary --------------------------
+    def handover(self, step: int) -> bytes | None:
+        """What a successor needs to run from `step` (the core's progress and the inputs held),
+        once this app has reached `step` with its inputs; None before that."""
+        if self.step != step or self.inbox.waiting_for(step):
+            return None
+        held = {leaf: encode(message) for leaf, message in self.inbox.held.items()}
+        return msgpack.packb({"progress": self.core.progress(), "held": held, "delivered": self.inbox.delivered})
+
+    def take_over(self, handover: bytes, step: int) -> None:
+        """Continue from a predecessor's `handover` at `step`: no step is skipped or repeated."""
+        state = msgpack.unpackb(handover)
+        self.core.restore(state["progress"])
+        for leaf, raw in state["held"].items():
+            self.inbox.held[leaf] = decode(raw, VEHICLE_TOPICS[leaf], f"handover {leaf}")
+        self.inbox.delivered = dict(state["delivered"])
+        self.started = True
+        self.step = step
+        self.granted = step - 1
+
+
 @dataclass
 class InProcessResult:
     outcome: str
@@ -156,51 +296,59 @@ def run_inprocess(
     max_steps: int,
     swaps: dict[int, dict[str, Core]] | None = None,
 ) -> InProcessResult:
-    """Run the lock-stepped cores in one process, exactly as the clock and shells would.
+    """Run the lock-stepped cores in one process, exactly as the clock and shells would: every
+    step is granted at once, and the steppers run in loop order until none can go further.
 
     `swaps` maps a step to replacement cores ({role: core}), swapped in before that step as
-    `nearsub swap --at-step` does: the new core takes over the old one's progress and inbox.
+    `nearsub swap --at-step` does: the grant stops before the step, the new core takes over
+    through the same handover as a swapped-in process, and the grant goes on.
     """
-    cores = dict(cores)
     swaps = swaps or {}
-    inboxes = {role: Inbox(cores[role].inputs, schedule) for role in ORDER}
+    steppers = {role: Stepper(cores[role], schedule, dt, max_steps) for role in ORDER}
     messages: list[tuple[str, str, Message]] = []
+    end: EndRequest | None = None
 
-    def publish(role: str, leaf: str, message: Message) -> None:
-        messages.append((role, leaf, message))
-        for inbox in inboxes.values():
-            if leaf in inbox.inputs:
-                error = inbox.offer(leaf, message)
-                if error:
-                    raise RuntimeError(error)
+    def run_until_quiet() -> None:
+        """Run the steppers in loop order, each again only once it has new input, until none has."""
+        nonlocal end
+        consumers = {leaf: [r for r in ORDER if leaf in steppers[r].core.inputs] for leaf in PRODUCER}
+        due = set(ORDER)
+        while due:
+            for role in ORDER:
+                if role not in due:
+                    continue
+                due.discard(role)
+                for channel, message in steppers[role].run():
+                    if channel == ACK:
+                        if message.end is not None:
+                            end = first_end(end, EndRequest(message.step, message.end, message.reason))
+                            for other in steppers.values():
+                                other.end_after(message.step)
+                        continue
+                    messages.append((role, channel, message))
+                    for consumer in consumers.get(channel, ()):
+                        if error := steppers[consumer].offer(channel, message):
+                            raise RuntimeError(error)
+                        due.add(consumer)
+        for role, stepper in steppers.items():
+            if missing := stepper.blocked():
+                raise RuntimeError(f"{role} at step {stepper.step} is missing {missing}")
 
-    for role in ORDER:
-        for leaf, message in cores[role].startup():
-            publish(role, leaf, message)
-
-    outcome, reason = None, ""
-    step = 0
-    while step < max_steps:
-        t = step * dt
-        for role, replacement in swaps.get(step, {}).items():
-            replacement.restore(cores[role].progress())
-            cores[role] = replacement
-        for role in schedule.runners(step):
-            missing = inboxes[role].waiting_for(step)
-            if missing:
-                raise RuntimeError(f"{role} at step {step} is missing {missing}")
-            core = cores[role]
-            core.new_mail(inboxes[role].take(step))
-            result = core.iterate(step, t)
-            for leaf, message in result.outputs:
-                publish(role, leaf, message)
-            for event in result.events:
-                messages.append((role, "events", event))
-            if more_severe(result.end, outcome) != outcome:
-                outcome, reason = result.end, result.reason
-        step += 1
-        if outcome is not None:
+    for pause in sorted(step for step in swaps if step < max_steps):
+        for stepper in steppers.values():
+            stepper.grant(pause - 1)
+        run_until_quiet()
+        if end is not None:
             break
-    if outcome is None:
-        outcome, reason = "time_limit", f"reached the time limit of {max_steps * dt:g} s"
-    return InProcessResult(outcome, reason, step, messages)
+        for role, core in swaps[pause].items():
+            handover = steppers[role].handover(pause)
+            if handover is None:
+                raise RuntimeError(f"{role} cannot hand over at step {pause}")
+            steppers[role] = Stepper(core, schedule, dt, max_steps)
+            steppers[role].take_over(handover, pause)
+    if end is None:
+        for stepper in steppers.values():
+            stepper.grant(max_steps - 1)
+        run_until_quiet()
+    end = end or time_limit_end(max_steps, dt)
+    return InProcessResult(end.outcome, end.reason, end.step + 1, messages)

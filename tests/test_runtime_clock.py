@@ -1,0 +1,194 @@
+"""The clock's grants, pauses and stall detection (`ClockCore`), driven with a made-up wall clock."""
+
+import pytest
+
+from nearsub.common.runtime.clock import ClockCore
+from nearsub.common.runtime.lifecycle import ORDER, Schedule
+from nearsub.common.runtime.messages import Ack, Control, Desired, Input, State
+
+DT = 0.05
+TIMEOUT = 2.0
+
+
+def clock(warp=0.0, max_steps=1000, helm_period=5, pause_at_step=None, dt=DT) -> ClockCore:
+    core = ClockCore(Schedule({"helm": helm_period, "pid": 1, "sim": 1}), dt, warp, max_steps, TIMEOUT, pause_at_step)
+    core.start(0.0)
+    return core
+
+
+def finish(core: ClockCore, step: int, roles=ORDER) -> None:
+    """The apps in `roles` that run at `step` finish it, each with its done output."""
+    t = step * core.dt
+    for role in roles:
+        if role not in core.progress.schedule.runners(step):
+            continue
+        if role == "helm":
+            core.progress.record_output("desired", Desired(step=step, t=t, source="helm", u_d=1.0, psi_d=0.0))
+        elif role == "pid":
+            core.progress.record_output("input", Input(step=step, t=t, source="pid", X_prop=0.0, delta_r=0.0))
+        else:
+            x = State(step=step + 1, t=t + core.dt, source="sim", u=0.0, v=0.0, r=0.0, x=0.0, y=0.0, psi=0.0)
+            core.progress.record_output("state", x)
+
+
+def finish_up_to(core: ClockCore, last: int) -> None:
+    for step in range(core.step, last + 1):
+        finish(core, step)
+
+
+def granted(core: ClockCore, now: float) -> int | None:
+    advance = core.advance(now)
+    assert advance.end is None, advance.end
+    return None if advance.tick is None else advance.tick.step
+
+
+def request(cmd: str, **args) -> Control:
+    return Control(step=0, t=0.0, source="tool", cmd=cmd, args=args, request_id=f"{cmd}-{args}", reply_to="tool")
+
+
+def test_warp_zero_grants_a_window_ahead_of_the_slowest_app():
+    core = clock()
+    assert granted(core, 0.0) == 19
+    finish_up_to(core, 5)
+    assert granted(core, 0.1) is None  # 25 is less than half a window beyond 19: no tick yet
+    finish_up_to(core, 9)
+    assert granted(core, 0.2) == 29
+    finish(core, 10, roles=("helm", "pid"))  # the sim has not finished step 10
+    assert core.progress.completed == 9 and granted(core, 0.3) is None
+
+
+def test_the_grant_stops_at_the_time_limit_and_the_mission_ends_after_the_last_step():
+    core = clock(max_steps=30)
+    assert granted(core, 0.0) == 19
+    finish_up_to(core, 15)
+    assert granted(core, 0.1) == 29  # capped by the time limit, so granted at once
+    finish_up_to(core, 29)
+    end = core.advance(0.2).end
+    assert (end.outcome, end.step, end.reason) == ("time_limit", 30, f"reached the time limit of {30 * DT:g} s")
+
+
+def test_warp_n_grants_the_steps_whose_simulated_time_has_come():
+    core = clock(warp=2.0)  # step k is due at k * 0.05 / 2 s
+    assert granted(core, 0.0) == 0
+    assert granted(core, 0.1) == 4
+    finish_up_to(core, 4)
+    assert granted(core, 0.11) is None
+    assert granted(core, 0.2) == 8
+
+
+def test_pause_at_the_next_step_boundary_and_resume():
+    core = clock()
+    assert granted(core, 0.0) == 19
+    assert core.on_control(request("pause"), 0.0) == []  # answered once reached
+    finish_up_to(core, 18)
+    assert core.advance(0.1).replies == [] and not core.paused
+    finish(core, 19)
+    advance = core.advance(0.2)
+    assert core.paused and advance.tick is None
+    [(to, reply)] = advance.replies
+    assert to == "tool" and reply.ok and reply.data == {"step": 20}
+    [(_, status)] = core.on_control(request("status"), 0.3)
+    assert status.data == {"step": 20, "paused": True}
+    assert granted(core, 0.4) is None  # paused: no grant
+    [(_, resumed)] = core.on_control(request("resume"), 0.5)
+    assert resumed.data == {"step": 20} and not core.paused
+    assert granted(core, 0.5) == 39
+
+
+def test_pause_at_a_given_step():
+    core = clock(pause_at_step=7)
+    assert granted(core, 0.0) == 6
+    finish_up_to(core, 6)
+    assert core.advance(0.1).replies == [] and core.paused  # the mission's own pause: no one to answer
+    core.on_control(request("resume"), 0.2)
+    assert granted(core, 0.2) == 26
+    [(_, refused)] = core.on_control(request("pause", at=20), 0.3)
+    assert not refused.ok and "granted up to 26" in refused.error
+    assert core.on_control(request("pause", at=40), 0.3) == []
+    finish_up_to(core, 20)
+    assert granted(core, 0.4) == 39  # no further than the step before the pause
+    finish_up_to(core, 39)
+    [(_, reply)] = core.advance(0.5).replies
+    assert reply.data == {"step": 40} and core.paused
+
+
+@pytest.mark.parametrize("at", ["20", 2.5, True, None])
+def test_a_pause_at_something_not_a_step_is_refused(at):
+    core = clock()
+    [(_, reply)] = core.on_control(request("pause", at=at), 0.0)
+    assert not reply.ok and "'at' must be a step number" in reply.error
+    assert core.pause_before is None
+
+
+def test_an_unknown_command_is_refused():
+    [(_, reply)] = clock().on_control(request("jump"), 0.0)
+    assert not reply.ok and "jump" in reply.error
+
+
+def test_a_stall_names_the_first_app_in_loop_order_that_has_not_finished_the_step():
+    core = clock()
+    granted(core, 0.0)
+    finish_up_to(core, 4)
+    finish(core, 5, roles=("helm",))
+    assert core.advance(1.0).end is None
+    end = core.advance(1.0 + TIMEOUT + 0.01).end
+    assert end.outcome == "stalled" and end.step == 5
+    assert end.reason == f"app 'pid' did not finish step 5 within {TIMEOUT:g} s (sim waiting on it)"
+
+
+def test_an_earlier_end_request_wins_over_a_more_severe_later_one():
+    core = clock()
+    granted(core, 0.0)
+    finish_up_to(core, 2)
+    core.progress.record_ack(Ack(step=4, t=4 * DT, source="sim", end="collision"))
+    core.progress.record_ack(Ack(step=3, t=3 * DT, source="pid", end="completed"))
+    finish(core, 3, roles=("sim",))
+    end = core.advance(0.1).end
+    assert (end.outcome, end.step) == ("completed", 4)
+
+
+def test_progress_restarts_the_stall_timer():
+    core = clock()
+    granted(core, 0.0)
+    for k in range(5):
+        finish(core, k)
+        assert core.advance((k + 1) * 0.9 * TIMEOUT).end is None
+    assert core.advance(5 * 0.9 * TIMEOUT + TIMEOUT + 0.01).end.outcome == "stalled"
+
+
+def test_a_pause_longer_than_the_step_timeout_does_not_stall_on_resume():
+    core = clock(pause_at_step=10)
+    granted(core, 0.0)
+    finish_up_to(core, 9)
+    core.advance(0.1)
+    assert core.paused
+    assert core.advance(0.1 + 5 * TIMEOUT).end is None  # paused: nothing is owed
+    core.on_control(request("resume"), 20 * TIMEOUT)
+    assert granted(core, 20 * TIMEOUT) == 29
+    assert core.advance(20.5 * TIMEOUT).end is None  # the timer restarted on resume
+    end = core.advance(21 * TIMEOUT + 0.01).end
+    assert end.outcome == "stalled" and "app 'helm' did not finish step 10" in end.reason
+
+
+def test_the_wait_for_a_paced_step_is_not_a_stall():
+    core = clock(warp=0.01, dt=1.0, helm_period=1)  # one step every 100 s
+    assert granted(core, 0.0) == 0
+    finish(core, 0)
+    assert granted(core, 99.0) is None
+    assert granted(core, 100.0) == 1
+    assert core.advance(100.0 + TIMEOUT * 0.9).end is None
+    assert core.advance(100.0 + TIMEOUT + 0.01).end.outcome == "stalled"
+
+
+@pytest.mark.parametrize(
+    ("first", "second", "expected"), [("completed", "collision", "collision"), ("error", "time_limit", "error")]
+)
+def test_the_most_severe_end_request_of_a_step_wins(first, second, expected):
+    core = clock()
+    granted(core, 0.0)
+    finish_up_to(core, 2)
+    core.progress.record_ack(Ack(step=3, t=3 * DT, source="pid", end=first, reason=first))
+    assert core.advance(0.1).end is None  # the sim has still to finish step 3
+    core.progress.record_ack(Ack(step=3, t=3 * DT, source="sim", end=second, reason=second))
+    end = core.advance(0.2).end
+    assert (end.outcome, end.reason, end.step) == (expected, expected, 4)
