@@ -134,6 +134,32 @@ class Summary:
         return "\n".join(lines)
 
 
+def spawn_router(folder: Path, timeout: float, interrupted=lambda: False) -> tuple[subprocess.Popen, list[str]]:
+    """Start a router on loopback port 0 (output in `folder`/router.out) and wait, up to `timeout`
+    wall seconds, for the ready file in which it names the endpoints it listens on. A router that
+    exits first, or stays silent, is a LaunchError naming it; `interrupted()` ends the wait."""
+    ready, output = folder / "router.json", folder / "router.out"
+    with open(output, "wb") as out:
+        router = spawn_app("router", ["--listen", "tcp/127.0.0.1:0", "--ready-file", str(ready), "--with-parent"], out)
+    deadline = time.monotonic() + timeout
+    try:
+        while not ready.exists():
+            code = router.poll()
+            if code is not None:
+                lines = output.read_text(errors="replace").strip().splitlines()
+                said = f": {lines[-1]}" if lines else ""
+                raise LaunchError(f"the router exited with code {code} before listening{said}", app="router")
+            if time.monotonic() > deadline:
+                raise LaunchError(f"the router did not report its endpoint within {timeout:g} s", app="router")
+            if interrupted():
+                raise KeyboardInterrupt
+            time.sleep(0.02)
+        return router, list(json.loads(ready.read_text()))
+    except BaseException:
+        stop([router], grace=0.0)
+        raise
+
+
 class Launcher:
     def __init__(self, mission: Mission, mission_path: str | None, log_root: str, quiet: bool = False):
         self.mission = mission
@@ -199,7 +225,7 @@ class Launcher:
         grace = 0.0 if self.router_lost() else 3.0  # without the router the apps never hear the end
         stop([c.process for c in self.children.values() if c.role == "surrogate"], grace=0.0)
         stop([c.process for c in self.children.values() if c.role not in ("logger", "surrogate")], grace=grace)
-        stop([c.process for c in self.children.values() if c.role == "logger"], grace=5.0)
+        stop([c.process for c in self.children.values() if c.role == "logger"], grace=5.0 if grace else 0.0)
 
     # -- the run ------------------------------------------------------------------------------
     def run(self) -> Summary:
@@ -270,25 +296,10 @@ class Launcher:
         network = self.mission.network
         if network.connect:
             return list(network.connect)
-        ready, output = self.run_dir / "router.json", self.run_dir / "router.out"
-        with open(output, "wb") as out:
-            self.router = spawn_app(
-                "router", ["--listen", "tcp/127.0.0.1:0", "--ready-file", str(ready), "--with-parent"], out
-            )
-        timeout = self.mission.startup_timeout
-        deadline = time.monotonic() + timeout
-        while not ready.exists():
-            code = self.router.poll()
-            if code is not None:
-                lines = output.read_text(errors="replace").strip().splitlines()
-                said = f": {lines[-1]}" if lines else ""
-                raise LaunchError(f"the router exited with code {code} before listening{said}", app="router")
-            if time.monotonic() > deadline:
-                raise LaunchError(f"the router did not report its endpoint within {timeout:g} s", app="router")
-            if self.stop_requested:
-                raise KeyboardInterrupt
-            time.sleep(0.02)
-        return list(json.loads(ready.read_text()))
+        self.router, endpoints = spawn_router(
+            self.run_dir, self.mission.startup_timeout, lambda: self.stop_requested is not None
+        )
+        return endpoints
 
     def claim_on_bus(self, bus: Bus, connect: list[str]) -> None:
         """Refuse a name another launcher uses on this bus (missions sharing a router, maybe from
