@@ -8,6 +8,8 @@ A launcher first claims its name (`claim`): an exclusive `flock` on `<community>
 without waiting and held until the launcher exits. The kernel drops the lock when the process
 dies, however it dies, so a stale claim needs no clean-up and two launches of one name racing
 each other cannot both win (flock(2); the JSON file is written only later, once the apps are up).
+The lock file stays when released: unlocked it means nothing, and removing it would let a launch
+that opened the old file and one that creates a new file both hold "the" lock.
 """
 
 from __future__ import annotations
