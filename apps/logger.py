@@ -17,7 +17,7 @@ from nearsub import __version__
 from nearsub.apps.shell import prepare_process
 from nearsub.common.mission.schema import RunConfig
 from nearsub.common.runtime import keys
-from nearsub.common.runtime.bus import Bus, Endpoints, signal_self
+from nearsub.common.runtime.bus import Bus, BusError, Endpoints, signal_self
 from nearsub.common.runtime.logfile import LogWriter
 from nearsub.common.runtime.messages import Event, MessageError, MissionEnd, decode, encode, model_for_key
 
@@ -89,6 +89,9 @@ def main(argv=None) -> int:
                     time.sleep(0.01)
                 else:
                     recorder.record(*item)
+    except BusError as exc:  # its router cannot be reached: one line, no traceback
+        print(f"[logger] {exc}", file=sys.stderr)
+        code = 1
     except KeyboardInterrupt:
         code = 130
     except SystemExit as exc:  # SIGTERM from the launcher or the lost-launcher watch

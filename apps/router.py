@@ -1,21 +1,35 @@
-"""A Zenoh router in a Python process: no zenohd can be installed offline (zenoh-notes.md 2).
+"""A Zenoh router in a Python process: no zenohd can be installed offline (docs/design.md,
+"Transport").
 
-`nearsub launch` starts one on a free loopback port; `nearsub router --listen ENDPOINT` runs one
-by hand, for example to join apps on several hosts.
+`nearsub launch` starts one on loopback port 0 and waits for the `--ready-file` it writes once it
+listens: the endpoints it really listens on (read back from its own admin space), so the launcher
+neither guesses a free port nor sleeps. `nearsub router --listen ENDPOINT` runs one by hand, for
+example to join apps on several hosts.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import os
 import signal
 import sys
 import threading
+from pathlib import Path
 
 from nearsub.apps.shell import prepare_process
-from nearsub.common.runtime.bus import Bus, make_config
+from nearsub.common.runtime.bus import Bus, BusError, make_config
 
 
-def serve(listen: list[str], connect: list[str] = (), with_parent: bool = False) -> int:
+def write_ready(path: str | Path, endpoints: list[str]) -> None:
+    """Write the endpoints as a JSON list, atomically: a reader sees the whole file or none."""
+    path = Path(path)
+    partial = path.with_name(path.name + ".partial")
+    partial.write_text(json.dumps(endpoints))
+    os.replace(partial, path)
+
+
+def serve(listen: list[str], connect: list[str] = (), with_parent: bool = False, ready_file: str | None = None) -> int:
     """Route until SIGINT/SIGTERM; `with_parent` also stops when the launcher process dies."""
     stop = threading.Event()
     if with_parent:
@@ -23,8 +37,11 @@ def serve(listen: list[str], connect: list[str] = (), with_parent: bool = False)
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     config = make_config("router", connect=connect, listen=listen, admin_space=True)
-    with Bus(config):
-        print(f"router listening on {', '.join(listen)}", flush=True)
+    with Bus(config) as bus:
+        endpoints = bus.locators() or list(listen)
+        if ready_file:
+            write_ready(ready_file, endpoints)
+        print(f"router listening on {', '.join(endpoints)}", flush=True)
         while not stop.wait(0.5):
             pass
     return 0
@@ -35,12 +52,13 @@ def main(argv=None) -> int:
     parser.add_argument("--listen", action="append", default=[], help="endpoint, e.g. tcp/127.0.0.1:7447")
     parser.add_argument("--connect", action="append", default=[], help="other routers to join")
     parser.add_argument("--with-parent", action="store_true", help="exit when the parent process dies")
+    parser.add_argument("--ready-file", help="write the endpoints listened on (JSON list) here once listening")
     args = parser.parse_args(argv)
     listen = args.listen or ["tcp/127.0.0.1:7447"]
     try:
-        return serve(listen, args.connect, args.with_parent)
-    except Exception as exc:  # e.g. the port is taken: say so in one line
-        print(f"router: cannot listen on {listen}: {exc}", file=sys.stderr)
+        return serve(listen, args.connect, args.with_parent, args.ready_file)
+    except (BusError, OSError) as exc:  # e.g. the port is taken: say so in one line
+        print(f"router: cannot listen on {', '.join(listen)}: {exc}", file=sys.stderr)
         return 1
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import time
 from collections import defaultdict
 from pathlib import Path
@@ -45,3 +46,18 @@ def finish(process, timeout: float = 120) -> tuple[int, dict, str]:
     """Wait for a `nearsub launch --json` process: exit code, summary, stderr."""
     out, err = process.communicate(timeout=timeout)
     return process.returncode, json.loads(out.strip().splitlines()[-1]), err
+
+
+def process_with(log_dir, marker: str) -> int:
+    """The pid of the process whose command line has the argument `marker` (an instance name,
+    a module) and mentions `log_dir` (so only this test's processes match)."""
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            argv = open(f"/proc/{entry}/cmdline").read().split("\0")
+        except OSError:
+            continue
+        if marker in argv and any(str(log_dir) in a for a in argv):
+            return int(entry)
+    raise AssertionError(f"no process with {marker} under {log_dir}")

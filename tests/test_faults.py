@@ -11,23 +11,13 @@ import msgpack
 import pytest
 
 from conftest import ALPHA, nearsub
-from helpers import finish, log_path, wait_registered
+from helpers import finish, log_path, process_with, wait_registered
 from nearsub.common.runtime.logfile import LogWriter, read_log
 
 pytestmark = pytest.mark.timeout(180)
 
 
-def app_pid(log_dir, instance):
-    for entry in os.listdir("/proc"):
-        if not entry.isdigit():
-            continue
-        try:
-            argv = open(f"/proc/{entry}/cmdline").read().split("\0")
-        except OSError:
-            continue
-        if "--instance" in argv and instance in argv and any(str(log_dir) in a for a in argv):
-            return int(entry)
-    raise AssertionError(f"no process for {instance}")
+app_pid = process_with
 
 
 def no_processes_left(log_dir):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ipaddress
 import json
 import sys
 
@@ -19,6 +20,23 @@ def add_parser(subparsers) -> None:
     p.set_defaults(func=launch_command)
 
 
+def endpoint_problem(endpoint: str) -> str | None:
+    """Why a `network.connect` endpoint that has the shape of one cannot be an address: a host
+    written as an IP address that is not one (tcp/256.1.1.1:7447, tcp/[::g]:7447). Host names are
+    left to the resolver: one that does not resolve is reported as unreachable."""
+    protocol, _, address = endpoint.partition("/")
+    if protocol == "unixsock-stream":
+        return None
+    host = address.rsplit(":", 1)[0]
+    literal = host[1:-1] if host.startswith("[") and host.endswith("]") else host
+    if host.startswith("[") or literal.replace(".", "").isdigit():
+        try:
+            ipaddress.ip_address(literal)
+        except ValueError:
+            return f"network.connect: {endpoint!r}: {literal!r} is not an IP address"
+    return None
+
+
 def launch_command(args) -> int:
     from nearsub.common.mission.schema import MissionError, load_mission
 
@@ -34,12 +52,16 @@ def launch_command(args) -> int:
     except MissionError as exc:
         print(f"nearsub launch: {exc}", file=sys.stderr)
         return 2
-    if mission.name in registry.running():
-        print(
-            f"nearsub launch: a mission named {mission.name!r} is already running; use --set name=OTHER",
-            file=sys.stderr,
-        )
+    for endpoint in mission.network.connect:
+        if problem := endpoint_problem(endpoint):
+            print(f"nearsub launch: {problem}", file=sys.stderr)
+            return 2
+    # The claim is held until this process exits; a second launch of the name refuses at once.
+    try:
+        with registry.claim(mission.name):
+            summary = Launcher(mission, args.mission, args.log, quiet=args.json).run()
+    except registry.NameTaken as exc:
+        print(f"nearsub launch: {exc}", file=sys.stderr)
         return 2
-    summary = Launcher(mission, args.mission, args.log, quiet=args.json).run()
     print(json.dumps(summary.as_dict()) if args.json else summary.text())
     return exit_code(summary)

@@ -1,9 +1,13 @@
 """The launcher of `nearsub launch`: a mission as separate processes (the pAntler of nearsub).
 
-Start order: router, logger, sim, pid, helm, clock; each app is waited for (liveliness) before the
-next group starts, so nothing is published before the logger listens. The launcher supervises:
-an app that exits or crashes is reported with the step within a fraction of a second, the
-mission is ended (the logger closes its file), and the rest is stopped. Stopping escalates per
+Start order: router, logger, sim, pid, helm, clock. The router is started on loopback port 0 and
+reports the endpoint it really listens on in a ready file; each app is waited for (liveliness)
+before the next group starts, so nothing is published before the logger listens. Every wait is
+bounded by the mission's startup_timeout, and so is every client's connect (on a loaded machine a
+process may take seconds just to import). The launcher supervises every process it started, the
+router, logger and surrogate server included: one that exits or crashes is reported with the step
+within a fraction of a second, the mission is ended (the logger closes its file), and the rest is
+stopped. A launch that fails before its logger started leaves no log folder behind. Stopping escalates per
 process group: SIGINT, then SIGTERM, then SIGKILL, 5 s apart (ros2 launch's ladder).
 
 It also serves `nearsub swap` (see `swap`): pause the clock at a step boundary, start the new app
@@ -12,11 +16,14 @@ instance, let it take over from the old one, retire the old one, resume.
 
 from __future__ import annotations
 
+import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
 import time
+import uuid
 from collections import Counter
 from dataclasses import dataclass, field
 from datetime import datetime
@@ -32,7 +39,7 @@ from nearsub.common.mission.schema import (
     mission_from_dict,
 )
 from nearsub.common.runtime import keys
-from nearsub.common.runtime.bus import Bus, Endpoints, Mailbox, free_tcp_port
+from nearsub.common.runtime.bus import CONNECT_TIMEOUT_VARIABLE, Bus, BusError, Endpoints, Mailbox
 from nearsub.common.runtime.lifecycle import ORDER
 from nearsub.common.runtime.messages import (
     Event,
@@ -52,7 +59,11 @@ EXIT_GRACE = 2.0  # wall seconds to wait for the mission end after an app left w
 
 
 class LaunchError(RuntimeError):
-    pass
+    """A launch or a mission that cannot go on; `app` names the process at fault, if one is."""
+
+    def __init__(self, text: str, app: str | None = None):
+        super().__init__(text)
+        self.app = app
 
 
 @dataclass
@@ -123,6 +134,32 @@ class Summary:
         return "\n".join(lines)
 
 
+def spawn_router(folder: Path, timeout: float, interrupted=lambda: False) -> tuple[subprocess.Popen, list[str]]:
+    """Start a router on loopback port 0 (output in `folder`/router.out) and wait, up to `timeout`
+    wall seconds, for the ready file in which it names the endpoints it listens on. A router that
+    exits first, or stays silent, is a LaunchError naming it; `interrupted()` ends the wait."""
+    ready, output = folder / "router.json", folder / "router.out"
+    with open(output, "wb") as out:
+        router = spawn_app("router", ["--listen", "tcp/127.0.0.1:0", "--ready-file", str(ready), "--with-parent"], out)
+    deadline = time.monotonic() + timeout
+    try:
+        while not ready.exists():
+            code = router.poll()
+            if code is not None:
+                lines = output.read_text(errors="replace").strip().splitlines()
+                said = f": {lines[-1]}" if lines else ""
+                raise LaunchError(f"the router exited with code {code} before listening{said}", app="router")
+            if time.monotonic() > deadline:
+                raise LaunchError(f"the router did not report its endpoint within {timeout:g} s", app="router")
+            if interrupted():
+                raise KeyboardInterrupt
+            time.sleep(0.02)
+        return router, list(json.loads(ready.read_text()))
+    except BaseException:
+        stop([router], grace=0.0)
+        raise
+
+
 class Launcher:
     def __init__(self, mission: Mission, mission_path: str | None, log_root: str, quiet: bool = False):
         self.mission = mission
@@ -174,7 +211,7 @@ class Launcher:
                 child = self.children.get(inst)
                 if child is not None and child.process.poll() is not None:
                     raise LaunchError(
-                        f"app {inst} exited with code {child.process.returncode} during start-up\n{child.tail()}"
+                        f"app {inst} exited with code {child.process.returncode} during start-up\n{child.tail()}", inst
                     )
             if time.monotonic() > deadline:
                 raise LaunchError(f"apps did not come up within {timeout:g} s: {', '.join(missing)}")
@@ -185,24 +222,30 @@ class Launcher:
     def stop_all(self) -> None:
         """Let apps leave on their own (the lock-stepped ones exit on the mission end), then
         escalate; the surrogate server serves until told; the logger closes its file last."""
+        grace = 0.0 if self.router_lost() else 3.0  # without the router the apps never hear the end
         stop([c.process for c in self.children.values() if c.role == "surrogate"], grace=0.0)
-        stop([c.process for c in self.children.values() if c.role not in ("logger", "surrogate")], grace=3.0)
-        stop([c.process for c in self.children.values() if c.role == "logger"], grace=5.0)
+        stop([c.process for c in self.children.values() if c.role not in ("logger", "surrogate")], grace=grace)
+        stop([c.process for c in self.children.values() if c.role == "logger"], grace=5.0 if grace else 0.0)
 
     # -- the run ------------------------------------------------------------------------------
     def run(self) -> Summary:
+        """Start, supervise and stop the mission. Raises registry.NameTaken when a live launcher
+        of the same name is on the bus (a mission on a shared router)."""
         self.run_dir.mkdir(parents=True, exist_ok=True)
         self.run_file = self.run_dir / "run.json"
         start_wall = time.monotonic()
+        # Every process started from here keeps trying to reach its router this long.
+        os.environ[CONNECT_TIMEOUT_VARIABLE] = f"{self.mission.startup_timeout:g}"
         previous_handlers = {s: signal.signal(s, self._on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
         try:
             connect = self.start_router()
             RunConfig(mission=self.mission, connect=connect, log_dir=str(self.run_dir)).save(self.run_file)
             log_path = self.run_dir / f"{self.community}.mcap"
-            with Bus(Endpoints("client", tuple(connect))) as bus:
+            with Bus(Endpoints("client", tuple(connect), timeout=self.mission.startup_timeout)) as bus:
                 self.bus = bus
                 self.mailbox = Mailbox()
                 c = self.community
+                self.claim_on_bus(bus, connect)
                 bus.subscribe(keys.all_events(c), self.mailbox)
                 bus.subscribe(keys.mission_end(c), self.mailbox)
                 bus.queryable(keys.launcher_control(c), self.mailbox)
@@ -216,12 +259,18 @@ class Launcher:
                     registry.register(self.community, connect, str(log_path))  # tools can find it now
                     self.supervise()
                 except LaunchError as exc:
-                    self.fail(str(exc))
+                    self.fail(exc)
                 except KeyboardInterrupt:
                     self.abort("interrupted", "stopped by the user")
                 self.stopping = True
                 self.stop_all()
                 self.drain_mailbox()
+        except (BusError, LaunchError) as exc:  # before any app started: there is no mission to end
+            self.summary.outcome, self.summary.reason = "error", str(exc).splitlines()[0]
+            self.summary.failed_app = getattr(exc, "app", None)
+            print(f"nearsub launch: {exc}", file=sys.stderr, flush=True)
+        except KeyboardInterrupt:
+            self.summary.outcome, self.summary.reason = "interrupted", "stopped by the user"
         finally:
             self.stopping = True
             for signum, handler in previous_handlers.items():
@@ -230,6 +279,8 @@ class Launcher:
             if self.router is not None:
                 stop([self.router], grace=0.0)
             (registry.runtime_dir() / f"{self.community}.json").unlink(missing_ok=True)
+            if not self.children:  # nothing ran: leave no half-empty log folder behind
+                shutil.rmtree(self.run_dir, ignore_errors=True)
         self.summary.wall_time = time.monotonic() - start_wall
         return self.summary
 
@@ -240,17 +291,32 @@ class Launcher:
             raise KeyboardInterrupt
 
     def start_router(self) -> list[str]:
+        """The endpoints of the mission's router: `network.connect`, or a router of our own on
+        loopback port 0, which writes the endpoint it listens on to a ready file once listening."""
         network = self.mission.network
         if network.connect:
             return list(network.connect)
-        for _ in range(5):
-            endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
-            with open(self.run_dir / "router.out", "wb") as out:
-                self.router = spawn_app("router", ["--listen", endpoint, "--with-parent"], out)
-            time.sleep(0.1)
-            if self.router.poll() is None:
-                return [endpoint]
-        raise LaunchError("could not start the router on a free loopback port")
+        self.router, endpoints = spawn_router(
+            self.run_dir, self.mission.startup_timeout, lambda: self.stop_requested is not None
+        )
+        return endpoints
+
+    def claim_on_bus(self, bus: Bus, connect: list[str]) -> None:
+        """Refuse a name another launcher uses on this bus (missions sharing a router, maybe from
+        other hosts; the registry's lock covers this host). A claim token is declared first and
+        then the claims and launcher tokens alive are listed, so of two launchers racing through
+        one router at least the later one sees the other (both refuse when they cross exactly)."""
+        root = f"{keys.community_root(self.community)}/launcher/claim"
+        mine = f"{root}/{uuid.uuid4().hex}"
+        bus.token(mine)
+        timeout = min(2.0, self.mission.startup_timeout)
+        others = [k for k in bus.alive(f"{root}/*", timeout=timeout) if k != mine]
+        others += bus.alive(keys.alive(self.community, "launcher", "*"), timeout=timeout)
+        if others:
+            raise registry.NameTaken(
+                f"a mission named {self.community!r} is already running or starting on {', '.join(connect)}; "
+                "use --set name=OTHER"
+            )
 
     def start_apps(self, bus: Bus, log_path: Path) -> None:
         timeout = self.mission.startup_timeout
@@ -278,19 +344,57 @@ class Launcher:
         while True:
             mail = self.mailbox.get(timeout=0.05)
             if mail is not None and self.handle(mail):
+                self.blame_on_end()
                 return
-            for child in self.children.values():
-                code = child.process.poll()
-                if code is not None and not child.retiring and child.role != "logger":
-                    if self.ended_clock(child.instance):
-                        continue
-                    # Apps leave when the mission ends; the end may still be on its way to us.
-                    if self.mission_end_within(EXIT_GRACE if code == 0 else 0.2):
-                        return
-                    step = self.current_step()
-                    raise LaunchError(
-                        f"app {child.instance} exited with code {code} at step {step}\n{child.tail()}",
-                    )
+            if self.check_processes():
+                self.blame_on_end()
+                return
+
+    def blame_on_end(self) -> None:
+        """A mission that ended badly because a process died (the sim ends it at once when the
+        surrogate server stops answering) names that process, as `check_processes` would have."""
+        if self.summary.outcome in NORMAL_OUTCOMES or self.summary.failed_app:
+            return
+        if self.router_lost():
+            culprit, code = "router", self.router.returncode
+        else:
+            dead = [
+                c
+                for c in self.children.values()
+                if not c.retiring
+                and (code := c.process.poll()) is not None
+                and (code < 0 or (code != 0 and c.role in ("logger", "surrogate")))
+            ]
+            if not dead:
+                return
+            culprit, code = dead[0].instance, dead[0].process.returncode
+        line = f"app {culprit} exited with code {code} at step {self.summary.steps}"
+        print(f"nearsub launch: {line}", file=sys.stderr, flush=True)
+        self.summary.failed_app = culprit
+        self.summary.reason = f"{line}; {self.summary.reason}" if self.summary.reason else line
+
+    def router_lost(self) -> bool:
+        return self.router is not None and self.router.poll() is not None
+
+    def check_processes(self) -> bool:
+        """Raise LaunchError naming a process that left before the mission end (the router
+        first: the apps leave because it did); True if the mission ended meanwhile."""
+        if self.router_lost():
+            code = self.router.returncode
+            raise LaunchError(f"app router exited with code {code}: the apps lost their bus", "router")
+        for child in list(self.children.values()):
+            code = child.process.poll()
+            if code is None or child.retiring or self.ended_clock(child.instance):
+                continue
+            # Apps leave when the mission ends; the end may still be on its way to us.
+            if self.mission_end_within(EXIT_GRACE if code == 0 else 0.2):
+                return True
+            if self.router_lost():
+                return self.check_processes()
+            step = "unknown (the clock is gone)" if child.role == "clock" else self.current_step()
+            text = f"app {child.instance} exited with code {code} at step {step}\n{child.tail()}"
+            raise LaunchError(text, child.instance)
+        return False
 
     def mission_end_within(self, seconds: float) -> bool:
         """Handle mail for up to `seconds`; True as soon as the mission end is among it."""
@@ -353,7 +457,7 @@ class Launcher:
         """End the mission from outside the clock, so every app and the logger wind down."""
         self.summary.outcome, self.summary.reason = outcome, reason
         try:
-            step = int(self.current_step())
+            step = 0 if self.router_lost() else int(self.current_step())
         except ValueError:
             step = 0
         self.summary.steps, self.summary.sim_time = step, step * self.mission.dt
@@ -361,11 +465,11 @@ class Launcher:
             encode(MissionEnd(step=step, t=step * self.mission.dt, source="launcher", outcome=outcome, reason=reason))
         )
 
-    def fail(self, text: str) -> None:
-        first_line = text.splitlines()[0]
+    def fail(self, exc: LaunchError) -> None:
+        text = str(exc)
         print(f"nearsub launch: {text}", file=sys.stderr, flush=True)
-        self.summary.failed_app = first_line.split()[1] if first_line.startswith("app ") else None
-        self.abort("error", first_line)
+        self.summary.failed_app = exc.app
+        self.abort("error", text.splitlines()[0])
 
     # -- swap ---------------------------------------------------------------------------------
     def on_control(self, mail) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import glob
 import json
 import sys
 from collections import Counter, defaultdict
@@ -16,8 +17,8 @@ if TYPE_CHECKING:
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("log")
     lg = p.add_subparsers(dest="log_command", required=True)
-    t = lg.add_parser("info", help="topics, counts, rates and outcome of a log")
-    t.add_argument("log")
+    t = lg.add_parser("info", help="topics, counts, rates and outcome of one or more logs")
+    t.add_argument("log", nargs="+", help="MCAP files (a quoted glob is expanded too)")
     t.add_argument("--json", action="store_true")
     t.set_defaults(func=info_command)
     t = lg.add_parser("export", help="export as csv, json lines or MOOS alog")
@@ -31,6 +32,44 @@ def add_parser(subparsers) -> None:
     t.add_argument("-o", "--output", help="PNG file (default: next to the log)")
     t.add_argument("--title")
     t.set_defaults(func=plot_command)
+
+
+MCAP_MAGIC = b"\x89MCAP0\r\n"  # the first 8 bytes of every MCAP file (MCAP specification, "Magic")
+
+
+class LogInputError(ValueError):
+    """A path that is not a readable MCAP log; the one-line text names it."""
+
+
+def log_paths(patterns: list[str]) -> list[Path]:
+    """The files named, a pattern with wildcards standing for the files it matches, each checked
+    to exist and to start as an MCAP file does."""
+    paths: list[Path] = []
+    for pattern in patterns:
+        if not Path(pattern).exists() and glob.has_magic(pattern):
+            matched = sorted(glob.glob(pattern))
+            if not matched:
+                raise LogInputError(f"{pattern}: no file matches")
+            paths += [Path(m) for m in matched]
+        else:
+            paths.append(Path(pattern))
+    for path in paths:
+        check_log(path)
+    return paths
+
+
+def check_log(path: Path) -> None:
+    try:
+        with open(path, "rb") as f:
+            head = f.read(len(MCAP_MAGIC))
+    except FileNotFoundError:
+        raise LogInputError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise LogInputError(f"{path}: is a folder, not a log file") from None
+    except OSError as exc:
+        raise LogInputError(f"{path}: cannot read ({exc.strerror})") from None
+    if head != MCAP_MAGIC:
+        raise LogInputError(f"{path}: not an MCAP log (it does not start with the MCAP magic bytes)")
 
 
 def flatten(value: dict) -> dict:
@@ -68,21 +107,37 @@ def _matches(pattern: str, topic: str) -> bool:
 
 
 def info_command(args) -> int:
+    try:
+        paths = log_paths(args.log)
+    except LogInputError as exc:
+        print(f"nearsub log info: {exc}", file=sys.stderr)
+        return 2
+    for i, path in enumerate(paths):
+        summary = log_summary(path)
+        if args.json:
+            print(json.dumps(summary))  # one JSON object per line and log
+        else:
+            if i:
+                print()
+            print_summary(summary)
+    return 0
+
+
+def log_summary(path: Path) -> dict:
     from nearsub.common.runtime.logfile import read_log
 
-    contents = read_log(args.log)
+    contents = read_log(path)
     counts = Counter(r.topic for r in contents.records)
     spans = defaultdict(list)
     for r in contents.records:
         spans[r.topic].append(r.sim_time)
-    outcome = contents.metadata.get("outcome", {})
-    summary = {
-        "file": str(args.log),
+    return {
+        "file": str(path),
         "recovered": contents.recovered,
         "messages": len(contents.records),
         "sim_start": min((r.sim_time for r in contents.records), default=0.0),
         "sim_end": max((r.sim_time for r in contents.records), default=0.0),
-        "outcome": outcome,
+        "outcome": contents.metadata.get("outcome", {}),
         "topics": {
             topic: {
                 "count": n,
@@ -93,22 +148,28 @@ def info_command(args) -> int:
             for topic, n in sorted(counts.items())
         },
     }
-    if args.json:
-        print(json.dumps(summary))
-        return 0
-    print(f"log      {summary['file']}" + ("  (recovered: the file was not finished)" if contents.recovered else ""))
+
+
+def print_summary(summary: dict) -> None:
+    outcome = summary["outcome"]
+    recovered = "  (recovered: the file was not finished)" if summary["recovered"] else ""
+    print(f"log      {summary['file']}{recovered}")
     print(f"messages {summary['messages']}, simulated {summary['sim_start']:.2f} .. {summary['sim_end']:.2f} s")
     if outcome:
         print(f"outcome  {outcome.get('outcome')} after {outcome.get('steps')} steps: {outcome.get('reason', '')}")
     print(f"{'topic':<50} {'count':>8} {'Hz (sim)':>9}")
     for topic, item in summary["topics"].items():
         print(f"{topic:<50} {item['count']:>8} {item['hz']:>9.2f}")
-    return 0
 
 
 def export_command(args) -> int:
     from nearsub.common.runtime.logfile import read_log
 
+    try:
+        check_log(Path(args.log))
+    except LogInputError as exc:
+        print(f"nearsub log export: {exc}", file=sys.stderr)
+        return 2
     contents = read_log(args.log)
     records = list(_select(contents, args.topic))
     out = open(args.output, "w", newline="") if args.output and args.format != "csv" else sys.stdout
@@ -176,6 +237,11 @@ def _write_csv(records, output: str | None) -> int:
 def plot_command(args) -> int:
     from .plot import plot_log
 
+    try:
+        check_log(Path(args.log))
+    except LogInputError as exc:
+        print(f"nearsub log plot: {exc}", file=sys.stderr)
+        return 2
     try:
         out = plot_log(args.log, args.output, args.title)
     except (OSError, ValueError) as exc:

@@ -3,14 +3,62 @@
 The launcher writes `<community>.json` (router endpoint, launcher pid, log path) when it starts and
 removes it when it stops; `tap` and `swap` read it so that users can name a community instead of
 an endpoint. Set NEARSUB_RUNTIME_DIR to move the folder (the tests do, to stay isolated).
+
+A launcher first claims its name (`claim`): an exclusive `flock` on `<community>.lock`, taken
+without waiting and held until the launcher exits. The kernel drops the lock when the process
+dies, however it dies, so a stale claim needs no clean-up and two launches of one name racing
+each other cannot both win (flock(2); the JSON file is written only later, once the apps are up).
+The lock file stays when released: unlocked it means nothing, and removing it would let a launch
+that opened the old file and one that creates a new file both hold "the" lock.
 """
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 import tempfile
 from pathlib import Path
+
+
+class NameTaken(LookupError):
+    """Another live launcher holds this mission name."""
+
+
+class Claim:
+    """The held claim on a mission name; `release` (or process exit) gives it up."""
+
+    def __init__(self, community: str, fd: int):
+        self.community = community
+        self._fd = fd
+
+    def release(self) -> None:
+        if self._fd >= 0:
+            os.close(self._fd)  # closing the descriptor drops the flock
+            self._fd = -1
+
+    def __enter__(self) -> Claim:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
+
+def claim(community: str) -> Claim:
+    """Claim `community` for this process, or raise NameTaken naming the launcher that holds it."""
+    path = runtime_dir() / f"{community}.lock"
+    fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o600)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        holder = os.pread(fd, 32, 0).decode(errors="replace").strip() or "unknown"
+        os.close(fd)
+        raise NameTaken(
+            f"a mission named {community!r} is already running (launcher pid {holder}); use --set name=OTHER"
+        ) from None
+    os.ftruncate(fd, 0)
+    os.pwrite(fd, str(os.getpid()).encode(), 0)
+    return Claim(community, fd)
 
 
 def runtime_dir() -> Path:

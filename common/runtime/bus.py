@@ -35,6 +35,25 @@ import zenoh
 
 ENCODING = "application/msgpack"
 
+# How long a client keeps trying to reach its router before giving up. The launcher sets the
+# mission's startup_timeout here for every process it starts; others use the default (the
+# mission default), since an app started on a loaded machine may find its router slow to accept.
+CONNECT_TIMEOUT_VARIABLE = "NEARSUB_CONNECT_TIMEOUT"
+DEFAULT_CONNECT_TIMEOUT = 30.0
+
+
+class BusError(RuntimeError):
+    """A session that could not be opened; the one-line text names the endpoints."""
+
+
+def connect_timeout() -> float:
+    """Seconds a client waits for its router: $NEARSUB_CONNECT_TIMEOUT, else the default."""
+    try:
+        value = float(os.environ.get(CONNECT_TIMEOUT_VARIABLE, DEFAULT_CONNECT_TIMEOUT))
+    except ValueError:
+        return DEFAULT_CONNECT_TIMEOUT
+    return value if 0 < value < 1e6 else DEFAULT_CONNECT_TIMEOUT
+
 
 def free_tcp_port(host: str = "127.0.0.1") -> int:
     """A TCP port that is free right now on `host` (for the launcher's router)."""
@@ -49,7 +68,10 @@ def make_config(
     listen: Iterable[str] = (),
     multicast_scouting: bool = False,
     admin_space: bool = False,
+    timeout: float | None = None,
 ) -> zenoh.Config:
+    """A session configuration; a client or peer waits up to `timeout` seconds (default
+    `connect_timeout()`) for its `connect` endpoints, retrying, then fails."""
     conf = zenoh.Config()
     conf.insert_json5("mode", json.dumps(mode))
     conf.insert_json5("scouting/multicast/enabled", json.dumps(multicast_scouting))
@@ -57,7 +79,8 @@ def make_config(
     conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
     if mode != "router":
         # Wait for the router instead of failing at once, so start order does not matter.
-        conf.insert_json5("connect/timeout_ms", json.dumps(10000))
+        seconds = connect_timeout() if timeout is None else timeout
+        conf.insert_json5("connect/timeout_ms", json.dumps(int(seconds * 1000)))
         conf.insert_json5("connect/exit_on_failure", json.dumps(True))
     if admin_space:
         conf.insert_json5("adminspace", json.dumps({"enabled": True, "permissions": {"read": True, "write": False}}))
@@ -72,10 +95,11 @@ class Endpoints:
     connect: tuple[str, ...] = ()
     listen: tuple[str, ...] = ()
     multicast_scouting: bool = False
+    timeout: float | None = None  # seconds to keep trying `connect`; None: connect_timeout()
 
     def config(self) -> zenoh.Config:
         listen = self.listen if self.mode == "peer" else ()
-        return make_config(self.mode, self.connect, listen, self.multicast_scouting)
+        return make_config(self.mode, self.connect, listen, self.multicast_scouting, timeout=self.timeout)
 
 
 @dataclass
@@ -236,6 +260,30 @@ class Publisher:
         self._publisher.put(payload)
 
 
+def open_error(config: zenoh.Config, exc: Exception) -> str:
+    """One line for a session that did not open: the endpoints and Zenoh's reason, without the
+    Rust source location Zenoh appends ("... Timeout! at /root/.cargo/...rs:388.")."""
+
+    def read(key: str):
+        try:
+            return json.loads(config.get_json(key))
+        except Exception:  # a key this Zenoh does not know: say less
+            return None
+
+    connect = read("connect/endpoints") or []
+    if isinstance(connect, dict):  # per-mode form {"router": [...], "peer": [...], "client": [...]}
+        connect = [e for v in connect.values() for e in v]
+    reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+    reason = reason.split(" at /", 1)[0].rstrip(".")
+    if "Timeout" in reason and connect:
+        timeout_ms = read("connect/timeout_ms")
+        within = f" within {timeout_ms / 1000:g} s" if isinstance(timeout_ms, int | float) else ""
+        return f"cannot reach {', '.join(connect)}{within} (is the router running there?)"
+    listen = read("listen/endpoints") or []
+    where = ", ".join(connect) or (", ".join(listen) if isinstance(listen, list) else str(listen))
+    return f"cannot open a Zenoh session on {where or 'no endpoint'}: {reason}"
+
+
 class Bus:
     """A Zenoh session with the few operations nearsub needs. Use as a context manager."""
 
@@ -245,7 +293,10 @@ class Bus:
         self._keep: list[Any] = []
 
     def __enter__(self) -> Bus:
-        self._session = zenoh.open(self._config)
+        try:
+            self._session = zenoh.open(self._config)
+        except zenoh.ZError as exc:
+            raise BusError(open_error(self._config, exc)) from None
         return self
 
     def __exit__(self, *exc) -> None:
@@ -346,6 +397,15 @@ class Bus:
             else:
                 out.append((False, reply.err.payload.to_bytes()))
         return out
+
+    def locators(self, timeout: float = 2.0) -> list[str]:
+        """The endpoints this router session actually listens on, read from its own admin space
+        (`make_config(..., admin_space=True)`): a listener on port 0 reads back its real port."""
+        zid = str(self._session.zid())
+        for reply in self._session.get(f"@/{zid}/router", timeout=timeout):
+            if reply.ok is not None:
+                return list(json.loads(reply.ok.payload.to_bytes()).get("locators", []))
+        return []
 
     def admin_keys(self, what: str, timeout: float = 1.0) -> list[str]:
         """Declared entities known to routers (`what` = publisher, subscriber or queryable)."""
