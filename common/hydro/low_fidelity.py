@@ -152,8 +152,8 @@ def solve_ring_panels(profile: Profile) -> RingPanels:
 
 # --- the tabulated submarine field ---------------------------------------------------------------
 
-_R_MIN = R_SUB + 0.01  # the table starts 1 cm outside the widest section [m]
-_R_MAX = 25.0  # R_lat up to about 0.27 [m]
+R_FIELD_MIN = R_SUB + 0.01  # the table starts 1 cm outside the widest section [m]
+R_FIELD_MAX = 25.0  # R_lat up to about 0.27 [m]
 _X_FINE = (SUB_STERN_X - 15.0, SUB_BOW_X + 15.0)  # 0.15 m spacing here [m]
 _X_MAX = 1.5 * L_SUB  # coarse (1 m) beyond _X_FINE, out to |R_long| = 1.5 [m]
 
@@ -174,8 +174,8 @@ def _field_grid() -> tuple[np.ndarray, np.ndarray]:
         )
     )
     steps = 0.002 * 1.12 ** np.arange(200)
-    r = _R_MIN + np.concatenate([[0.0], np.cumsum(steps)])
-    return x, r[: np.searchsorted(r, _R_MAX) + 1]
+    r = R_FIELD_MIN + np.concatenate([[0.0], np.cumsum(steps)])
+    return x, r[: np.searchsorted(r, R_FIELD_MAX) + 1]
 
 
 @dataclass(frozen=True)
@@ -250,30 +250,71 @@ def input_columns(inputs) -> tuple[np.ndarray, ...]:
 
 def _strip_coefficients(inputs, n_strips: int, n_frusta: int | None) -> np.ndarray:
     """[X', Y', N'] of the strip model; n_frusta None means no submarine (the free-stream UUV)."""
+    geometry = _strip_geometry(inputs, n_strips)
+    if n_frusta is None:
+        return _strip_forces(geometry, np.zeros(geometry.px.shape), np.zeros(geometry.px.shape))
+    ux, ur, valid, _ = _submarine_velocity(geometry, n_frusta, hold=False)
+    out = _strip_forces(geometry, ux, ur)
+    out[~valid] = np.nan
+    return out
+
+
+@dataclass(frozen=True)
+class _StripGeometry:
+    """The UUVs' strips placed at their poses: ring points (3, n, strips) at azimuth 0 (+eta, away
+    from the submarine), pi (-eta) and pi/2 (+z), and what the strip forces need."""
+
+    px: np.ndarray
+    py: np.ndarray
+    pz: np.ndarray
+    xi: np.ndarray
+    r: np.ndarray
+    arc: np.ndarray
+    cos_psi: np.ndarray
+    sin_psi: np.ndarray
+    speed: np.ndarray
+    length: np.ndarray
+
+
+def _strip_geometry(inputs, n_strips: int) -> _StripGeometry:
     x_c, y_c, speed, psi, diameter, length = input_columns(inputs)
     xi, r, arc = (part * diameter[:, None] for part in _strips(length / diameter, n_strips))
     cos_psi, sin_psi = np.cos(psi)[:, None], np.sin(psi)[:, None]
     axis_x, axis_y = x_c[:, None] + xi * cos_psi, y_c[:, None] + xi * sin_psi
-    # Ring points at azimuth 0 (+eta, away from the submarine), pi (-eta) and pi/2 (+z); the -z
-    # point mirrors +z, so it carries twice the weight in ring means.
+    # The -z point mirrors +z, so it carries twice the weight in ring means.
     px = np.stack([axis_x - r * sin_psi, axis_x + r * sin_psi, axis_x])
     py = np.stack([axis_y + r * cos_psi, axis_y - r * cos_psi, axis_y])
     pz = np.stack([np.zeros_like(r), np.zeros_like(r), r])
-    radial = np.hypot(py, pz)
+    return _StripGeometry(px, py, pz, xi, r, arc, cos_psi, sin_psi, speed, length)
+
+
+def _submarine_velocity(geometry: _StripGeometry, n_frusta: int, hold: bool):
+    """The submarine's perturbation (u_x, u_R) per unit U at the ring points, whether each UUV lies
+    inside the tabulated field, and (with `hold`) which UUVs had points held at its inner edge."""
+    field = submarine_field(n_frusta)
+    px = geometry.px
+    radial = np.hypot(geometry.py, geometry.pz)
+    near = radial < field.r_range[0]
+    if hold:
+        radial = np.maximum(radial, field.r_range[0])
+    inside = (
+        (px >= field.x_range[0])
+        & (px <= field.x_range[1])
+        & (radial >= field.r_range[0])
+        & (radial <= field.r_range[1])
+    )
     ux = np.zeros(px.shape)
     ur = np.zeros(px.shape)
-    valid = np.ones(len(x_c), dtype=bool)
-    if n_frusta is not None:
-        field = submarine_field(n_frusta)
-        inside = (
-            (px >= field.x_range[0])
-            & (px <= field.x_range[1])
-            & (radial >= field.r_range[0])
-            & (radial <= field.r_range[1])
-        )
-        valid = inside.all(axis=(0, 2))
-        ux[inside] = field.ux.ev(px[inside], radial[inside])
-        ur[inside] = field.ur.ev(px[inside], radial[inside])
+    ux[inside] = field.ux.ev(px[inside], radial[inside])
+    ur[inside] = field.ur.ev(px[inside], radial[inside])
+    return ux, ur, inside.all(axis=(0, 2)), near.any(axis=(0, 2))
+
+
+def _strip_forces(geometry: _StripGeometry, ux: np.ndarray, ur: np.ndarray) -> np.ndarray:
+    """[X', Y', N'] (n, 3) of the strips in the stream -U x plus the perturbation (ux, ur)."""
+    py, pz, xi, r = geometry.py, geometry.pz, geometry.xi, geometry.r
+    cos_psi, sin_psi = geometry.cos_psi, geometry.sin_psi
+    radial = np.hypot(py, pz)
     # Velocity per unit U (stream -U x plus the submarine's perturbation), in UUV body axes.
     vx = -1.0 + ux
     vy = ur * py / np.where(radial > 0.0, radial, 1.0)
@@ -292,11 +333,10 @@ def _strip_coefficients(inputs, n_strips: int, n_frusta: int | None) -> np.ndarr
     n_moment = np.trapezoid(2.0 * area * u_axial * v_eta_mean - xi * area * dcp_deta, xi, axis=1)
     x_pressure = -np.sum(0.5 * (area[:, 1:] + area[:, :-1]) * np.diff(cp_mean, axis=1), axis=1)
     # ITTC-57 friction at the perimeter-weighted local axial speed (thesis section 4.4).
+    speed, length, arc = geometry.speed, geometry.length, geometry.arc
     reynolds = speed * length / NU
     friction = -ittc57(reynolds) * np.trapezoid(2.0 * np.pi * r * u_axial**2, arc, axis=1)
-    out = np.column_stack([(x_pressure + friction) / length**2, y_force / length**2, n_moment / length**3])
-    out[~valid] = np.nan
-    return out
+    return np.column_stack([(x_pressure + friction) / length**2, y_force / length**2, n_moment / length**3])
 
 
 def lf_coefficients(inputs, *, n_strips: int = N_STRIPS, n_frusta: int = N_FRUSTA) -> np.ndarray:
@@ -312,3 +352,19 @@ def lf_free_stream(inputs, *, n_strips: int = N_STRIPS) -> np.ndarray:
     ignored): ITTC-57 friction and the slender Munk moment rho Vol U^2 sin psi cos psi
     (hydro-notes section 2.2). The interaction increment of SPEC section 5 is lf - lf_free_stream."""
     return _strip_coefficients(inputs, n_strips, None)
+
+
+def lf_increment_terms(inputs, *, n_strips: int = N_STRIPS, n_frusta: int = N_FRUSTA):
+    """`lf_coefficients` and `lf_free_stream` of the same rows (n, 3) each, from one placement of
+    the strips, and (n,) True where the UUV had a point closer to the submarine's axis than the
+    tabulated field (within 1 cm of the widest radius: touching the hull beside the middle body,
+    or inside the tapering ends' radius). Those points see the field held at the table's inner
+    edge, R_sub + 1 cm, instead of NaN: the interaction in the loop stays defined and continuous
+    up to contact (`interaction.interaction_at` flags it; a collision or close call is declared
+    there anyway). Rows beyond the table's outer edges are NaN, as in `lf_coefficients`."""
+    geometry = _strip_geometry(inputs, n_strips)
+    ux, ur, valid, held = _submarine_velocity(geometry, n_frusta, hold=True)
+    lf = _strip_forces(geometry, ux, ur)
+    lf[~valid] = np.nan
+    free = _strip_forces(geometry, np.zeros(ux.shape), np.zeros(ur.shape))
+    return lf, free, held
