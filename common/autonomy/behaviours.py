@@ -251,8 +251,9 @@ GUARD_SAMPLES = 24
 @dataclass(frozen=True)
 class GuardedOffset:
     """The guard's answer, element-wise over vehicles: the offset to fly [rad], the limit the tip
-    clearance puts on it [rad] (signed as the command; +/-inf where none binds), whether that limit
-    binds (active) and whether the limit or the rate limit cut the command (saturated)."""
+    clearance puts on it [rad] (signed as the command; +/-inf where there is none), whether that
+    limit lies within the command (active) and whether the limit or the rate limit cut the command
+    (saturated)."""
 
     delta_psi: np.ndarray
     limit: np.ndarray
@@ -279,9 +280,10 @@ def _tips(length: float, diameter: float) -> tuple[float, float]:
 
 
 def guard_heading_offset(x, y, psi_track, commanded, previous, length: float, diameter: float, clearance, max_step):
-    """Saturate (6.1)'s offset `commanded` [rad] so that the UUV at (x, y), flying psi_track +
-    offset, keeps its tips `clearance` [m] off the hull, and limit its change from `previous` to
-    `max_step` [rad] (the rate limit times the helm's period). Element-wise over vehicles.
+    """Limit (6.1)'s offset `commanded` [rad] in rate, to `max_step` [rad] (the rate limit times the
+    helm's period) from `previous`, and saturate it so that the UUV at (x, y), flying psi_track +
+    offset, keeps its tips `clearance` [m] off the hull. Element-wise over vehicles; the clearance
+    wins over the rate limit (an offset that is no longer safe is cut at once).
 
     The offset is allowed from 0 towards the command while the tips' clearance stays at least
     min(clearance, its value at no offset): where the track itself already brings a tip closer
@@ -304,7 +306,7 @@ def guard_heading_offset(x, y, psi_track, commanded, previous, length: float, di
     drop = np.where(g0 > g1, g0 - g1, 1.0)
     crossing = f0 + (f1 - f0) * np.clip((g0 - floor[..., 0]) / drop, 0.0, 1.0)
     limit = np.where(active, commanded * crossing, np.copysign(np.inf, commanded))
-    guarded = np.where(active, limit, commanded)
-    stepped = np.clip(guarded, previous - max_step, previous + max_step)
-    saturated = active | (stepped != guarded)
-    return GuardedOffset(stepped, limit, active, saturated)
+    rated = np.clip(commanded, previous - max_step, previous + max_step)
+    beyond = active & (np.abs(rated) > np.abs(limit)) & (np.sign(rated) == np.sign(commanded))
+    guarded = np.where(beyond, limit, rated)
+    return GuardedOffset(guarded, limit, active, guarded != commanded)
