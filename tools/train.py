@@ -26,42 +26,13 @@ from pathlib import Path
 import numpy as np
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
-from nearsub.common.hydro import high_fidelity as hydro_hf
-from nearsub.common.hydro import low_fidelity as hydro_lf
 from nearsub.common.learning.active import Campaign, CampaignSettings
 from nearsub.common.learning.gp import MultiOutputGP
-from nearsub.common.learning.testproblems import Problem
 from nearsub.common.surrogate import domain
 from nearsub.common.surrogate import model as sg
+from nearsub.common.surrogate.training import interaction_problem, write_samples
 
 DEFAULT_STATE = Path("training") / "campaign.json"
-
-
-def interaction_problem(
-    hf=hydro_hf.hf_coefficients,
-    name: str = "uuv-submarine-interaction",
-    description: str = "HF: two-way Hess-Smith panels with viscous corrections; LF: one-way slender body + ITTC-57",
-) -> Problem:
-    """The surrogate's domain (table 4.2, constraints (4.4)-(4.7)) with the LF physics and an HF
-    evaluator (default: the HF physics; `nearsub campaign` names its own problem, whose HF is a
-    user's CFD, so that `train --resume` never fills such a campaign with panel-method samples)."""
-    return Problem(
-        name=name,
-        bounds=domain.BOUNDS,
-        input_names=domain.INPUT_NAMES,
-        output_names=domain.OUTPUT_NAMES,
-        hf=hf,
-        lf=hydro_lf.lf_coefficients,
-        constraint=domain.constraint_values,
-        description=description,
-    )
-
-
-def write_samples(path: Path, X: np.ndarray, Y: np.ndarray) -> None:
-    with open(path, "w", newline="") as fh:
-        writer = csv.writer(fh)
-        writer.writerow([*domain.INPUT_NAMES, *domain.OUTPUT_NAMES])
-        writer.writerows(np.column_stack([X, Y]).tolist())
 
 
 def nmmf_settings(args) -> CampaignSettings:

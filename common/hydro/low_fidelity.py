@@ -39,6 +39,9 @@ from nearsub.common.physics.hull import (
     uuv_dimensions,
 )
 
+# Version of this model's physics: bump it with any change that alters lf_coefficients' values.
+# Surrogate model files store it (with N_STRIPS, N_FRUSTA) and refuse a different LF.
+LF_VERSION = 1
 NU = 1.19e-6  # kinematic viscosity of sea water at about 15 C [m^2/s] (hydro-notes section 1)
 KNOT = 1852.0 / 3600.0  # [m/s]
 

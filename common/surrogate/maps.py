@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from nearsub.common.surrogate.domain import BOUNDS, INPUT_NAMES, constraints_ok
+from nearsub.common.surrogate.modelfile import LFInLoopModel
 
 LABELS = {
     "R_long": "R_long",
@@ -145,7 +146,10 @@ def evaluate_map(model: Any, panel: MapPanel, nx: int = 121, ny: int = 81) -> di
 
 def training_points(model: Any, fidelity: str = "hf") -> np.ndarray:
     """The model's training inputs (n, 6): its high-fidelity samples, or for 'lf' the low-fidelity
-    samples of a multi-fidelity model (empty if it has none)."""
+    samples of a multi-fidelity model (empty if it has none; an LF-in-the-loop model evaluates
+    the LF exactly and has no LF samples)."""
     if fidelity == "lf":
         return model.lf.gps[0].X_train_.copy() if hasattr(model, "lf") else np.empty((0, len(INPUT_NAMES)))
+    if isinstance(model, LFInLoopModel):
+        return model.X.copy()  # its GPs hold the warped inputs
     return model.gps[0].X_train_.copy()
