@@ -120,7 +120,7 @@ def test_the_applied_force_is_what_the_dynamics_add(model):
     command = np.zeros((len(states), 2))
     added = body_forces(states, command, SDV, seen.interaction) - body_forces(states, command, SDV)
     np.testing.assert_allclose(added, seen.applied, rtol=1e-12, atol=1e-9)
-    np.testing.assert_array_equal(seen.forces, seen.lf + seen.delta_weight[:, None] * seen.model)
+    np.testing.assert_allclose(seen.forces, seen.lf + seen.delta_weight[:, None] * seen.model, rtol=1e-13, atol=1e-12)
 
 
 def test_forces_topic_publishes_what_the_sim_applied(model):
@@ -171,8 +171,8 @@ def test_where_the_lf_is_undefined_its_field_is_held_and_flagged(model):
 
 def test_lf_increment_reaches_out_and_is_cut_off_smoothly():
     clearance = np.linspace(0.0, 20.0, 2001)
-    y = R_SUB + clearance
-    w = lf_reach_weight(np.full_like(y, -30.0), y)
+    y = R_SUB + clearance  # beside the parallel middle body, where the clearance is |y| - R_sub
+    w = lf_reach_weight(np.zeros_like(y), y)
     assert np.all(w[clearance <= LF_FULL] == 1.0) and np.all(w[clearance >= LF_CUT] == 0.0)
     assert np.abs(np.diff(w)).max() <= 1.5 * (clearance[1] - clearance[0]) / (LF_CUT - LF_FULL) * 1.01
 
@@ -185,16 +185,16 @@ def test_guard_keeps_the_tip_clearance_that_unguarded_compensation_would_break()
     clearance = SDV.diameter
     y = R_SUB + SDV.diameter / 2 + 0.6
     for commanded in (math.radians(-15.0), math.radians(15.0)):
-        unguarded = behaviours.tip_clearance(-30.0, y, commanded, SDV.length, SDV.diameter)
+        unguarded = behaviours.tip_clearance(0.0, y, commanded, SDV.length, SDV.diameter)
         assert unguarded < clearance
         guard = behaviours.guard_heading_offset(
-            -30.0, y, 0.0, commanded, commanded, SDV.length, SDV.diameter, clearance, math.inf
+            0.0, y, 0.0, commanded, commanded, SDV.length, SDV.diameter, clearance, math.inf
         )
         assert guard.active and guard.saturated
         assert abs(guard.delta_psi) < abs(commanded) and np.sign(guard.delta_psi) == np.sign(commanded)
-        kept = behaviours.tip_clearance(-30.0, y, guard.delta_psi, SDV.length, SDV.diameter)
+        kept = behaviours.tip_clearance(0.0, y, guard.delta_psi, SDV.length, SDV.diameter)
         assert kept >= clearance - 2e-3  # the limit is interpolated between samples 0.6 deg apart
-        wider = behaviours.tip_clearance(-30.0, y, guard.delta_psi * 1.05, SDV.length, SDV.diameter)
+        wider = behaviours.tip_clearance(0.0, y, guard.delta_psi * 1.05, SDV.length, SDV.diameter)
         assert wider < clearance  # and it is (nearly) the largest offset that keeps it
     far = behaviours.guard_heading_offset(-30.0, 20.0, 0.0, 0.3, 0.3, SDV.length, SDV.diameter, clearance, math.inf)
     assert not far.active and not far.saturated and far.delta_psi == 0.3 and math.isinf(far.limit)
@@ -218,21 +218,29 @@ def test_guarded_compensation_mission_keeps_the_tip_clearance(model):
             "environment.submarine=true",
             "environment.u_sub=1.5",
             "vehicle=sdv",
-            "start.x=-35",
+            "start.x=-25",
             "start.y=6.0",
+            "start.psi_deg=0",
             "start.speed=1.5",
             "apps.helm.behaviour=nuv_compensation",
             "apps.helm.guard_clearance=0.6",
             "apps.helm.legs=[{points = [[60.0, 6.0]], speed = 1.5, lead = 15.9, lead_to_start = true}]",
-            "time_limit=20",
+            "time_limit=30",
         ],
     )
     result = run_mission(mission, model)
+    assert result.outcome == "time_limit"
     helm = result.topic("helm")
+    states = {m.step: m for m in result.topic("state")}
     assert all(m.guard_clearance == 0.6 for m in helm)
     step = math.radians(5.0) * mission.dt * mission.apps.helm.period
     for before, m in zip(helm[:-1], helm[1:], strict=True):
         assert abs(m.delta_psi) <= abs(m.guard_limit) + 1e-12
         assert m.guard_saturated == (m.delta_psi != m.delta_psi_commanded)
         assert abs(m.delta_psi - before.delta_psi) <= step + 1e-12 or m.delta_psi == m.guard_limit
+        s = states[m.step]
+        track = m.psi_d - m.delta_psi
+        flown = behaviours.tip_clearance(s.x, s.y, m.psi_d, SDV.length, SDV.diameter)
+        straight = behaviours.tip_clearance(s.x, s.y, track, SDV.length, SDV.diameter)
+        assert flown >= min(0.6, straight) - 2e-3  # the heading the helm asks for keeps the tips off
     assert any(m.guard_active for m in helm)  # the mission does test the guard
