@@ -69,11 +69,13 @@ def test_shipped_table_is_the_shipped_models_and_matches_hf_free_stream_off_grid
     assert np.all(error <= TOLERANCE), error
 
 
-def test_increment_is_the_prediction_minus_the_free_stream_at_the_same_clipped_inputs(shipped, table):
-    """Both sides of the submarine (mirrored heading, Y and N), both signs of psi, and a hull outside
+def test_increment_is_the_prediction_minus_the_free_stream_at_the_same_clipped_inputs(model_file, table):
+    """A model without the LF in the loop (here the analytic fixture, given the shipped table), on
+    both sides of the submarine (mirrored heading, Y and N), both signs of psi, and a hull outside
     the trained ratios (REMUS 100, D_sub/D_uuv = 54 clipped to 50): the forces the dynamics add are
     the replace mode's minus the free stream of the same inputs, and that free stream is the lone
     UUV's, evaluated directly."""
+    model = load_surrogate(model_file)
     for vehicle, y, u in ((SDV, 5.9, 1.75), (REMUS100, 5.45, 1.5)):
         states = np.array(
             [
@@ -83,8 +85,8 @@ def test_increment_is_the_prediction_minus_the_free_stream_at_the_same_clipped_i
                 for psi in (1.5, -0.8)
             ]
         )
-        replace = interaction_at(shipped, states, vehicle, RHO, "replace")
-        increment = interaction_at(shipped, states, vehicle, RHO, "increment")
+        replace = interaction_at(model, states, vehicle, RHO, "replace")
+        increment = interaction_at(model, states, vehicle, RHO, "increment", free_stream=table)
         inputs, mirror = clipped_inputs(states, vehicle)
         free = domain.to_forces(table.coefficients(inputs), mirror, states[:, 0], vehicle.length, RHO)
         np.testing.assert_allclose(increment.forces, replace.forces - free, rtol=1e-12, atol=1e-9)

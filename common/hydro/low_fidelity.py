@@ -230,12 +230,22 @@ def _explorer_cb_table() -> CubicSpline:
 
 def _strips(ld_ratio: np.ndarray, n_strips: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Strips of Explorer UUVs of unit diameter, one row per L/D: body-frame stations xi (ascending,
-    tail to nose, cosine-spaced so the tips are resolved), radius r and meridian arc length."""
+    tail to nose, cosine-spaced so the tips are resolved), radius r and meridian arc length. A
+    vehicle has one L/D, so the rows come from `_unit_strips`, computed once per L/D."""
+    values, index = np.unique(ld_ratio, return_inverse=True)
+    rows = [_unit_strips(float(ld), n_strips) for ld in values]
+    return tuple(np.stack([row[k] for row in rows])[index] for k in range(3))
+
+
+@lru_cache(maxsize=256)
+def _unit_strips(ld: float, n_strips: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     t = 0.5 * (1.0 - np.cos(np.linspace(0.0, np.pi, n_strips)))[::-1]
-    s = ld_ratio[:, None] * t
-    r = np.stack([explorer_radius(row, ld, 1.0) for row, ld in zip(s, ld_ratio, strict=True)])
-    xi = _explorer_cb_table()(ld_ratio)[:, None] - s
-    arc = np.concatenate([np.zeros((len(s), 1)), np.cumsum(np.hypot(np.diff(xi), np.diff(r)), axis=1)], axis=1)
+    s = ld * t
+    r = explorer_radius(s, ld, 1.0)
+    xi = _explorer_cb_table()(np.array([ld]))[0] - s
+    arc = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(xi), np.diff(r)))])
+    for part in (xi, r, arc):
+        part.setflags(write=False)
     return xi, r, arc
 
 

@@ -15,7 +15,13 @@ from nearsub.common.physics import dynamics
 from nearsub.common.physics import proximity as events
 from nearsub.common.runtime.lifecycle import InProcessResult, Iteration, Schedule, run_inprocess
 from nearsub.common.runtime.messages import Desired, Event, Forces, HelmProgress, Input, Message, State
-from nearsub.common.surrogate.interaction import ForceModel, InteractionAt, geometry_outside, interaction_at
+from nearsub.common.surrogate.interaction import (
+    ForceModel,
+    InteractionAt,
+    geometry_outside,
+    interaction_at,
+    prepare,
+)
 from nearsub.common.surrogate.model import load_surrogate
 
 
@@ -60,6 +66,8 @@ class HelmCore:
         # N_s is the yaw moment the interaction adds to the vehicle's own model, as the sim applies
         # it: the interaction increment in "increment" mode, the surrogate's total otherwise.
         self.interaction_mode = "increment" if mission.apps.sim.interaction == "increment" else "replace"
+        if self.surrogate is not None:
+            prepare(self.interaction_mode)
         self.cross_flow = None
         if self.settings.modified:
             u_sub = mission.environment.u_sub
@@ -239,6 +247,8 @@ class SimCore:
         if wanted and surrogate is None:
             raise ValueError("the sim's interaction forces need the surrogate (a force model)")
         self.surrogate = surrogate if wanted else None
+        if self.surrogate is not None:
+            prepare(self.interaction_mode)
         self.settings = mission.apps.sim
         self.env = mission.environment.dynamics()
         self.submarine = mission.environment.submarine

@@ -106,6 +106,13 @@ def blend_weight(inputs: np.ndarray, bounds: np.ndarray = domain.BOUNDS, heading
     return smoothstep(np.where(np.isfinite(margin), margin, 0.0))
 
 
+def prepare(mode: str) -> None:
+    """Tabulate the LF's submarine field now (a few seconds, once per process) when `mode` may put
+    the LF in the loop, so that an app's first step does not pay for it within the step timeout."""
+    if mode == "increment":
+        hydro_lf.submarine_field()
+
+
 def lf_reach_weight(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """(n,) weight of the LF increment at CB positions x, y [m] (submarine frame): 1 up to LF_FULL
     of clearance from the hull, 0 beyond LF_CUT, smooth between. Independent of the heading."""
