@@ -1,4 +1,4 @@
-"""The surrogate server app: answers GP queries on nearsub/<community>/surrogate (SPEC sections 1, 3).
+"""The surrogate server app: answers GP queries on nearsub/<community>/surrogate (docs/design.md).
 
     python -m nearsub.apps.surrogate [--model PATH] --community NAME --connect ENDPOINT [--instance NAME]
     python -m nearsub.apps.surrogate [--model PATH] --run RUNFILE [--instance NAME]

@@ -1,4 +1,4 @@
-"""The "increment" interaction mode (SPEC section 5): the surrogate's prediction minus the
+"""The "increment" interaction mode (docs/design.md, "Physics decisions"): the surrogate's prediction minus the
 high-fidelity model's free stream for the lone UUV (common/free_stream.py, nearsub/data/
 surrogate-free-stream.npz), added to the vehicle's own (5.11) forces."""
 
@@ -25,7 +25,7 @@ from nearsub.tools import free_stream as free_stream_tool
 
 pytestmark = pytest.mark.timeout(180)
 
-RHO = 1025.0  # sea water (SPEC section 2)
+RHO = 1025.0  # sea water (docs/design.md, "Frames, units and signs")
 # The shipped table against hf_free_stream (MEDIUM panels) off its grid, in X', Y', N': about twice
 # the largest errors its build measured at 300 points (7.8e-6, 9.3e-7, 2.4e-7; free_stream.GRID).
 TOLERANCE = np.array([1.5e-5, 2e-6, 5e-7])
@@ -112,7 +112,7 @@ def test_increment_at_the_outer_lateral_edge_is_much_smaller_than_the_total(ship
     assert np.all(np.abs(increment[:, 0]) < 0.3 * np.abs(total[:, 0]))  # surge: the drag is gone
     assert abs(increment[1, 2]) < 0.2 * abs(total[1, 2])  # yaw abreast the CB: the Munk moment is gone
     # The high-fidelity model at R_long = 0 on the edge (table 4.2 with (4.5)): the interaction is a
-    # few per cent of the lone UUV's drag and Munk moment (hydro-notes section 5: it decays with
+    # few per cent of the lone UUV's drag and Munk moment (it decays with
     # the clearance).
     inputs, _ = clipped_inputs(states[1:2], SDV)
     hf_total = hydro_hf.hf_coefficients(inputs)

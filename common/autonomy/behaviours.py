@@ -1,7 +1,7 @@
 """Helm behaviours as pure functions of the state and their parameters.
 
-`waypoints` follows thesis section 5.7 with MOOS-IvP BHV_Waypoint semantics (moos-notes.md
-section 5): the vehicle steers at a lead point `lead` metres ahead of its perpendicular foot on
+`waypoints` follows thesis section 5.7 with MOOS-IvP BHV_Waypoint semantics (the MOOS-IvP helm
+documentation, Benjamin et al.): the vehicle steers at a lead point `lead` metres ahead of its perpendicular foot on
 the track-line from the previous waypoint; the lead point never passes the next waypoint. A
 waypoint counts as reached when the vehicle is within `capture_radius`, or it has started to
 move away after coming within `slip_radius` (slip), or, with `capture_line`, it has crossed the

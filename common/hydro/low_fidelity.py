@@ -1,21 +1,21 @@
-"""Low fidelity "one-way slender" model of the UUV-submarine interaction (issue 6; SPEC section 7).
+"""Low fidelity "one-way slender" model of the UUV-submarine interaction (docs/design.md, "Physics decisions").
 
 The thesis's low fidelity source was FS-Flow potential flow with ITTC-57 friction (thesis sections
-3.4 and 4.4). This replacement (hydro-notes section 6(a)):
+3.4 and 4.4). This replacement, nearsub's own:
 
 1. The flow of the submarine alone: an axisymmetric ring-source panel solution of the SUBOFF hull
-   in the stream -U x (hydro-notes section 2.3), tabulated once per process on an (x, R) grid around
+   in the stream -U x (Hess & Smith 1967), tabulated once per process on an (x, R) grid around
    the hull and interpolated with bicubic splines. Both vehicles move at the same speed U = u
    through the water, so in the submarine frame the flow is steady (thesis section 4.2.2).
 2. The UUV in that flow, one way (the UUV does not disturb the submarine's flow: the thesis's
    "one-way assumption", section 3.5): slender-body strip theory with the Froude-Krylov pressure
-   gradient and added-mass terms, which give the exact Munk moment (hydro-notes section 2.2,
-   finite-diameter variant).
+   gradient and added-mass terms, which give the exact Munk moment (slender-body theory: Munk 1924;
+   Newman 1977, Marine Hydrodynamics; a finite-diameter variant).
 3. ITTC-57 friction drag at the strip-averaged local speed (thesis section 4.4, no form factor).
 
-Inputs are rows [R_long, R_lat, u_kn, psi_deg, d_ratio, ld_ratio] (SPEC section 5); outputs are the
-UUV body-axis coefficients [X', Y', N'] (SPEC section 2): Y' > 0 away from the submarine and N' > 0
-bow turning away, for the UUV on the +y side.
+Inputs are rows [R_long, R_lat, u_kn, psi_deg, d_ratio, ld_ratio]; outputs are the UUV body-axis
+coefficients [X', Y', N'] (docs/design.md, "Frames, units and signs"): Y' > 0 away from the submarine
+and N' > 0 bow turning away, for the UUV on the +y side.
 """
 
 from __future__ import annotations
@@ -42,22 +42,26 @@ from nearsub.common.physics.hull import (
 # Version of this model's physics: bump it with any change that alters lf_coefficients' values.
 # Surrogate model files store it (with N_STRIPS, N_FRUSTA) and refuse a different LF.
 LF_VERSION = 1
-NU = 1.19e-6  # kinematic viscosity of sea water at about 15 C [m^2/s] (hydro-notes section 1)
+# Kinematic viscosity of sea water at about 15 C [m^2/s] (ITTC 2011, procedure 7.5-02-01-03: 1.1892e-6 at
+# 15 C and 35 g/kg salinity).
+NU = 1.19e-6
 KNOT = 1852.0 / 3600.0  # [m/s]
 
-N_FRUSTA = 240  # ring-source panels on the SUBOFF profile (hydro-notes section 2.3: 150-250)
-N_STRIPS = 60  # UUV strips (hydro-notes section 6(a)2)
+# Ring-source panels on the SUBOFF profile, nearsub's choice: 960 change the field by at most 1.8e-3 U
+# (`_field_grid`).
+N_FRUSTA = 240
+N_STRIPS = 60  # UUV strips, cosine-spaced; nearsub's choice
 _GAUSS_RULES = tuple(np.polynomial.legendre.leggauss(k) for k in (1, 2, 8, 32))
 
 
 def ittc57(reynolds):
-    """ITTC-57 model-ship correlation line C_F = 0.075 / (log10 Re - 2)^2 (hydro-notes section 2.5)."""
+    """ITTC-57 model-ship correlation line C_F = 0.075 / (log10 Re - 2)^2 (ITTC 1957)."""
     return 0.075 / (np.log10(reynolds) - 2.0) ** 2
 
 
 def ring_source_velocity(x, r, x0, a):
     """Velocity (u_x, u_r) at axial position x, radius r of a ring source of unit total volume flux
-    at axial position x0 with radius a (hydro-notes section 2.3; Hess & Smith 1967). Arrays
+    at axial position x0 with radius a (Hess & Smith 1967). Arrays
     broadcast; m = 2B / (A + B) is scipy's elliptic parameter k^2."""
     dx = np.asarray(x) - x0
     big_a = dx**2 + np.asarray(r) ** 2 + np.asarray(a) ** 2
@@ -139,7 +143,7 @@ def _frusta_velocity(panels: RingPanels, x: np.ndarray, r: np.ndarray, strengths
 def solve_ring_panels(profile: Profile) -> RingPanels:
     """Ring-source panel solution of a body of revolution in the unit stream -x (frame of the
     profile). Boundary condition u.n = n_x at each frustum midpoint (the body-frame stream is
-    -U x, hydro-notes section 2.4), with the source sheet's own jump sigma/2 on the diagonal."""
+    -U x), with the source sheet's own jump sigma/2 on the diagonal."""
     x, r = profile.x, profile.r
     panels = RingPanels(x[:-1], r[:-1], x[1:], r[1:], np.zeros(len(x) - 1))
     length = panels.lengths
@@ -193,7 +197,7 @@ class SubmarineField:
 
 def submarine_field(n_frusta: int = N_FRUSTA) -> SubmarineField:
     """The ring-panel solution of the full-scale SUBOFF, tabulated once per panel count and process
-    (about 3 s; hydro-notes section 6(a)1)."""
+    (about 3 s)."""
     return _submarine_field(int(n_frusta))
 
 
@@ -338,9 +342,9 @@ def _strip_forces(geometry: _StripGeometry, ux: np.ndarray, ur: np.ndarray) -> n
     ring = np.array([0.25, 0.25, 0.5])[:, None, None]
     cp_mean, v_eta_mean, u_axial = (np.sum(ring * q, axis=0) for q in (cp, v_eta, -v_xi))
     area = np.pi * r**2
-    # Lateral pressure gradient from the +eta/-eta points (hydro-notes section 2.2, finite diameter).
+    # Lateral pressure gradient from the +eta/-eta points (slender-body theory, finite diameter).
     dcp_deta = np.where(r > 0.0, (cp[0] - cp[1]) / np.where(r > 0.0, 2.0 * r, 1.0), 0.0)
-    # Strip forces over (1/2) rho U^2 (hydro-notes section 2.2): f_y = -d/dxi[rho A U_x V_y] - A dp/dy.
+    # Strip forces over (1/2) rho U^2 (slender-body theory, Newman 1977): f_y = -d/dxi[rho A U_x V_y] - A dp/dy.
     # Y integrates the first term to zero (A = 0 at both tips); N takes it by parts.
     y_force = -np.trapezoid(area * dcp_deta, xi, axis=1)
     n_moment = np.trapezoid(2.0 * area * u_axial * v_eta_mean - xi * area * dcp_deta, xi, axis=1)
@@ -363,7 +367,7 @@ def lf_coefficients(inputs, *, n_strips: int = N_STRIPS, n_frusta: int = N_FRUST
 def lf_free_stream(inputs, *, n_strips: int = N_STRIPS) -> np.ndarray:
     """The same model's [X', Y', N'] for the UUV alone at that speed and heading (R_long, R_lat
     ignored): ITTC-57 friction and the slender Munk moment rho Vol U^2 sin psi cos psi
-    (hydro-notes section 2.2). The interaction increment of SPEC section 5 is lf - lf_free_stream."""
+    (Munk 1924). The interaction increment (docs/design.md, "Physics decisions") is lf - lf_free_stream."""
     return _strip_coefficients(inputs, n_strips, None)
 
 

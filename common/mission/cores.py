@@ -233,7 +233,7 @@ class PidCore:
 
 class SimCore:
     """uSimMarine: integrates (5.10)/(5.12) from x_k and u_k to x_{k+1}; near the submarine with
-    the surrogate's interaction forces, (5.20) (SPEC section 5)."""
+    the surrogate's interaction forces, (5.20) (docs/design.md, "Physics decisions")."""
 
     role = "sim"
     inputs = ("input",)

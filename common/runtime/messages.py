@@ -1,7 +1,7 @@
 """Wire messages: pydantic models, msgpack codec and the topic -> model registry.
 
 Every message carries the schema version, the step index it describes and the simulated time
-(SPEC section 3). The thesis vectors travel as named fields: state [u, v, r, x, y, psi],
+(docs/design.md). The thesis vectors travel as named fields: state [u, v, r, x, y, psi],
 desired [u_d, psi_d], input [X_prop, delta_r]. Angles are radians on the wire.
 
 `decode` validates on receive: a malformed payload raises `MessageError` whose text names the
@@ -60,7 +60,7 @@ class FiniteMessage(Message):
 
 class State(FiniteMessage):
     """Vehicle state x = [u, v, r, x, y, psi]: velocities relative to the water, position in the
-    submarine frame (SPEC section 2)."""
+    submarine frame (docs/design.md, "Frames, units and signs")."""
 
     u: float
     v: float
