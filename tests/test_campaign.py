@@ -1,5 +1,5 @@
 """`nearsub campaign start|next|tell|export`: NMMF with the user's CFD as the high fidelity
-(issue 6 item 6). The "CFD" here is nearsub's own HF on coarse panels, told by hand."""
+The "CFD" here is nearsub's own HF on coarse panels, told by hand."""
 
 import csv
 import json

@@ -123,3 +123,4 @@ def test_bench_reports_every_figure():
     for key in ("point_core_us", "batch_10000_ms", "query_median_us", "query_p99_us", "fit_3_outputs_s"):
         assert result[key] > 0
     assert result["targets"]["point_us"] == 50.0
+    assert result["lf_in_loop"]["point_us"] > result["lf_in_loop"]["lf_point_us"] > 0  # the shipped model

@@ -1,5 +1,5 @@
 """`nearsub surrogate validate`: Latin-hypercube test points within the constraints, HF values on a
-process pool, MAE and the REMUS 100 error equivalents of thesis table 4.3 (issue 6 item 7)."""
+process pool, MAE and the REMUS 100 error equivalents of thesis table 4.3."""
 
 import json
 import math
