@@ -159,7 +159,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_router)
 
     from . import albench, train
-    from .surrogate_cli import add_bench_parser, add_parser
+    from .surrogate import add_bench_parser, add_parser
 
     add_parser(sub)
     train.add_parser(sub)

@@ -5,7 +5,7 @@ held (figures 4-4, 4-5, 4-7 to 4-11). `THESIS_MAPS` lists those panels with the 
 values, `slice_grid` makes the inputs of a panel and `evaluate_map` the values, NaN where the
 constraints (4.4)-(4.7) exclude the point. Plotting is in tools/maps.py.
 
-One departure, forced by SPEC errata 7: nearsub's R_lat is centre to centre, so the thesis's
+One departure, forced by docs/design.md, "Thesis errata": nearsub's R_lat is centre to centre, so the thesis's
 R_lat = 0.08 violates (4.5) (the UUV more than two of its diameters off the hull) for every
 D_sub/D_uuv above 10.7, which includes the thesis's D_sub/D_uuv = 20 slices. Where the thesis
 holds R_lat at 0.08, these maps put the UUV in the middle of the lateral window that (4.4) and

@@ -1,19 +1,25 @@
 """The loaded surrogate: predictions with their domain flags, and the surrogate server's messages.
 
 The thesis's reduced-order model (chapter 4) maps six inputs to the non-dimensional interaction
-coefficients X', Y', N' of the UUV (SPEC section 2). This module is pure numpy (no Zenoh): it says
-which inputs are valid (table 4.2, constraints (4.4)-(4.7) with SPEC errata 3 and 7), converts a
-dimensional state to inputs and coefficients back to forces (mirroring the -y side, section
-4.2.1), wraps a model file as a `Surrogate`, and defines the query/reply messages of the
-surrogate server (`apps/surrogate.py`).
+coefficients X', Y', N' of the UUV (thesis section 5.2). This module is pure numpy (no Zenoh): it
+says which inputs are valid (table 4.2, constraints (4.4)-(4.7) as corrected in docs/design.md,
+"Thesis errata"), converts a dimensional state to inputs and coefficients back to forces
+(mirroring the -y side, section 4.2.1), wraps a model file as a `Surrogate`, and defines the
+query/reply messages of the surrogate server (`apps/surrogate.py`).
+
+A `Surrogate` is one of three kinds (`Surrogate.kind`): "lf_in_loop", the exact low fidelity plus
+a residual GP (the shipped kind; `low_fidelity` and `discrepancy` give its two parts);
+"multi_fidelity", the thesis's GP of the LF plus a GP of the discrepancy (2.11); "gp", one GP per
+output (a user's table, the analytic fixture).
 
 A point outside the domain or the constraints is never refused and never extrapolated silently:
-it is answered with the GP's value at that point and flagged (`in_domain`, `constraints_ok`);
-the consumer (the sim's blend, SPEC section 5) decides what to do with it.
+it is answered with the model's value at that point and flagged (`in_domain`,
+`constraints_ok`); the consumer (the sim's interaction modes, docs/design.md, "Physics
+decisions") decides what to do with it.
 
-Until the hydrodynamics issue trains and ships the real model (`default_model_path()`), the
-server, CLI and tests use `analytic_model()`: a GP fitted to a made-up smooth function. It is a
-test fixture, it says so in its provenance, and whoever falls back to it says so on stderr.
+Without a shipped model (`default_model_path()`), the server, CLI and tests fall back to
+`analytic_model()`: a GP fitted to a made-up smooth function. It is a test fixture, it says so in
+its provenance, and whoever falls back to it says so on stderr.
 """
 
 from __future__ import annotations
@@ -69,7 +75,7 @@ MAX_QUERY_POINTS = 100_000
 
 
 def surrogate_key(community: str) -> str:
-    """The server's queryable: nearsub/<community>/surrogate (SPEC section 3, a service key)."""
+    """The server's queryable: nearsub/<community>/surrogate (a service key, docs/design.md, "Keys")."""
     return f"{keys.community_root(community)}/surrogate"
 
 
@@ -249,8 +255,7 @@ def analytic_model(n: int = 100, seed: int = 0, path: str | os.PathLike | None =
         "method": "ANALYTIC TEST FIXTURE: GP fitted to nearsub.common.surrogate.model.analytic_coefficients, "
         "a made-up smooth function; NOT hydrodynamics",
         "command": f"nearsub.common.surrogate.model.analytic_model(n={n}, seed={seed})",
-        "notes": "For tests and plumbing only, until the hydrodynamics issue trains and ships the real "
-        "model (SPEC section 7). Do not use its numbers.",
+        "notes": "For tests and plumbing only. Do not use its numbers.",
         "n_train": n,
         "seed": seed,
     }

@@ -29,6 +29,7 @@ import os
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -36,8 +37,8 @@ import numpy as np
 
 from nearsub.common.hydro import high_fidelity as hydro_hf
 from nearsub.common.hydro import low_fidelity as hydro_lf
-from nearsub.common.learning.active import initial_design
-from nearsub.common.learning.gp import FINAL_FIT_RESTARTS
+from nearsub.common.learning.active import candidate_set, initial_design
+from nearsub.common.learning.gp import FINAL_FIT_RESTARTS, MultiOutputGP
 from nearsub.common.learning.testproblems import Problem
 from nearsub.common.surrogate import domain
 from nearsub.common.surrogate.modelfile import LFInLoopModel
@@ -48,7 +49,7 @@ DEFAULT_SEED = 1  # seed 0 is the held-out set's (validation.HELD_OUT_SEED)
 DEFAULT_N_SEED = 20  # space-filling HF points that seed the adaptive designs
 # Optimiser starts of the refits inside an adaptive design (warm-started from the previous
 # optimum); the final fit uses FINAL_FIT_RESTARTS.
-_CAMPAIGN_RESTARTS = 3
+_CAMPAIGN_RESTARTS = 2
 _CANDIDATES_PER_DIM = 500  # about 3000 d box draws, ~500 feasible candidates per pick
 _THREAD_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 HF_DESCRIPTION = (
@@ -86,6 +87,16 @@ def sobol_design(n: int, seed: int = DEFAULT_SEED) -> np.ndarray:
     the 100-sample design is the first 100 of the 300-sample one)."""
     check_seed(seed)
     return initial_design(PROBLEM, n, [seed, 0])
+
+
+def held_out_overlap(X: np.ndarray) -> int:
+    """How many rows of X coincide (to 1e-9 of the box width) with held-out validation points."""
+    from nearsub.common.surrogate.validation import HELD_OUT_POINTS, HELD_OUT_SEED, latin_hypercube_feasible
+
+    held = latin_hypercube_feasible(HELD_OUT_POINTS, HELD_OUT_SEED)
+    width = domain.BOUNDS[:, 1] - domain.BOUNDS[:, 0]
+    close = np.all(np.abs(X[:, None, :] - held[None, :, :]) <= 1e-9 * width, axis=2)
+    return int(np.any(close, axis=1).sum())
 
 
 def check_seed(seed: int) -> None:
@@ -242,3 +253,114 @@ def provenance(design: str, model: LFInLoopModel, command: str, **extra: Any) ->
         "command": command,
         **extra,
     }
+
+
+# ----------------------------------------------------------------------------------- designs
+@dataclass(frozen=True)
+class DesignSettings:
+    """design: one of DESIGNS; budget: HF samples in all; seed: the design's seed (never the
+    held-out set's); n_seed: space-filling seed points of the adaptive designs; batch:
+    residual-us picks per round (nmmf picks one: q_AD has no batch form)."""
+
+    design: str = "sobol"
+    budget: int = 100
+    seed: int = DEFAULT_SEED
+    n_seed: int = DEFAULT_N_SEED
+    batch: int = 10
+
+    def __post_init__(self):
+        if self.design not in DESIGNS:
+            raise ValueError(f"--design {self.design!r}: choose from {', '.join(DESIGNS)}")
+        check_seed(self.seed)
+        if self.budget < 2:
+            raise ValueError(f"--budget {self.budget}: need at least 2 HF samples")
+        if not 2 <= self.n_seed <= self.budget:
+            raise ValueError(f"--n-seed {self.n_seed}: need 2 <= n_seed <= budget ({self.budget})")
+        if self.batch < 1:
+            raise ValueError(f"--batch {self.batch}: need at least 1")
+
+
+def _candidates(seed: int, draw: int) -> np.ndarray:
+    """A fresh feasible candidate set (scrambled Sobol, constraints (4.4)-(4.7))."""
+    return candidate_set(PROBLEM, _CANDIDATES_PER_DIM, [seed, 1, draw])
+
+
+def _refit(delta: MultiOutputGP | None, warping: Warping, X: np.ndarray, Y: np.ndarray, seed: int) -> MultiOutputGP:
+    """The campaign's residual GP on the finite samples, warm-started from the previous fit."""
+    X, Y = finite_rows(X, Y)
+    if delta is None:
+        delta = MultiOutputGP(bounds=warping.bounds, n_restarts=_CAMPAIGN_RESTARTS, seed=seed)
+        return delta.fit(warping.forward(X), Y - hydro_lf.lf_coefficients(X))
+    return delta.fit(warping.forward(X), Y - hydro_lf.lf_coefficients(X), warm_start=True)
+
+
+def _scaled(model: MultiOutputGP) -> np.ndarray:
+    """sigma_y,i of (2.31): each output's training-data std."""
+    return np.array([gp.y_std_ for gp in model.gps])
+
+
+def residual_us_picks(delta: MultiOutputGP, warping: Warping, candidates: np.ndarray, k: int) -> np.ndarray:
+    """k greedy uncertainty-sampling picks (2.9) on the residual GP, maximum normalised variance
+    over the outputs (2.31), each conditioned on the earlier picks at fixed hyperparameters
+    (placeholder outputs: the posterior mean; sigma does not depend on them)."""
+    W = warping.forward(candidates)
+    scale = _scaled(delta)
+    thetas = np.stack([gp.theta_ for gp in delta.gps])
+    X_train = delta.gps[0].X_train_
+    Y_train = np.column_stack([gp.y_train_ for gp in delta.gps])
+    look, picks = delta, []
+    for _ in range(k):
+        std = look.predict(W, return_std=True)[1]
+        best = int(np.argmax(np.max((std / scale) ** 2, axis=1)))
+        picks.append(best)
+        extra = W[picks]
+        look = MultiOutputGP(bounds=warping.bounds, seed=delta.seed).fit(
+            np.vstack([X_train, extra]), np.vstack([Y_train, delta.predict(extra)]), theta=thetas
+        )
+    return candidates[picks]
+
+
+def nmmf_pick(delta: MultiOutputGP, hf_only: MultiOutputGP, warping: Warping, candidates: np.ndarray) -> np.ndarray:
+    """Algorithm 1's HF point with the exact LF: argmax over outputs of q_AD = |y_HF - y_MF| (2.17)
+    over sigma_y,i (2.31), y_MF = LF + delta and y_HF the HF-only GP."""
+    W = warping.forward(candidates)
+    lf = hydro_lf.lf_coefficients(candidates)
+    gap = np.abs(hf_only.predict(W) - (lf + delta.predict(W))) / _scaled(hf_only)
+    gap[~np.all(np.isfinite(gap), axis=1)] = -np.inf
+    return candidates[int(np.argmax(np.max(gap, axis=1)))][None, :]
+
+
+def run_design(
+    settings: DesignSettings,
+    store: HFStore,
+    run: Runner,
+    warping: Warping | None = None,
+    on_row: Callable[[], None] | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The HF samples (X, Y) of a design (module doc); HF runs through `store` (reused if there)."""
+    warping = warping or Warping(DEFAULT_WARPING)
+    s = settings
+    if s.design == "sobol":
+        X = sobol_design(s.budget, s.seed)
+        return X, evaluate_hf(X, store, run, on_row)
+    X = sobol_design(s.n_seed, s.seed)
+    Y = evaluate_hf(X, store, run, on_row)
+    delta = hf_only = None
+    draw = 0
+    while len(X) < s.budget:
+        draw += 1
+        delta = _refit(delta, warping, X, Y, s.seed)
+        candidates = _candidates(s.seed, draw)
+        if s.design == "residual-us":
+            new = residual_us_picks(delta, warping, candidates, min(s.batch, s.budget - len(X)))
+        else:
+            keep = np.all(np.isfinite(Y), axis=1)
+            if hf_only is None:
+                hf_only = MultiOutputGP(bounds=warping.bounds, n_restarts=_CAMPAIGN_RESTARTS, seed=s.seed + 2000)
+                hf_only.fit(warping.forward(X[keep]), Y[keep])
+            else:
+                hf_only.fit(warping.forward(X[keep]), Y[keep], warm_start=True)
+            new = nmmf_pick(delta, hf_only, warping, candidates)
+        X = np.vstack([X, new])
+        Y = np.vstack([Y, evaluate_hf(new, store, run, on_row)])
+    return X, Y
