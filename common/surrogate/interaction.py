@@ -293,20 +293,25 @@ def interaction_at(
                 spread[asked] = prediction.std
         coefficients = model_mean - free
         lf, delta_weight, held = np.full((n, 3), np.nan), np.full(n, np.nan), np.zeros(n, dtype=bool)
-    forces = domain.to_forces(coefficients, mirror, u, vehicle.length, rho)
+    # One conversion for the four (n, 3) arrays (element-wise, so each gets its own bits).
+    parts = np.vstack([coefficients, model_mean, spread, lf])
+    forces, model_forces, spread_forces, lf_forces = np.split(
+        domain.to_forces(parts, np.tile(mirror, 4), np.tile(u, 4), vehicle.length, rho), 4
+    )
     safe = np.where(np.isfinite(forces), forces, 0.0)  # weight is 0 wherever they are not finite
     interaction = Interaction(safe[0], weight[0], mode) if single else Interaction(safe, weight, mode)
+    flags = outside_mask(raw)
     return InteractionAt(
         interaction=interaction,
         forces=forces,
         applied=weight[:, None] * safe,
-        model=domain.to_forces(model_mean, mirror, u, vehicle.length, rho),
-        std=np.abs(domain.to_forces(spread, mirror, u, vehicle.length, rho)),
-        lf=domain.to_forces(lf, mirror, u, vehicle.length, rho),
+        model=model_forces,
+        std=np.abs(spread_forces),
+        lf=lf_forces,
         delta_weight=delta_weight,
-        in_domain=domain.in_domain(raw),
-        constraints_ok=domain.constraints_ok(raw),
-        outside_mask=outside_mask(raw),
+        in_domain=~flags[:, : len(domain.INPUT_NAMES)].any(axis=1),
+        constraints_ok=~flags[:, len(domain.INPUT_NAMES) :].any(axis=1),
+        outside_mask=flags,
         lf_held=held,
     )
 
