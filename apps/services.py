@@ -10,17 +10,51 @@ from nearsub.common.surrogate import model as sg
 from nearsub.common.surrogate.interaction import ServiceError
 
 
+def discrepancy_key(community: str) -> str:
+    """The server's answers of the residual GP alone (the LF-in-the-loop kind's delta)."""
+    return f"{sg.surrogate_key(community)}/discrepancy"
+
+
+def kind_key(community: str) -> str:
+    """The server's model kind ("lf_in_loop", "multi_fidelity" or "gp"), as UTF-8 text."""
+    return f"{sg.surrogate_key(community)}/kind"
+
+
 class RemoteSurrogate:
     """The surrogate server, asked over the bus (one query per call, the whole batch in it).
-    It answers with the numbers `Surrogate.predict` gives in-process, bit for bit."""
+    It answers with the numbers `Surrogate.predict` and `Surrogate.discrepancy` give in-process,
+    bit for bit (msgpack carries the doubles unchanged)."""
 
     def __init__(self, bus: Bus, community: str, timeout: float = 5.0):
         self.key = sg.surrogate_key(community)
         self._querier = bus.querier(self.key, timeout)
+        self._discrepancy = bus.querier(discrepancy_key(community), timeout)
+        self._kind_querier = bus.querier(kind_key(community), timeout)
+        self._kind: str | None = None
+
+    def _ask(self, querier, payload: bytes) -> bytes:
+        try:
+            return querier.ask(payload)
+        except ReplyError as exc:
+            raise ServiceError(f"surrogate server at {self.key}: {exc}") from None
+
+    @property
+    def kind(self) -> str:
+        """The served model's kind (asked once)."""
+        if self._kind is None:
+            self._kind = self._ask(self._kind_querier, b"").decode()
+        return self._kind
 
     def predict(self, inputs: np.ndarray, return_std: bool = True) -> sg.Prediction:
         try:
-            payload = self._querier.ask(sg.encode_query(inputs))
-            return sg.decode_reply(payload).prediction()
-        except (ReplyError, MessageError) as exc:
+            return sg.decode_reply(self._ask(self._querier, sg.encode_query(inputs))).prediction()
+        except MessageError as exc:
             raise ServiceError(f"surrogate server at {self.key}: {exc}") from None
+
+    def discrepancy(self, inputs: np.ndarray, return_std: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+        """The residual GP's mean and std (n, 3) (`Surrogate.discrepancy`; the std is always sent)."""
+        try:
+            answer = sg.decode_reply(self._ask(self._discrepancy, sg.encode_query(inputs))).prediction()
+        except MessageError as exc:
+            raise ServiceError(f"surrogate server at {self.key}: {exc}") from None
+        return answer.mean, answer.std if return_std else None

@@ -1,10 +1,13 @@
-"""The surrogate server app: answers GP queries on nearsub/<community>/surrogate (SPEC sections 1, 3).
+"""The surrogate server app: answers GP queries on nearsub/<community>/surrogate (docs/design.md).
 
     python -m nearsub.apps.surrogate [--model PATH] --community NAME --connect ENDPOINT [--instance NAME]
     python -m nearsub.apps.surrogate [--model PATH] --run RUNFILE [--instance NAME]
 
-Each query is a `SurrogateQuery` (common/surrogate.py) with a batch of points; the whole batch is
-predicted at once and answered with a `SurrogateReply`. A malformed query gets an error reply
+Each query is a `SurrogateQuery` (common/surrogate/model.py) with a batch of points; the whole batch
+is predicted at once and answered with a `SurrogateReply`. The same queryable answers
+nearsub/<community>/surrogate/discrepancy with the residual GP alone (the LF-in-the-loop kind's
+delta, which the increment mode adds to the LF it evaluates itself; `apps.services`) and
+nearsub/<community>/surrogate/kind with the model's kind. A malformed query gets an error reply
 naming the field and value, and the server carries on. Without --model the shipped model is
 used, or, until one ships, the analytic test fixture (with a warning). The server stops on
 SIGTERM/SIGINT, when its parent dies (PR_SET_PDEATHSIG) or when the launcher's token goes.
@@ -16,12 +19,23 @@ import argparse
 import sys
 from typing import NoReturn
 
+import numpy as np
+
+from nearsub.apps.services import discrepancy_key, kind_key
 from nearsub.apps.shell import prepare_process
 from nearsub.common.mission.schema import MissionError, RunConfig
 from nearsub.common.runtime import keys
 from nearsub.common.runtime.bus import Bus, Endpoints, signal_self
-from nearsub.common.runtime.messages import MessageError
-from nearsub.common.surrogate.model import Surrogate, answer_query, load_surrogate, surrogate_key
+from nearsub.common.runtime.messages import MessageError, decode, encode
+from nearsub.common.surrogate.domain import constraints_ok, in_domain
+from nearsub.common.surrogate.model import (
+    Surrogate,
+    SurrogateQuery,
+    SurrogateReply,
+    answer_query,
+    load_surrogate,
+    surrogate_key,
+)
 from nearsub.common.surrogate.modelfile import ModelFileError
 
 # Error replies are cut to this many characters: a 100,000-point batch of NaNs would otherwise
@@ -29,22 +43,49 @@ from nearsub.common.surrogate.modelfile import ModelFileError
 MAX_ERROR_CHARS = 2000
 
 
+def answer_discrepancy(surrogate: Surrogate, payload: bytes, source: str = "surrogate") -> bytes:
+    """`Surrogate.discrepancy` of a query's points, as a `SurrogateReply` (mean and std of delta,
+    the flags of the points). Raises MessageError for a malformed query, TypeError for a model
+    without the LF in the loop."""
+    query = decode(payload, SurrogateQuery, "surrogate discrepancy query")
+    points = np.array(query.points, dtype=float)
+    mean, std = surrogate.discrepancy(points, return_std=True)
+    reply = SurrogateReply(
+        step=query.step,
+        t=query.t,
+        source=source,
+        mean=mean.tolist(),
+        std=std.tolist(),
+        in_domain=in_domain(points, surrogate.bounds).tolist(),
+        constraints_ok=constraints_ok(points).tolist(),
+        output_names=list(surrogate.output_names),
+        model_id=surrogate.model_id,
+    )
+    return encode(reply)
+
+
 def serve(bus: Bus, community: str, surrogate: Surrogate, instance: str = "surrogate") -> NoReturn:
     """Answer queries until the process is stopped; the liveliness token
     nearsub/<community>/alive/surrogate/<instance> says the server is up."""
-    requests = bus.serve(surrogate_key(community))
+    key = surrogate_key(community)
+    requests = bus.serve(f"{key}/**")  # the key itself, .../discrepancy and .../kind
     bus.on_liveliness_lost(keys.alive(community, "launcher", "*"), signal_self())
     bus.token(keys.alive(community, "surrogate", instance))
     print(
-        f"[{instance}] serving {surrogate_key(community)}: model {surrogate.model_id} from {surrogate.source} "
+        f"[{instance}] serving {key}: model {surrogate.model_id} from {surrogate.source} "
         f"({surrogate.loaded.provenance.get('method', 'no method recorded')})",
         flush=True,
     )
     while True:
         request = requests.recv()
         try:
-            answer = answer_query(surrogate, request.payload, instance)
-        except MessageError as exc:
+            if request.key == kind_key(community):
+                answer = surrogate.kind.encode()
+            elif request.key == discrepancy_key(community):
+                answer = answer_discrepancy(surrogate, request.payload, instance)
+            else:
+                answer = answer_query(surrogate, request.payload, instance)
+        except (MessageError, TypeError) as exc:  # TypeError: no discrepancy in this kind of model
             text = str(exc)
             if len(text) > MAX_ERROR_CHARS:
                 text = text[:MAX_ERROR_CHARS] + f" ... ({len(text) - MAX_ERROR_CHARS} more characters)"

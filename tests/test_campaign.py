@@ -1,5 +1,5 @@
 """`nearsub campaign start|next|tell|export`: NMMF with the user's CFD as the high fidelity
-(issue 6 item 6). The "CFD" here is nearsub's own HF on coarse panels, told by hand."""
+The "CFD" here is nearsub's own HF on coarse panels, told by hand."""
 
 import csv
 import json
@@ -105,5 +105,5 @@ def test_next_without_a_campaign_says_how_to_start_one(tmp_path, capsys):
 def test_train_refuses_to_fill_a_cfd_campaign_with_panel_samples(tmp_path, capsys):
     state = tmp_path / "cfd.json"
     assert run(capsys, "campaign", "start", "--state", state, "--budget", 3, "--n-lf0", 3, "--n-hf0", 2)[0] == 0
-    code, _, err = run(capsys, "train", "--resume", "--state", state, "--out", tmp_path / "m.npz")
-    assert code == 2 and "external HF" in err
+    code, _, err = run(capsys, "train", "--state", state, "--out", tmp_path / "m.npz")
+    assert code == 2 and "not an HF sample store" in err

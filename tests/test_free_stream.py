@@ -1,4 +1,4 @@
-"""The "increment" interaction mode (SPEC section 5): the surrogate's prediction minus the
+"""The "increment" interaction mode (docs/design.md, "Physics decisions"): the surrogate's prediction minus the
 high-fidelity model's free stream for the lone UUV (common/free_stream.py, nearsub/data/
 surrogate-free-stream.npz), added to the vehicle's own (5.11) forces."""
 
@@ -25,7 +25,7 @@ from nearsub.tools import free_stream as free_stream_tool
 
 pytestmark = pytest.mark.timeout(180)
 
-RHO = 1025.0  # sea water (SPEC section 2)
+RHO = 1025.0  # sea water (docs/design.md, "Frames, units and signs")
 # The shipped table against hf_free_stream (MEDIUM panels) off its grid, in X', Y', N': about twice
 # the largest errors its build measured at 300 points (7.8e-6, 9.3e-7, 2.4e-7; free_stream.GRID).
 TOLERANCE = np.array([1.5e-5, 2e-6, 5e-7])
@@ -69,11 +69,13 @@ def test_shipped_table_is_the_shipped_models_and_matches_hf_free_stream_off_grid
     assert np.all(error <= TOLERANCE), error
 
 
-def test_increment_is_the_prediction_minus_the_free_stream_at_the_same_clipped_inputs(shipped, table):
-    """Both sides of the submarine (mirrored heading, Y and N), both signs of psi, and a hull outside
+def test_increment_is_the_prediction_minus_the_free_stream_at_the_same_clipped_inputs(model_file, table):
+    """A model without the LF in the loop (here the analytic fixture, given the shipped table), on
+    both sides of the submarine (mirrored heading, Y and N), both signs of psi, and a hull outside
     the trained ratios (REMUS 100, D_sub/D_uuv = 54 clipped to 50): the forces the dynamics add are
     the replace mode's minus the free stream of the same inputs, and that free stream is the lone
     UUV's, evaluated directly."""
+    model = load_surrogate(model_file)
     for vehicle, y, u in ((SDV, 5.9, 1.75), (REMUS100, 5.45, 1.5)):
         states = np.array(
             [
@@ -83,8 +85,8 @@ def test_increment_is_the_prediction_minus_the_free_stream_at_the_same_clipped_i
                 for psi in (1.5, -0.8)
             ]
         )
-        replace = interaction_at(shipped, states, vehicle, RHO, "replace")
-        increment = interaction_at(shipped, states, vehicle, RHO, "increment")
+        replace = interaction_at(model, states, vehicle, RHO, "replace")
+        increment = interaction_at(model, states, vehicle, RHO, "increment", free_stream=table)
         inputs, mirror = clipped_inputs(states, vehicle)
         free = domain.to_forces(table.coefficients(inputs), mirror, states[:, 0], vehicle.length, RHO)
         np.testing.assert_allclose(increment.forces, replace.forces - free, rtol=1e-12, atol=1e-9)
@@ -110,7 +112,7 @@ def test_increment_at_the_outer_lateral_edge_is_much_smaller_than_the_total(ship
     assert np.all(np.abs(increment[:, 0]) < 0.3 * np.abs(total[:, 0]))  # surge: the drag is gone
     assert abs(increment[1, 2]) < 0.2 * abs(total[1, 2])  # yaw abreast the CB: the Munk moment is gone
     # The high-fidelity model at R_long = 0 on the edge (table 4.2 with (4.5)): the interaction is a
-    # few per cent of the lone UUV's drag and Munk moment (hydro-notes section 5: it decays with
+    # few per cent of the lone UUV's drag and Munk moment (it decays with
     # the clearance).
     inputs, _ = clipped_inputs(states[1:2], SDV)
     hf_total = hydro_hf.hf_coefficients(inputs)

@@ -255,3 +255,22 @@ def test_rows_give_the_same_bits_alone_and_in_a_batch():
     alone = np.vstack([model.predict_rows(Xt[i : i + 1]) for i in range(len(Xt))])
     assert np.array_equal(together, alone)
     np.testing.assert_allclose(together, model.predict(Xt), rtol=1e-6, atol=1e-9)
+
+
+def test_a_fit_with_all_length_scales_at_a_bound_is_rejected():
+    from nearsub.common.learning.gp import DegenerateFitError, all_length_scales_at_bound
+
+    bounds = np.log([[0.01, 100.0], [0.01, 100.0]])
+    assert all_length_scales_at_bound(np.log([0.01, 100.0]), bounds)
+    assert not all_length_scales_at_bound(np.log([0.01, 0.3]), bounds)
+    rng = np.random.default_rng(0)
+    X = rng.uniform(size=(15, 2))
+    y = np.sin(4 * X[:, 0]) + X[:, 1]
+    # Length scales pinned to one value: every optimum has them all at the bound, so every start is
+    # rejected, fresh starts are tried, and the fit fails rather than return the degenerate optimum.
+    gp = GaussianProcess(n_restarts=3, length_scale_bounds=(0.05, 0.05))
+    with pytest.raises(DegenerateFitError, match="all length scales at a bound"):
+        gp.fit(X, y)
+    assert gp.n_rejected_ == 9  # 3 rounds of 3 starts
+    ok = GaussianProcess(n_restarts=3).fit(X, y)
+    assert ok.n_rejected_ == 0 and not all_length_scales_at_bound(ok.theta_[:2], np.log([[0.01, 100.0]] * 2))

@@ -128,3 +128,84 @@ def test_save_validates_metadata(tmp_path, model):
         with pytest.raises(ValueError):
             save_model(tmp_path / "m.npz", model, **{**META, **change})
     assert not list(tmp_path.iterdir())
+
+
+# ------------------------------------------------------------------------- LF in the loop
+@pytest.fixture(scope="module")
+def in_loop(tmp_path_factory):
+    from nearsub.common.hydro.low_fidelity import lf_coefficients
+    from nearsub.common.surrogate.domain import sample_feasible
+    from nearsub.common.surrogate.model import save_surrogate
+    from nearsub.common.surrogate.training import fit_model
+
+    X = sample_feasible(25, seed=5)
+    Y = 1.1 * lf_coefficients(X) + 1e-4 * np.sin(X[:, [0]] * 4.0)  # a made-up "HF"
+    path = tmp_path_factory.mktemp("in-loop") / "surrogate.npz"
+    return save_surrogate(path, fit_model(X, Y), {"method": "unit test"})
+
+
+def test_lf_in_the_loop_predicts_lf_plus_delta_and_round_trips(in_loop):
+    from nearsub.common.hydro.low_fidelity import lf_coefficients
+    from nearsub.common.surrogate.domain import sample_feasible
+    from nearsub.common.surrogate.model import Surrogate, load_surrogate
+
+    s = load_surrogate(in_loop)
+    assert s.kind == "lf_in_loop"
+    X = sample_feasible(40, seed=6)
+    p = s.predict(X)
+    delta, delta_std = s.discrepancy(X)
+    assert np.array_equal(s.low_fidelity(X), lf_coefficients(X))
+    assert np.array_equal(p.mean, lf_coefficients(X) + delta) and np.array_equal(p.std, delta_std)
+    assert s.discrepancy(X, return_std=False)[1] is None
+    single = np.vstack([s.predict(X[i]).mean for i in range(len(X))])
+    assert np.array_equal(single, p.mean)
+    # Outside the LF's field (UUV inside the hull, far behind it): finite, and flagged.
+    far = s.predict([[0.0, 0.03, 3.0, 0.0, 20.0, 8.0], [3.0, 0.07, 3.0, 0.0, 20.0, 8.0]])
+    assert np.all(np.isfinite(far.mean)) and not far.valid.any()
+    old = Surrogate(load_model(in_loop))  # the same file through the generic path
+    assert old.model_id == s.model_id
+
+
+def test_old_kinds_have_no_low_fidelity_or_discrepancy(saved):
+    from nearsub.common.surrogate.model import Surrogate, analytic_model
+
+    s = Surrogate(analytic_model(n=12))
+    assert s.kind == "gp"
+    for call in (s.low_fidelity, s.discrepancy):
+        with pytest.raises(TypeError, match="only an LF-in-the-loop model"):
+            call(np.zeros((1, 6)))
+
+
+def test_a_model_file_refuses_a_different_low_fidelity_naming_both(in_loop, monkeypatch):
+    from nearsub.common.hydro import low_fidelity as hydro_lf
+
+    monkeypatch.setattr(hydro_lf, "LF_VERSION", hydro_lf.LF_VERSION + 1)
+    with pytest.raises(ModelFileError) as error:
+        load_model(in_loop)
+    text = str(error.value)
+    assert "different low fidelity" in text
+    assert f"'version': {hydro_lf.LF_VERSION - 1}" in text and f"'version': {hydro_lf.LF_VERSION}" in text
+
+
+def test_a_model_file_refuses_a_changed_lf_with_the_same_version(in_loop, monkeypatch):
+    from nearsub.common.hydro import low_fidelity as hydro_lf
+
+    original = hydro_lf.lf_coefficients
+    monkeypatch.setattr(hydro_lf, "lf_coefficients", lambda X, **kw: 1.01 * original(X, **kw))
+    with pytest.raises(ModelFileError, match="other values at its probe points"):
+        load_model(in_loop)
+
+
+def test_warping_round_trips_and_maps_the_feasible_set_into_its_box():
+    from nearsub.common.surrogate.domain import sample_feasible
+    from nearsub.common.surrogate.warping import DEFAULT_WARPING, Warping, clearance_ratio
+
+    w = Warping(DEFAULT_WARPING)
+    X = sample_feasible(2000, seed=7)
+    W = w.forward(X)
+    np.testing.assert_allclose(w.inverse(W), X, rtol=1e-12, atol=1e-14)
+    assert np.all((W >= w.bounds[:, 0] - 1e-12) & (W <= w.bounds[:, 1] + 1e-12))
+    np.testing.assert_allclose(W[:, 1], np.log(clearance_ratio(X[:, 1], X[:, 4])))
+    np.testing.assert_allclose(W[:, 4], np.log(X[:, 4]))
+    with pytest.raises(ValueError, match="unknown 'cube'"):
+        Warping(("identity", "cube", "identity", "identity", "identity", "identity"))

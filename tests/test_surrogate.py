@@ -12,7 +12,7 @@ from nearsub.common.runtime.messages import MessageError
 from nearsub.common.surrogate import domain
 from nearsub.common.surrogate import model as sg
 from nearsub.common.surrogate.modelfile import ModelFileError, load_model
-from nearsub.tools.surrogate_cli import write_analytic_model
+from nearsub.tools.surrogate import write_analytic_model
 
 # A feasible mid-domain point: Explorer-like UUV (table 4.1: D_sub/D_uuv 14.0, L/D 7.24).
 MID = np.array([0.1, 0.07, 3.5, 0.5, 14.0, 7.24])
@@ -57,7 +57,7 @@ def test_constraints_match_the_printed_equations():
     r_lat, inv_d, ld = MID[1], 1 / MID[4], MID[5]
     assert g == pytest.approx(
         [
-            8.575 * r_lat - 0.5 * inv_d - 9.425e-3 * inv_d * ld - 0.5048,  # (4.4), SPEC errata 3
+            8.575 * r_lat - 0.5 * inv_d - 9.425e-3 * inv_d * ld - 0.5048,  # (4.4), docs/design.md, "Thesis errata"
             -8.575 * r_lat + 2 * inv_d + 0.5,  # (4.5)
             65.44 * inv_d + ld - 8,  # (4.6)
             -58.81 * inv_d - ld + 17,  # (4.7)
@@ -77,7 +77,7 @@ def test_constraint_4_4_is_the_clearance_with_centre_to_centre_r_lat():
 
 
 def test_the_low_corner_is_infeasible_and_speed_does_not_matter():
-    # R_lat = 0.059 violates (4.4) for every UUV size in the domain (SPEC errata 7).
+    # R_lat = 0.059 violates (4.4) for every UUV size in the domain (docs/design.md, "Thesis errata").
     corners = np.array([[0.0, 0.059, 3.0, 0.0, d, ld] for d in (5.0, 12.0, 50.0) for ld in (4.3, 8.0, 13.0)])
     assert (domain.constraint_values(corners)[:, 0] < 0).all()
     assert not domain.constraints_ok(corners).any()
@@ -125,7 +125,7 @@ def test_to_forces_inverts_the_non_dimensionalisation():
     q = 0.5 * rho * u**2
     assert forces[0] == pytest.approx([-1e-3 * q * length**2, 2e-3 * q * length**2, -5e-4 * q * length**3])
     assert forces[1] == pytest.approx(forces[0] * [1, -1, -1])
-    # and back: X' = X / (0.5 rho u^2 L^2), N' = N / (0.5 rho u^2 L^3) (SPEC section 2)
+    # and back: X' = X / (0.5 rho u^2 L^2), N' = N / (0.5 rho u^2 L^3) (thesis section 5.2)
     assert forces[0, 0] / (q * length**2) == pytest.approx(-1e-3)
     assert forces[0, 2] / (q * length**3) == pytest.approx(-5e-4)
 

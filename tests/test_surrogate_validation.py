@@ -1,5 +1,5 @@
 """`nearsub surrogate validate`: Latin-hypercube test points within the constraints, HF values on a
-process pool, MAE and the REMUS 100 error equivalents of thesis table 4.3 (issue 6 item 7)."""
+process pool, MAE and the REMUS 100 error equivalents of thesis table 4.3."""
 
 import json
 import math
@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from conftest import ROOT
 from nearsub.common.hydro import high_fidelity as hydro_hf
 from nearsub.common.physics.vehicles import REMUS100
 from nearsub.common.surrogate.domain import constraints_ok, in_domain
@@ -85,3 +86,49 @@ def test_validate_rejects_an_output_it_cannot_write(tmp_path, capsys):
     code = main(["surrogate", "validate", "--points", "2", "--out", str(tmp_path / "result.txt")])
     err = capsys.readouterr().err
     assert code == 2 and "result.txt" in err and ".json or .csv" in err
+
+
+POINTS_FILE = ROOT / "docs" / "hydro" / "validation-points.csv"
+
+
+def test_validate_with_a_points_file_reproduces_the_mae_computed_directly(tmp_path, capsys):
+    from nearsub.common.hydro.low_fidelity import lf_coefficients
+    from nearsub.common.surrogate.model import load_surrogate
+
+    out = tmp_path / "validation.json"
+    assert main(["surrogate", "validate", "--points-file", str(POINTS_FILE), "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "LF MAE" in text and "2-sigma" in text and "500 points with HF values" in text
+    summary = json.loads(out.read_text())["summary"]
+    data = np.genfromtxt(POINTS_FILE, delimiter=",", names=True)
+    X = np.column_stack([data[k] for k in ("R_long", "R_lat", "u_kn", "psi_deg", "d_ratio", "ld_ratio")])
+    hf = np.column_stack([data[f"{n}_hf"] for n in ("X_p", "Y_p", "N_p")])
+    p = load_surrogate().predict(X)
+    assert summary["mae"] == pytest.approx(np.mean(np.abs(p.mean - hf), axis=0).tolist(), rel=1e-12)
+    assert summary["lf_mae"] == pytest.approx(np.mean(np.abs(lf_coefficients(X) - hf), axis=0).tolist(), rel=1e-12)
+    within = np.mean(np.abs(p.mean - hf) <= 2.0 * p.std, axis=0)
+    assert summary["fraction_within_2_std"] == pytest.approx(within.tolist())
+
+
+@pytest.mark.parametrize(
+    "row, message",
+    [
+        ("0.1,0.07,abc,0,20,8,1e-4,1e-4,1e-4", "row 2 (line 3), column u_kn: 'abc' is not a number"),
+        ("0.1,0.07,3,inf,20,8,1e-4,1e-4,1e-4", "row 2 (line 3), column psi_deg: 'inf' is not finite"),
+        ("0.1,0.07,3,0,20,8,1e-4,,1e-4", "row 2 (line 3), column Y_p_hf: '' is not a number"),
+    ],
+)
+def test_validate_names_the_row_column_and_value_of_a_bad_points_file(tmp_path, capsys, row, message):
+    path = tmp_path / "points.csv"
+    header = "R_long,R_lat,u_kn,psi_deg,d_ratio,ld_ratio,X_p_hf,Y_p_hf,N_p_hf"
+    path.write_text(f"{header}\n0.1,0.07,3,0,20,8,1e-4,1e-4,1e-4\n{row}\n")
+    assert main(["surrogate", "validate", "--points-file", str(path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and len(err.splitlines()) == 1
+
+
+def test_validate_names_a_missing_points_file_column(tmp_path, capsys):
+    path = tmp_path / "points.csv"
+    path.write_text("R_long,R_lat,u_kn,psi_deg,d_ratio,ld_ratio,X_p,Y_p,N_p\n0.1,0.07,3,0,20,8,1,1,1\n")
+    assert main(["surrogate", "validate", "--points-file", str(path)]) == 2
+    assert "missing column(s) X_p_hf, Y_p_hf, N_p_hf" in capsys.readouterr().err

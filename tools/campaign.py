@@ -37,7 +37,7 @@ def _user_hf(X: np.ndarray) -> np.ndarray:
 
 
 def _problem():
-    from .train import interaction_problem
+    from nearsub.common.surrogate.training import interaction_problem
 
     return interaction_problem(
         hf=_user_hf,
@@ -152,8 +152,6 @@ def _report(campaign, state: Path, as_json: bool) -> None:
 def start_command(args) -> int:
     from nearsub.common.learning.active import Campaign
 
-    from .train import nmmf_settings
-
     state = Path(args.state)
     if state.exists() and not args.restart:
         raise CampaignError(f"{state} exists; continue it with `nearsub campaign next` or pass --restart")
@@ -228,8 +226,6 @@ def tell_command(args) -> int:
 
 
 def export_command(args) -> int:
-    from .train import write_campaign_model
-
     state = Path(args.state)
     campaign = _resume(state)
     if campaign.model is None:
@@ -239,6 +235,60 @@ def export_command(args) -> int:
     status = "complete" if campaign.done else f"in progress, {campaign.settings.hf_budget - n_hf} HF samples to go"
     print(f"wrote {args.out} ({n_hf} HF and {n_lf} LF samples; campaign {status})")
     return 0
+
+
+def nmmf_settings(args):
+    """The thesis's training settings (NMMF, maximum-variance selection (2.31)) with the design
+    options of `add_design_arguments`. Raises ValueError for inconsistent sizes."""
+    from nearsub.common.learning.active import CampaignSettings
+
+    return CampaignSettings(
+        method="nmmf",
+        hf_budget=args.budget,
+        selection="max-variance",
+        seed=args.seed,
+        n_lf0=args.n_lf0,
+        n_hf0=args.n_hf0,
+    )
+
+
+def add_design_arguments(p) -> None:
+    """--budget, --seed, --n-lf0, --n-hf0: the options `nmmf_settings` reads."""
+    p.add_argument("--budget", type=int, default=100, help="high-fidelity samples (default 100, as the thesis)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--n-lf0", type=int, default=30, help="initial low-fidelity design")
+    p.add_argument("--n-hf0", type=int, default=10, help="initial high-fidelity design (nested in the LF one)")
+
+
+def write_campaign_model(out: Path, campaign, state: Path, high_fidelity: str) -> tuple[int, int]:
+    """Write a campaign's multi-fidelity model with its provenance, and its samples as CSV beside it
+    (<stem>-hf-samples.csv, <stem>-lf-samples.csv); returns the HF and LF sample counts."""
+    from datetime import UTC, datetime
+
+    from nearsub.common.surrogate import model as sg
+    from nearsub.common.surrogate.training import write_samples
+
+    from .train import command_line
+
+    out.parent.mkdir(parents=True, exist_ok=True)
+    X_hf, Y_hf = campaign.data("hf")
+    X_lf, Y_lf = campaign.data("lf")
+    provenance = {
+        "method": "NMMF active learning (thesis Algorithm 1), maximum-variance multi-output selection (2.31); "
+        "Kennedy-O'Hagan multi-fidelity GP with rho = 1",
+        "high_fidelity": high_fidelity,
+        "low_fidelity": "nearsub one-way slender-body model with ITTC-57 friction (common/hydro/low_fidelity.py)",
+        "command": command_line("nearsub campaign export"),
+        "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
+        "hf_samples": int(len(X_hf)),
+        "lf_samples": int(len(X_lf)),
+        "campaign": str(state),
+        "settings": json.loads(json.dumps(campaign.settings.__dict__)),
+    }
+    sg.save_surrogate(out, campaign.model, provenance)
+    write_samples(out.with_name(out.stem + "-hf-samples.csv"), X_hf, Y_hf)
+    write_samples(out.with_name(out.stem + "-lf-samples.csv"), X_lf, Y_lf)
+    return len(X_hf), len(X_lf)
 
 
 def campaign_command(args) -> int:
@@ -251,8 +301,6 @@ def campaign_command(args) -> int:
 
 
 def add_parser(subparsers) -> None:
-    from .train import add_design_arguments
-
     p = subparsers.add_parser("campaign", help="NMMF training with your own CFD as the high fidelity")
     sub = p.add_subparsers(dest="campaign_command", required=True)
 

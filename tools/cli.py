@@ -23,7 +23,7 @@ TOOLS = {
     "swap": ("swap", "replace a running app (the helm) without stopping the mission"),
     "clock": ("clock", "status, pause or resume a running mission's clock"),
     "router": ("router", "run a Zenoh router (for multi-host setups)"),
-    "surrogate": ("surrogate_cli", "inspect and query a surrogate model file"),
+    "surrogate": ("surrogate", "inspect and query a surrogate model file"),
     "train": ("train", "train the interaction surrogate with NMMF (LF + HF physics)"),
     "al-bench": ("al_bench", "NMMF vs myopic MF vs HF-only active learning on thesis benchmarks"),
     "maps": ("maps", "colour maps of thesis figures 4-4 to 4-11 as PNGs"),

@@ -1,11 +1,15 @@
-"""`nearsub train`: train the interaction surrogate with NMMF active learning (thesis ch. 2 and 4).
+"""`nearsub train`: train the interaction surrogate, LF in the loop (common/surrogate/training.py).
 
-The two fidelities are nearsub's own physics (SPEC section 7): the low fidelity is the one-way
-slender-body model (`common/hydro_lf.py`), the high fidelity the two-way panel model
-(`common/hydro_hf.py`). NMMF (`common/active.py`) picks every sample, with maximum-variance
-selection over the three outputs (2.31). The campaign saves itself after every sample, so a killed
-run resumes with `--resume` without repeating or losing one. At the end the multi-fidelity model
-is written as a model file with its provenance, and the samples as CSV.
+    nearsub train [--design sobol|residual-us|nmmf] [--budget 300] [--workers 2 | --scheduler ADDRESS]
+
+The model is the exact low fidelity (the one-way slender-body model, `common/hydro/low_fidelity.py`)
+plus a residual GP on HF - LF at the HF samples (the two-way panel model,
+`common/hydro/high_fidelity.py`). `--design` chooses where the HF runs (docs/hydro/designs.md).
+HF runs go in parallel on a local Dask cluster (`--workers N`, on 127.0.0.1) or a running one
+(`--scheduler tcp://HOST:8786`), and are appended to the `--state` CSV as they finish, so a killed
+run continues where it stopped (the designs replay the stored runs; `--restart` discards them).
+At the end the model is written with its provenance, and its HF samples as CSV beside it
+(<stem>-hf-samples.csv).
 
 `nearsub train --data FILE.csv --out MODEL.npz` instead fits a single-fidelity GP to a user's own
 table (columns as the samples CSV), after checking every value: a missing column, a value that is
@@ -15,9 +19,7 @@ naming the file, row, column and value (exit 2).
 
 from __future__ import annotations
 
-import csv
 import hashlib
-import json
 import sys
 import time
 from datetime import UTC, datetime
@@ -26,143 +28,79 @@ from pathlib import Path
 import numpy as np
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
-from nearsub.common.hydro import high_fidelity as hydro_hf
-from nearsub.common.hydro import low_fidelity as hydro_lf
-from nearsub.common.learning.active import Campaign, CampaignSettings
-from nearsub.common.learning.gp import MultiOutputGP
-from nearsub.common.learning.testproblems import Problem
+from nearsub.common.learning.gp import FINAL_FIT_RESTARTS, MultiOutputGP
 from nearsub.common.surrogate import domain
 from nearsub.common.surrogate import model as sg
+from nearsub.common.surrogate import training as tr
+from nearsub.common.surrogate.validation import read_number_table
 
-DEFAULT_STATE = Path("training") / "campaign.json"
-
-
-def interaction_problem(
-    hf=hydro_hf.hf_coefficients,
-    name: str = "uuv-submarine-interaction",
-    description: str = "HF: two-way Hess-Smith panels with viscous corrections; LF: one-way slender body + ITTC-57",
-) -> Problem:
-    """The surrogate's domain (table 4.2, constraints (4.4)-(4.7)) with the LF physics and an HF
-    evaluator (default: the HF physics; `nearsub campaign` names its own problem, whose HF is a
-    user's CFD, so that `train --resume` never fills such a campaign with panel-method samples)."""
-    return Problem(
-        name=name,
-        bounds=domain.BOUNDS,
-        input_names=domain.INPUT_NAMES,
-        output_names=domain.OUTPUT_NAMES,
-        hf=hf,
-        lf=hydro_lf.lf_coefficients,
-        constraint=domain.constraint_values,
-        description=description,
-    )
+DEFAULT_STATE = Path("training") / "hf-samples.csv"
 
 
-def write_samples(path: Path, X: np.ndarray, Y: np.ndarray) -> None:
-    with open(path, "w", newline="") as fh:
-        writer = csv.writer(fh)
-        writer.writerow([*domain.INPUT_NAMES, *domain.OUTPUT_NAMES])
-        writer.writerows(np.column_stack([X, Y]).tolist())
-
-
-def nmmf_settings(args) -> CampaignSettings:
-    """The thesis's training settings (NMMF, maximum-variance selection (2.31)) with the design
-    options of `add_design_arguments`. Raises ValueError for inconsistent sizes."""
-    return CampaignSettings(
-        method="nmmf",
-        hf_budget=args.budget,
-        selection="max-variance",
-        seed=args.seed,
-        n_lf0=args.n_lf0,
-        n_hf0=args.n_hf0,
-    )
-
-
-def add_design_arguments(p) -> None:
-    """--budget, --seed, --n-lf0, --n-hf0: the options `nmmf_settings` reads."""
-    p.add_argument("--budget", type=int, default=100, help="high-fidelity samples (default 100, as the thesis)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--n-lf0", type=int, default=30, help="initial low-fidelity design")
-    p.add_argument("--n-hf0", type=int, default=10, help="initial high-fidelity design (nested in the LF one)")
+def command_line(default: str) -> str:
+    return "nearsub " + " ".join(sys.argv[1:]) if sys.argv and "nearsub" in sys.argv[0] else default
 
 
 def train_command(args) -> int:
     if getattr(args, "data", None):
         return data_command(args)
-    problem = interaction_problem()
+    try:
+        settings = tr.DesignSettings(
+            design=args.design, budget=args.budget, seed=args.seed, n_seed=args.n_seed, batch=args.batch
+        )
+    except ValueError as exc:
+        print(f"nearsub train: {exc}", file=sys.stderr)
+        return 2
+    if args.workers is not None and args.workers < 1:
+        print(f"nearsub train: --workers {args.workers}: need at least 1", file=sys.stderr)
+        return 2
     state = Path(args.state)
-    if args.resume:
-        if not state.exists():
-            print(f"nearsub train: no campaign to resume at {state}", file=sys.stderr)
-            return 2
-        try:
-            campaign = Campaign.resume(state, problem)
-        except (ValueError, KeyError) as exc:  # another problem's campaign (nearsub campaign), or not one
-            print(f"nearsub train: cannot resume {state}: {exc}", file=sys.stderr)
-            return 2
-    else:
-        if state.exists() and not args.restart:
-            print(f"nearsub train: {state} exists; pass --resume to continue it or --restart", file=sys.stderr)
-            return 2
-        state.parent.mkdir(parents=True, exist_ok=True)
-        campaign = Campaign(problem, nmmf_settings(args), path=state)
+    if args.restart:
+        state.unlink(missing_ok=True)
+    try:
+        store = tr.HFStore(state)
+    except ValueError as exc:
+        print(f"nearsub train: --state {state}: {exc}", file=sys.stderr)
+        return 2
     started = time.perf_counter()
-    hf_seconds = 0.0
-    columns = (
-        TextColumn("[bold]HF samples"),
-        BarColumn(),
-        TextColumn("{task.completed}/{task.total}"),
-        TextColumn("{task.fields[error]}"),
-        TimeRemainingColumn(),
-    )
+    columns = (TextColumn("[bold]HF runs"), BarColumn(), TextColumn("{task.completed}"), TimeRemainingColumn())
     with Progress(*columns, disable=not sys.stderr.isatty() and not args.progress) as progress:
-        task = progress.add_task("train", total=campaign.settings.hf_budget, completed=campaign.n_hf, error="")
-        while (request := campaign.ask()) is not None:
-            began = time.perf_counter()
-            Y = (problem.lf if request.fidelity == "lf" else problem.hf)(request.X)
-            if request.fidelity == "hf":
-                hf_seconds += time.perf_counter() - began
-            campaign.tell(request.X, Y)
-            if campaign.model is not None:
-                probe = domain.sample_feasible(200, seed=1)
-                _, std = campaign.model.predict(probe, return_std=True)
-                progress.update(task, completed=campaign.n_hf, error=f"mean predicted std {np.mean(std):.2e}")
+        task = progress.add_task("train", total=None)
+        with tr.hf_runner(args.workers, args.scheduler) as run:
+            X, Y = tr.run_design(settings, store, run, on_row=lambda: progress.advance(task))
+    design_seconds = time.perf_counter() - started
+    overlap = tr.held_out_overlap(X)
+    if overlap:
+        print(f"nearsub train: {overlap} sample(s) coincide with held-out validation points", file=sys.stderr)
+        return 2
+    began = time.perf_counter()
+    model = tr.fit_model(X, Y, seed=args.seed)
+    fit_seconds = time.perf_counter() - began
     out = Path(args.out or sg.default_model_path())
-    high_fidelity = (
-        "nearsub two-way Hess-Smith panel method with viscous corrections (common/hydro_hf.py); "
-        "NOT RANS CFD (docs/hydro/README.md)"
-    )
-    n_hf, n_lf = write_campaign_model(out, campaign, state, high_fidelity)
-    elapsed = time.perf_counter() - started
-    print(f"wrote {out} ({n_hf} HF and {n_lf} LF samples) in {elapsed / 3600:.2f} h; HF runs {hf_seconds:.0f} s")
-    return 0
-
-
-def _command_line(default: str) -> str:
-    return "nearsub " + " ".join(sys.argv[1:]) if sys.argv and "nearsub" in sys.argv[0] else default
-
-
-def write_campaign_model(out: Path, campaign: Campaign, state: Path, high_fidelity: str) -> tuple[int, int]:
-    """Write a campaign's multi-fidelity model with its provenance, and its samples as CSV beside it
-    (<stem>-hf-samples.csv, <stem>-lf-samples.csv); returns the HF and LF sample counts."""
     out.parent.mkdir(parents=True, exist_ok=True)
-    X_hf, Y_hf = campaign.data("hf")
-    X_lf, Y_lf = campaign.data("lf")
-    provenance = {
-        "method": "NMMF active learning (thesis Algorithm 1), maximum-variance multi-output selection (2.31); "
-        "Kennedy-O'Hagan multi-fidelity GP with rho = 1",
-        "high_fidelity": high_fidelity,
-        "low_fidelity": "nearsub one-way slender-body model with ITTC-57 friction (common/hydro_lf.py)",
-        "command": _command_line("nearsub train"),
-        "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
-        "hf_samples": int(len(X_hf)),
-        "lf_samples": int(len(X_lf)),
-        "campaign": str(state),
-        "settings": json.loads(json.dumps(campaign.settings.__dict__)),
-    }
-    sg.save_surrogate(out, campaign.model, provenance)
-    write_samples(out.with_name(out.stem + "-hf-samples.csv"), X_hf, Y_hf)
-    write_samples(out.with_name(out.stem + "-lf-samples.csv"), X_lf, Y_lf)
-    return len(X_hf), len(X_lf)
+    hf_seconds = sum(store.rows[store._key(x)][1] for x in X)
+    provenance = tr.provenance(
+        settings.design,
+        model,
+        command_line("nearsub train"),
+        created_utc=datetime.now(UTC).isoformat(timespec="seconds"),
+        settings=settings.__dict__,
+        hf_store=str(state),
+        hf_seconds=round(hf_seconds, 1),
+        design_wall_seconds=round(design_seconds, 1),
+        fit_wall_seconds=round(fit_seconds, 1),
+        dropped_samples=int(len(X) - len(model.X)),
+        workers=args.scheduler or args.workers or 1,
+    )
+    sg.save_surrogate(out, model, provenance)
+    tr.write_samples(out.with_name(out.stem + "-hf-samples.csv"), X, Y)
+    elapsed = time.perf_counter() - started
+    lml = ", ".join(f"{v:.1f}" for v in model.log_marginal_likelihoods)
+    print(
+        f"wrote {out} ({settings.design}, {len(model.X)} HF samples) in {elapsed / 60:.1f} min: design "
+        f"{design_seconds / 60:.1f} min (HF runs {hf_seconds:.0f} s), fit {fit_seconds:.0f} s; LML {lml}"
+    )
+    return 0
 
 
 # ------------------------------------------------------------------------ --data: a user's table
@@ -193,36 +131,12 @@ def read_training_table(path: Path) -> tuple[np.ndarray, np.ndarray]:
     number inside table 4.2's bounds and constraints (4.4)-(4.7). Raises DataFileError naming the
     file, row (data rows from 1, with the file's line), column and value of the first problem."""
     names = (*domain.INPUT_NAMES, *domain.OUTPUT_NAMES)
-    try:
-        with open(path, newline="") as fh:
-            reader = csv.reader(fh)
-            header = [name.strip() for name in next(reader, [])]
-            rows = list(reader)
-    except (OSError, UnicodeDecodeError) as exc:
-        raise DataFileError(f"{path}: cannot read: {exc}") from None
-    missing = [name for name in names if name not in header]
-    if missing:
-        hints = [f"found {found!r}: give {_COLUMN_HINTS[found]}" for found in header if found in _COLUMN_HINTS]
-        raise DataFileError(
-            f"{path}: missing column(s) {', '.join(missing)} (expected {', '.join(names)}"
-            + (f"; {'; '.join(hints)}" if hints else "")
-            + ")"
-        )
-    index = [header.index(name) for name in names]
-    values = np.empty((len(rows), len(names)))
-    for r, row in enumerate(rows):
-        for c, (name, k) in enumerate(zip(names, index, strict=True)):
-            text = row[k].strip() if k < len(row) else ""
-            try:
-                values[r, c] = float(text)
-            except ValueError:
-                unit = domain.UNITS[name]
-                raise DataFileError(
-                    f"{path}: row {r + 1} (line {r + 2}), column {name}: {text!r} is not a number "
-                    f"(give a plain number in the column's unit, {unit})"
-                ) from None
-            if not np.isfinite(values[r, c]):
-                raise DataFileError(f"{path}: row {r + 1} (line {r + 2}), column {name}: {text!r} is not finite")
+
+    def hints(header: list[str]) -> str:
+        found = [f"found {name!r}: give {_COLUMN_HINTS[name]}" for name in header if name in _COLUMN_HINTS]
+        return f"; {'; '.join(found)}" if found else ""
+
+    values = read_number_table(path, names, DataFileError, missing_hint=hints)
     if len(values) < MIN_DATA_ROWS:
         raise DataFileError(f"{path}: {len(values)} data row(s); a surrogate needs at least {MIN_DATA_ROWS}")
     X, Y = values[:, : len(domain.INPUT_NAMES)], values[:, len(domain.INPUT_NAMES) :]
@@ -247,7 +161,7 @@ def read_training_table(path: Path) -> tuple[np.ndarray, np.ndarray]:
     return X, Y
 
 
-def fit_from_data(path: Path, out: Path, seed: int = 0, n_restarts: int = 5) -> int:
+def fit_from_data(path: Path, out: Path, seed: int = 0, n_restarts: int = FINAL_FIT_RESTARTS) -> int:
     """Fit a single-fidelity GP surrogate to a user's table and save it with its provenance;
     returns the number of rows. Raises DataFileError for a bad table."""
     X, Y = read_training_table(path)
@@ -258,7 +172,7 @@ def fit_from_data(path: Path, out: Path, seed: int = 0, n_restarts: int = 5) -> 
         "data": str(path),
         "data_sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
         "rows": int(len(X)),
-        "command": _command_line(f"nearsub train --data {path}"),
+        "command": command_line(f"nearsub train --data {path}"),
         "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
         "seed": seed,
     }
@@ -283,11 +197,16 @@ def data_command(args) -> int:
 
 
 def add_parser(subparsers) -> None:
-    p = subparsers.add_parser("train", help="train the interaction surrogate with NMMF (LF + HF physics)")
-    add_design_arguments(p)
-    p.add_argument("--state", default=str(DEFAULT_STATE), help="campaign file, saved after every sample")
-    p.add_argument("--resume", action="store_true", help="continue the campaign in --state")
-    p.add_argument("--restart", action="store_true", help="start over even if --state exists")
+    p = subparsers.add_parser("train", help="train the interaction surrogate (exact LF + residual GP on HF runs)")
+    p.add_argument("--design", choices=tr.DESIGNS, default="sobol", help="where the HF runs (default sobol)")
+    p.add_argument("--budget", type=int, default=300, help="HF samples (default 300)")
+    p.add_argument("--seed", type=int, default=tr.DEFAULT_SEED, help="design seed (0 is the held-out set's)")
+    p.add_argument("--n-seed", type=int, default=tr.DEFAULT_N_SEED, help="space-filling seed points (adaptive designs)")
+    p.add_argument("--batch", type=int, default=10, help="residual-us picks per round")
+    p.add_argument("--workers", type=int, metavar="N", help="run the HF on a local Dask cluster of N processes")
+    p.add_argument("--scheduler", metavar="ADDRESS", help="run the HF on this Dask scheduler (tcp://host:8786)")
+    p.add_argument("--state", default=str(DEFAULT_STATE), help="HF runs CSV, appended as each run finishes")
+    p.add_argument("--restart", action="store_true", help="discard the HF runs in --state")
     p.add_argument("--out", help="model file to write (default: the shipped one; required with --data)")
     p.add_argument(
         "--data",

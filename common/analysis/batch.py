@@ -1,10 +1,11 @@
 """The vectorised batch engine: N independent UUVs run in one process as numpy arrays.
 
-It calls the functions the apps' cores call, on arrays: `behaviours.steer` and
-`behaviours.nuv_heading_offset` (helm), `control.pid_step` (pid), `interaction.interaction_at`,
-`dynamics.step` and `events.classify` (sim), in the thesis order and with the same multi-rate
-schedule (the helm runs every `period` steps and the pid holds its last desired state). The
-surrogate is asked once per step for the whole batch, in-process. Nothing is re-implemented, so a
+It calls the functions the apps' cores call, on arrays: `behaviours.steer`,
+`behaviours.nuv_heading_offset` and `behaviours.guard_heading_offset` (helm), `control.pid_step`
+(pid), `interaction.interaction_at`, `dynamics.step` and `events.classify` (sim), in the thesis
+order and with the same multi-rate schedule (the helm runs every `period` steps and the pid holds
+its last desired state). The surrogate (and the LF, when it is in the loop) is asked once per step
+for the whole batch, in-process. Nothing is re-implemented, so a
 cell run here and the same cell run as a mission through the launcher agree (tests check it).
 
 Each UUV follows one track-line from its start; it stops being integrated at a collision (its
@@ -13,12 +14,14 @@ state is frozen there), as the sim ends a mission at a collision.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 
 import numpy as np
 
 from nearsub.common.autonomy import behaviours, control
+from nearsub.common.mission.cores import guard_clearance
 from nearsub.common.mission.schema import Mission
 from nearsub.common.physics import dynamics
 from nearsub.common.physics import proximity as events
@@ -80,6 +83,8 @@ def run_batch(
     if helm.modified:
         cross_flow = behaviours.CrossFlow(mission.environment.u_sub, helm.alpha, vehicle.length)
     gamma = helm.gamma or float(behaviours.gamma_from_m11(vehicle.thesis_M11 or vehicle.M11))
+    clearance = guard_clearance(mission)
+    guard_step = math.radians(helm.guard_rate_deg) * dt * helm.period
     use_surrogate = surrogate is not None and mission.environment.submarine
     compensate = helm.compensated and use_surrogate
     interact = use_surrogate and sim.interaction != "off"
@@ -99,6 +104,7 @@ def run_batch(
     memory = control.PidState.zeros((len(flying),))
     u_d = np.zeros(len(flying))
     psi_d = np.zeros(len(flying))
+    delta_psi = np.zeros(len(flying))  # the guarded N_uv offsets of the last helm step
     command = np.zeros((len(flying), 2))
     for step in range(mission.max_steps):
         if flying.size == 0:
@@ -121,8 +127,19 @@ def run_batch(
                 cross_flow,
             )
             if compensate:
-                n_s = seen.interaction.weight * seen.interaction.forces[:, 2]
-                heading = heading + behaviours.nuv_heading_offset(n_s, speed, vehicle.compensation_N_uv, gamma)
+                commanded = behaviours.nuv_heading_offset(seen.applied[:, 2], speed, vehicle.compensation_N_uv, gamma)
+                delta_psi = behaviours.guard_heading_offset(
+                    x[:, dynamics.X],
+                    x[:, dynamics.Y],
+                    heading,
+                    commanded,
+                    delta_psi,
+                    vehicle.length,
+                    vehicle.diameter,
+                    clearance,
+                    guard_step,
+                ).delta_psi
+                heading = heading + delta_psi
             u_d = np.broadcast_to(np.asarray(speed, dtype=float), heading.shape).copy()
             psi_d = heading
         if step % pid.period == 0:  # pid
@@ -144,6 +161,7 @@ def run_batch(
             keep = ~found.collision
             flying, x, track_start, track_end = flying[keep], x[keep], track_start[keep], track_end[keep]
             memory, u_d, psi_d, command = _keep(memory, keep), u_d[keep], psi_d[keep], command[keep]
+            delta_psi = delta_psi[keep]
         if on_step is not None:
             on_step(step + 1, mission.max_steps)
     final[flying] = x

@@ -1,7 +1,7 @@
 """Helm behaviours as pure functions of the state and their parameters.
 
-`waypoints` follows thesis section 5.7 with MOOS-IvP BHV_Waypoint semantics (moos-notes.md
-section 5): the vehicle steers at a lead point `lead` metres ahead of its perpendicular foot on
+`waypoints` follows thesis section 5.7 with MOOS-IvP BHV_Waypoint semantics (the MOOS-IvP helm
+documentation, Benjamin et al.): the vehicle steers at a lead point `lead` metres ahead of its perpendicular foot on
 the track-line from the previous waypoint; the lead point never passes the next waypoint. A
 waypoint counts as reached when the vehicle is within `capture_radius`, or it has started to
 move away after coming within `slip_radius` (slip), or, with `capture_line`, it has crossed the
@@ -14,10 +14,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from functools import lru_cache
 from typing import Annotated
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
+
+from nearsub.common.physics import proximity
+from nearsub.common.physics.hull import uuv_body_outline
 
 # Positions in a mission lie within this range of the submarine [m]: a nearsub choice that turns
 # a slip of the exponent (1e12) into an error; the largest envelope reaches about 1.5 L_sub.
@@ -238,8 +242,79 @@ def gamma_from_m11(m11):
 
 
 def nuv_heading_offset(n_s, u_d, n_uv, gamma):
-    """Delta psi of (6.1) as corrected in SPEC errata 5: v_comp = gamma N_s / (N_uv u_d) and
+    """Delta psi of (6.1) as corrected (docs/design.md, "Thesis errata"): v_comp = gamma N_s / (N_uv u_d) and
     Delta psi = atan2(v_comp, u_d). Flying at psi_d + Delta psi while the course stays on psi_d
     gives the sway v = -u sin(Delta psi), whose Munk moment N_uv u v then opposes N_s."""
     v_comp = gamma * n_s / (n_uv * u_d)
     return np.arctan2(v_comp, u_d)
+
+
+# --- Tip-clearance guard on the N_uv offset (nearsub; docs/design.md, "Physics decisions") -------
+# Candidate offsets between 0 and (6.1)'s command at which the tips' clearance is checked; the limit
+# is then placed by linear interpolation between the last safe and the first unsafe one. 24 steps
+# of a 20 deg offset are 0.8 deg apart: nearsub's choice, a small fraction of the offsets (6.1) asks.
+GUARD_SAMPLES = 24
+
+
+@dataclass(frozen=True)
+class GuardedOffset:
+    """The guard's answer, element-wise over vehicles: the offset to fly [rad], the limit the tip
+    clearance puts on it [rad] (signed as the command; +/-inf where there is none), whether that
+    limit lies within the command (active) and whether the limit or the rate limit cut the command
+    (saturated)."""
+
+    delta_psi: np.ndarray
+    limit: np.ndarray
+    active: np.ndarray
+    saturated: np.ndarray
+
+
+def tip_clearance(x, y, psi, length: float, diameter: float):
+    """Signed clearance [m] of the UUV's tips (bow and stern points of its outline, `hull`) from the
+    submarine's outline, the smaller of the two (`proximity.hull_signed_distance`)."""
+    bow, stern = _tips(length, diameter)
+    x, y, psi = (np.asarray(a, dtype=float) for a in (x, y, psi))
+    cos_psi, sin_psi = np.cos(psi), np.sin(psi)
+    return np.minimum(
+        proximity.hull_signed_distance(x + bow * cos_psi, y + bow * sin_psi),
+        proximity.hull_signed_distance(x + stern * cos_psi, y + stern * sin_psi),
+    )
+
+
+@lru_cache(maxsize=16)
+def _tips(length: float, diameter: float) -> tuple[float, float]:
+    bx, _ = uuv_body_outline(length, diameter)
+    return float(bx.max()), float(bx.min())
+
+
+def guard_heading_offset(x, y, psi_track, commanded, previous, length: float, diameter: float, clearance, max_step):
+    """Limit (6.1)'s offset `commanded` [rad] in rate, to `max_step` [rad] (the rate limit times the
+    helm's period) from `previous`, and saturate it so that the UUV at (x, y), flying psi_track +
+    offset, keeps its tips `clearance` [m] off the hull. Element-wise over vehicles; the clearance
+    wins over the rate limit (an offset that is no longer safe is cut at once).
+
+    The offset is allowed from 0 towards the command while the tips' clearance stays at least
+    min(clearance, its value at no offset): where the track itself already brings a tip closer
+    than `clearance`, the compensation may not bring it closer still."""
+    x, y, psi_track, commanded, previous = np.broadcast_arrays(
+        *(np.asarray(a, dtype=float) for a in (x, y, psi_track, commanded, previous))
+    )
+    fractions = np.linspace(0.0, 1.0, GUARD_SAMPLES + 1)
+    offsets = commanded[..., None] * fractions
+    gap = tip_clearance(x[..., None], y[..., None], psi_track[..., None] + offsets, length, diameter)
+    floor = np.minimum(clearance, gap[..., :1])
+    unsafe = gap < floor
+    first = np.where(unsafe.any(axis=-1), np.argmax(unsafe, axis=-1), GUARD_SAMPLES + 1)
+    active = first <= GUARD_SAMPLES
+    last = np.clip(first - 1, 0, GUARD_SAMPLES)
+    after = np.clip(first, 0, GUARD_SAMPLES)
+    g0 = np.take_along_axis(gap, last[..., None], axis=-1)[..., 0]
+    g1 = np.take_along_axis(gap, after[..., None], axis=-1)[..., 0]
+    f0, f1 = fractions[last], fractions[after]
+    drop = np.where(g0 > g1, g0 - g1, 1.0)
+    crossing = f0 + (f1 - f0) * np.clip((g0 - floor[..., 0]) / drop, 0.0, 1.0)
+    limit = np.where(active, commanded * crossing, np.copysign(np.inf, commanded))
+    rated = np.clip(commanded, previous - max_step, previous + max_step)
+    beyond = active & (np.abs(rated) > np.abs(limit)) & (np.sign(rated) == np.sign(commanded))
+    guarded = np.where(beyond, limit, rated)
+    return GuardedOffset(guarded, limit, active, guarded != commanded)

@@ -1,21 +1,21 @@
-"""Low fidelity "one-way slender" model of the UUV-submarine interaction (issue 6; SPEC section 7).
+"""Low fidelity "one-way slender" model of the UUV-submarine interaction (docs/design.md, "Physics decisions").
 
 The thesis's low fidelity source was FS-Flow potential flow with ITTC-57 friction (thesis sections
-3.4 and 4.4). This replacement (hydro-notes section 6(a)):
+3.4 and 4.4). This replacement, nearsub's own:
 
 1. The flow of the submarine alone: an axisymmetric ring-source panel solution of the SUBOFF hull
-   in the stream -U x (hydro-notes section 2.3), tabulated once per process on an (x, R) grid around
+   in the stream -U x (Hess & Smith 1967), tabulated once per process on an (x, R) grid around
    the hull and interpolated with bicubic splines. Both vehicles move at the same speed U = u
    through the water, so in the submarine frame the flow is steady (thesis section 4.2.2).
 2. The UUV in that flow, one way (the UUV does not disturb the submarine's flow: the thesis's
    "one-way assumption", section 3.5): slender-body strip theory with the Froude-Krylov pressure
-   gradient and added-mass terms, which give the exact Munk moment (hydro-notes section 2.2,
-   finite-diameter variant).
+   gradient and added-mass terms, which give the exact Munk moment (slender-body theory: Munk 1924;
+   Newman 1977, Marine Hydrodynamics; a finite-diameter variant).
 3. ITTC-57 friction drag at the strip-averaged local speed (thesis section 4.4, no form factor).
 
-Inputs are rows [R_long, R_lat, u_kn, psi_deg, d_ratio, ld_ratio] (SPEC section 5); outputs are the
-UUV body-axis coefficients [X', Y', N'] (SPEC section 2): Y' > 0 away from the submarine and N' > 0
-bow turning away, for the UUV on the +y side.
+Inputs are rows [R_long, R_lat, u_kn, psi_deg, d_ratio, ld_ratio]; outputs are the UUV body-axis
+coefficients [X', Y', N'] (docs/design.md, "Frames, units and signs"): Y' > 0 away from the submarine
+and N' > 0 bow turning away, for the UUV on the +y side.
 """
 
 from __future__ import annotations
@@ -39,22 +39,29 @@ from nearsub.common.physics.hull import (
     uuv_dimensions,
 )
 
-NU = 1.19e-6  # kinematic viscosity of sea water at about 15 C [m^2/s] (hydro-notes section 1)
+# Version of this model's physics: bump it with any change that alters lf_coefficients' values.
+# Surrogate model files store it (with N_STRIPS, N_FRUSTA) and refuse a different LF.
+LF_VERSION = 1
+# Kinematic viscosity of sea water at about 15 C [m^2/s] (ITTC 2011, procedure 7.5-02-01-03: 1.1892e-6 at
+# 15 C and 35 g/kg salinity).
+NU = 1.19e-6
 KNOT = 1852.0 / 3600.0  # [m/s]
 
-N_FRUSTA = 240  # ring-source panels on the SUBOFF profile (hydro-notes section 2.3: 150-250)
-N_STRIPS = 60  # UUV strips (hydro-notes section 6(a)2)
+# Ring-source panels on the SUBOFF profile, nearsub's choice: 960 change the field by at most 1.8e-3 U
+# (`_field_grid`).
+N_FRUSTA = 240
+N_STRIPS = 60  # UUV strips, cosine-spaced; nearsub's choice
 _GAUSS_RULES = tuple(np.polynomial.legendre.leggauss(k) for k in (1, 2, 8, 32))
 
 
 def ittc57(reynolds):
-    """ITTC-57 model-ship correlation line C_F = 0.075 / (log10 Re - 2)^2 (hydro-notes section 2.5)."""
+    """ITTC-57 model-ship correlation line C_F = 0.075 / (log10 Re - 2)^2 (ITTC 1957)."""
     return 0.075 / (np.log10(reynolds) - 2.0) ** 2
 
 
 def ring_source_velocity(x, r, x0, a):
     """Velocity (u_x, u_r) at axial position x, radius r of a ring source of unit total volume flux
-    at axial position x0 with radius a (hydro-notes section 2.3; Hess & Smith 1967). Arrays
+    at axial position x0 with radius a (Hess & Smith 1967). Arrays
     broadcast; m = 2B / (A + B) is scipy's elliptic parameter k^2."""
     dx = np.asarray(x) - x0
     big_a = dx**2 + np.asarray(r) ** 2 + np.asarray(a) ** 2
@@ -136,7 +143,7 @@ def _frusta_velocity(panels: RingPanels, x: np.ndarray, r: np.ndarray, strengths
 def solve_ring_panels(profile: Profile) -> RingPanels:
     """Ring-source panel solution of a body of revolution in the unit stream -x (frame of the
     profile). Boundary condition u.n = n_x at each frustum midpoint (the body-frame stream is
-    -U x, hydro-notes section 2.4), with the source sheet's own jump sigma/2 on the diagonal."""
+    -U x), with the source sheet's own jump sigma/2 on the diagonal."""
     x, r = profile.x, profile.r
     panels = RingPanels(x[:-1], r[:-1], x[1:], r[1:], np.zeros(len(x) - 1))
     length = panels.lengths
@@ -152,8 +159,8 @@ def solve_ring_panels(profile: Profile) -> RingPanels:
 
 # --- the tabulated submarine field ---------------------------------------------------------------
 
-_R_MIN = R_SUB + 0.01  # the table starts 1 cm outside the widest section [m]
-_R_MAX = 25.0  # R_lat up to about 0.27 [m]
+R_FIELD_MIN = R_SUB + 0.01  # the table starts 1 cm outside the widest section [m]
+R_FIELD_MAX = 25.0  # R_lat up to about 0.27 [m]
 _X_FINE = (SUB_STERN_X - 15.0, SUB_BOW_X + 15.0)  # 0.15 m spacing here [m]
 _X_MAX = 1.5 * L_SUB  # coarse (1 m) beyond _X_FINE, out to |R_long| = 1.5 [m]
 
@@ -174,8 +181,8 @@ def _field_grid() -> tuple[np.ndarray, np.ndarray]:
         )
     )
     steps = 0.002 * 1.12 ** np.arange(200)
-    r = _R_MIN + np.concatenate([[0.0], np.cumsum(steps)])
-    return x, r[: np.searchsorted(r, _R_MAX) + 1]
+    r = R_FIELD_MIN + np.concatenate([[0.0], np.cumsum(steps)])
+    return x, r[: np.searchsorted(r, R_FIELD_MAX) + 1]
 
 
 @dataclass(frozen=True)
@@ -190,7 +197,7 @@ class SubmarineField:
 
 def submarine_field(n_frusta: int = N_FRUSTA) -> SubmarineField:
     """The ring-panel solution of the full-scale SUBOFF, tabulated once per panel count and process
-    (about 3 s; hydro-notes section 6(a)1)."""
+    (about 3 s)."""
     return _submarine_field(int(n_frusta))
 
 
@@ -227,12 +234,22 @@ def _explorer_cb_table() -> CubicSpline:
 
 def _strips(ld_ratio: np.ndarray, n_strips: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Strips of Explorer UUVs of unit diameter, one row per L/D: body-frame stations xi (ascending,
-    tail to nose, cosine-spaced so the tips are resolved), radius r and meridian arc length."""
+    tail to nose, cosine-spaced so the tips are resolved), radius r and meridian arc length. A
+    vehicle has one L/D, so the rows come from `_unit_strips`, computed once per L/D."""
+    values, index = np.unique(ld_ratio, return_inverse=True)
+    rows = [_unit_strips(float(ld), n_strips) for ld in values]
+    return tuple(np.stack([row[k] for row in rows])[index] for k in range(3))
+
+
+@lru_cache(maxsize=256)
+def _unit_strips(ld: float, n_strips: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     t = 0.5 * (1.0 - np.cos(np.linspace(0.0, np.pi, n_strips)))[::-1]
-    s = ld_ratio[:, None] * t
-    r = np.stack([explorer_radius(row, ld, 1.0) for row, ld in zip(s, ld_ratio, strict=True)])
-    xi = _explorer_cb_table()(ld_ratio)[:, None] - s
-    arc = np.concatenate([np.zeros((len(s), 1)), np.cumsum(np.hypot(np.diff(xi), np.diff(r)), axis=1)], axis=1)
+    s = ld * t
+    r = explorer_radius(s, ld, 1.0)
+    xi = _explorer_cb_table()(np.array([ld]))[0] - s
+    arc = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(xi), np.diff(r)))])
+    for part in (xi, r, arc):
+        part.setflags(write=False)
     return xi, r, arc
 
 
@@ -250,30 +267,71 @@ def input_columns(inputs) -> tuple[np.ndarray, ...]:
 
 def _strip_coefficients(inputs, n_strips: int, n_frusta: int | None) -> np.ndarray:
     """[X', Y', N'] of the strip model; n_frusta None means no submarine (the free-stream UUV)."""
+    geometry = _strip_geometry(inputs, n_strips)
+    if n_frusta is None:
+        return _strip_forces(geometry, np.zeros(geometry.px.shape), np.zeros(geometry.px.shape))
+    ux, ur, valid, _ = _submarine_velocity(geometry, n_frusta, hold=False)
+    out = _strip_forces(geometry, ux, ur)
+    out[~valid] = np.nan
+    return out
+
+
+@dataclass(frozen=True)
+class _StripGeometry:
+    """The UUVs' strips placed at their poses: ring points (3, n, strips) at azimuth 0 (+eta, away
+    from the submarine), pi (-eta) and pi/2 (+z), and what the strip forces need."""
+
+    px: np.ndarray
+    py: np.ndarray
+    pz: np.ndarray
+    xi: np.ndarray
+    r: np.ndarray
+    arc: np.ndarray
+    cos_psi: np.ndarray
+    sin_psi: np.ndarray
+    speed: np.ndarray
+    length: np.ndarray
+
+
+def _strip_geometry(inputs, n_strips: int) -> _StripGeometry:
     x_c, y_c, speed, psi, diameter, length = input_columns(inputs)
     xi, r, arc = (part * diameter[:, None] for part in _strips(length / diameter, n_strips))
     cos_psi, sin_psi = np.cos(psi)[:, None], np.sin(psi)[:, None]
     axis_x, axis_y = x_c[:, None] + xi * cos_psi, y_c[:, None] + xi * sin_psi
-    # Ring points at azimuth 0 (+eta, away from the submarine), pi (-eta) and pi/2 (+z); the -z
-    # point mirrors +z, so it carries twice the weight in ring means.
+    # The -z point mirrors +z, so it carries twice the weight in ring means.
     px = np.stack([axis_x - r * sin_psi, axis_x + r * sin_psi, axis_x])
     py = np.stack([axis_y + r * cos_psi, axis_y - r * cos_psi, axis_y])
     pz = np.stack([np.zeros_like(r), np.zeros_like(r), r])
-    radial = np.hypot(py, pz)
+    return _StripGeometry(px, py, pz, xi, r, arc, cos_psi, sin_psi, speed, length)
+
+
+def _submarine_velocity(geometry: _StripGeometry, n_frusta: int, hold: bool):
+    """The submarine's perturbation (u_x, u_R) per unit U at the ring points, whether each UUV lies
+    inside the tabulated field, and (with `hold`) which UUVs had points held at its inner edge."""
+    field = submarine_field(n_frusta)
+    px = geometry.px
+    radial = np.hypot(geometry.py, geometry.pz)
+    near = radial < field.r_range[0]
+    if hold:
+        radial = np.maximum(radial, field.r_range[0])
+    inside = (
+        (px >= field.x_range[0])
+        & (px <= field.x_range[1])
+        & (radial >= field.r_range[0])
+        & (radial <= field.r_range[1])
+    )
     ux = np.zeros(px.shape)
     ur = np.zeros(px.shape)
-    valid = np.ones(len(x_c), dtype=bool)
-    if n_frusta is not None:
-        field = submarine_field(n_frusta)
-        inside = (
-            (px >= field.x_range[0])
-            & (px <= field.x_range[1])
-            & (radial >= field.r_range[0])
-            & (radial <= field.r_range[1])
-        )
-        valid = inside.all(axis=(0, 2))
-        ux[inside] = field.ux.ev(px[inside], radial[inside])
-        ur[inside] = field.ur.ev(px[inside], radial[inside])
+    ux[inside] = field.ux.ev(px[inside], radial[inside])
+    ur[inside] = field.ur.ev(px[inside], radial[inside])
+    return ux, ur, inside.all(axis=(0, 2)), near.any(axis=(0, 2))
+
+
+def _strip_forces(geometry: _StripGeometry, ux: np.ndarray, ur: np.ndarray) -> np.ndarray:
+    """[X', Y', N'] (n, 3) of the strips in the stream -U x plus the perturbation (ux, ur)."""
+    py, pz, xi, r = geometry.py, geometry.pz, geometry.xi, geometry.r
+    cos_psi, sin_psi = geometry.cos_psi, geometry.sin_psi
+    radial = np.hypot(py, pz)
     # Velocity per unit U (stream -U x plus the submarine's perturbation), in UUV body axes.
     vx = -1.0 + ux
     vy = ur * py / np.where(radial > 0.0, radial, 1.0)
@@ -284,19 +342,18 @@ def _strip_coefficients(inputs, n_strips: int, n_frusta: int | None) -> np.ndarr
     ring = np.array([0.25, 0.25, 0.5])[:, None, None]
     cp_mean, v_eta_mean, u_axial = (np.sum(ring * q, axis=0) for q in (cp, v_eta, -v_xi))
     area = np.pi * r**2
-    # Lateral pressure gradient from the +eta/-eta points (hydro-notes section 2.2, finite diameter).
+    # Lateral pressure gradient from the +eta/-eta points (slender-body theory, finite diameter).
     dcp_deta = np.where(r > 0.0, (cp[0] - cp[1]) / np.where(r > 0.0, 2.0 * r, 1.0), 0.0)
-    # Strip forces over (1/2) rho U^2 (hydro-notes section 2.2): f_y = -d/dxi[rho A U_x V_y] - A dp/dy.
+    # Strip forces over (1/2) rho U^2 (slender-body theory, Newman 1977): f_y = -d/dxi[rho A U_x V_y] - A dp/dy.
     # Y integrates the first term to zero (A = 0 at both tips); N takes it by parts.
     y_force = -np.trapezoid(area * dcp_deta, xi, axis=1)
     n_moment = np.trapezoid(2.0 * area * u_axial * v_eta_mean - xi * area * dcp_deta, xi, axis=1)
     x_pressure = -np.sum(0.5 * (area[:, 1:] + area[:, :-1]) * np.diff(cp_mean, axis=1), axis=1)
     # ITTC-57 friction at the perimeter-weighted local axial speed (thesis section 4.4).
+    speed, length, arc = geometry.speed, geometry.length, geometry.arc
     reynolds = speed * length / NU
     friction = -ittc57(reynolds) * np.trapezoid(2.0 * np.pi * r * u_axial**2, arc, axis=1)
-    out = np.column_stack([(x_pressure + friction) / length**2, y_force / length**2, n_moment / length**3])
-    out[~valid] = np.nan
-    return out
+    return np.column_stack([(x_pressure + friction) / length**2, y_force / length**2, n_moment / length**3])
 
 
 def lf_coefficients(inputs, *, n_strips: int = N_STRIPS, n_frusta: int = N_FRUSTA) -> np.ndarray:
@@ -310,5 +367,21 @@ def lf_coefficients(inputs, *, n_strips: int = N_STRIPS, n_frusta: int = N_FRUST
 def lf_free_stream(inputs, *, n_strips: int = N_STRIPS) -> np.ndarray:
     """The same model's [X', Y', N'] for the UUV alone at that speed and heading (R_long, R_lat
     ignored): ITTC-57 friction and the slender Munk moment rho Vol U^2 sin psi cos psi
-    (hydro-notes section 2.2). The interaction increment of SPEC section 5 is lf - lf_free_stream."""
+    (Munk 1924). The interaction increment (docs/design.md, "Physics decisions") is lf - lf_free_stream."""
     return _strip_coefficients(inputs, n_strips, None)
+
+
+def lf_increment_terms(inputs, *, n_strips: int = N_STRIPS, n_frusta: int = N_FRUSTA):
+    """`lf_coefficients` and `lf_free_stream` of the same rows (n, 3) each, from one placement of
+    the strips, and (n,) True where the UUV had a point closer to the submarine's axis than the
+    tabulated field (within 1 cm of the widest radius: touching the hull beside the middle body,
+    or inside the tapering ends' radius). Those points see the field held at the table's inner
+    edge, R_sub + 1 cm, instead of NaN: the interaction in the loop stays defined and continuous
+    up to contact (`interaction.interaction_at` flags it; a collision or close call is declared
+    there anyway). Rows beyond the table's outer edges are NaN, as in `lf_coefficients`."""
+    geometry = _strip_geometry(inputs, n_strips)
+    ux, ur, valid, held = _submarine_velocity(geometry, n_frusta, hold=True)
+    lf = _strip_forces(geometry, ux, ur)
+    lf[~valid] = np.nan
+    free = _strip_forces(geometry, np.zeros(ux.shape), np.zeros(ur.shape))
+    return lf, free, held

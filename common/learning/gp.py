@@ -25,7 +25,16 @@ from scipy.linalg import solve_triangular
 from scipy.linalg.lapack import dpotrf, dpotrs
 from scipy.optimize import minimize
 
-__all__ = ["GaussianProcess", "MultiOutputGP"]
+__all__ = ["FINAL_FIT_RESTARTS", "DegenerateFitError", "GaussianProcess", "MultiOutputGP"]
+
+# Optimiser starts of every final surrogate fit: with 2 starts the shipped N' fit sat 2-3x worse
+# than a 10-start refit (docs/hydro/validation.md, "Fitting").
+FINAL_FIT_RESTARTS = 10
+# An optimum with every length scale within this (log units) of a bound is degenerate: all at the
+# floor is white noise that interpolates, all at the ceiling a constant. It is rejected, and a
+# fresh round of random starts tried, up to _REJECT_ROUNDS rounds in all.
+_AT_BOUND_TOL = 1e-3
+_REJECT_ROUNDS = 3
 
 # Jitter ladder, as multiples of mean(diag K): try the exact matrix first, then add more and
 # more until Cholesky succeeds (GPy's jitchol; GPy #642, BoTorch #862 show why it is needed).
@@ -47,6 +56,16 @@ _RANDOM_NOISE_VARIANCE = (1e-6, 1.0)
 _BATCH_ROWS = 4096
 _ROW_CHUNK = 256  # rows per chunk in `_Predictor.rows`: (m, 256, n, d) temporaries stay small
 _LOG_2PI = math.log(2.0 * math.pi)
+
+
+class DegenerateFitError(RuntimeError):
+    """No optimiser start reached an acceptable optimum (see `all_length_scales_at_bound`)."""
+
+
+def all_length_scales_at_bound(log_l: np.ndarray, log_bounds: np.ndarray) -> bool:
+    """True if every log length scale lies within _AT_BOUND_TOL of its lower or upper bound."""
+    near = np.minimum(np.abs(log_l - log_bounds[:, 0]), np.abs(log_l - log_bounds[:, 1]))
+    return bool(np.all(near < _AT_BOUND_TOL))
 
 
 def _cholesky(K: np.ndarray) -> tuple[np.ndarray, float] | None:
@@ -350,14 +369,24 @@ class GaussianProcess:
         if previous is not None and previous.shape == (d + 2,):
             starts = [np.clip(previous, tb[:, 0], tb[:, 1])] + starts[: self.n_restarts - 1]
 
-        best_theta, best_f = None, math.inf
-        for x0 in starts:
-            res = minimize(_neg_lml, x0, args=(self._D2, self._ys), jac=True, method="L-BFGS-B", bounds=tb)
-            if math.isfinite(res.fun) and res.fun < best_f:
-                best_theta, best_f = res.x, float(res.fun)
-        if best_theta is None:
-            raise RuntimeError("GP fit failed: the kernel matrix was not factorisable at any start")
-        return best_theta
+        self.n_rejected_ = 0
+        for _ in range(_REJECT_ROUNDS):
+            best_theta, best_f = None, math.inf
+            for x0 in starts:
+                res = minimize(_neg_lml, x0, args=(self._D2, self._ys), jac=True, method="L-BFGS-B", bounds=tb)
+                if not math.isfinite(res.fun):
+                    continue
+                if all_length_scales_at_bound(res.x[:d], tb[:d]):
+                    self.n_rejected_ += 1
+                elif res.fun < best_f:
+                    best_theta, best_f = res.x, float(res.fun)
+            if best_theta is not None:
+                return best_theta
+            starts = list(rng.uniform(rand_box[:, 0], rand_box[:, 1], (self.n_restarts, d + 2)))
+        raise DegenerateFitError(
+            f"GP fit failed: after {_REJECT_ROUNDS} rounds of {self.n_restarts} starts every optimum had all "
+            "length scales at a bound (or the kernel matrix was not factorisable)"
+        )
 
     def _condition(self, theta: np.ndarray) -> None:
         """Factorise K at theta and precompute alpha = K^-1 y and L^-1 for prediction."""

@@ -15,7 +15,13 @@ from nearsub.common.physics import dynamics
 from nearsub.common.physics import proximity as events
 from nearsub.common.runtime.lifecycle import InProcessResult, Iteration, Schedule, run_inprocess
 from nearsub.common.runtime.messages import Desired, Event, Forces, HelmProgress, Input, Message, State
-from nearsub.common.surrogate.interaction import ForceModel, geometry_outside, interaction_at
+from nearsub.common.surrogate.interaction import (
+    ForceModel,
+    InteractionAt,
+    geometry_outside,
+    interaction_at,
+    prepare,
+)
 from nearsub.common.surrogate.model import load_surrogate
 
 
@@ -30,6 +36,12 @@ def state_message(values: np.ndarray, step: int, t: float, source: str) -> State
 
 def event(role: str, step: int, t: float, kind: str, detail: str, data: dict | None = None) -> Event:
     return Event(step=step, t=t, source=role, kind=kind, detail=detail, data=data or {})
+
+
+def guard_clearance(mission: Mission) -> float:
+    """The N_uv guard's tip clearance [m]: the helm setting, or one UUV diameter (schema)."""
+    clearance = mission.apps.helm.guard_clearance
+    return mission.vehicle_model.diameter if clearance is None else clearance
 
 
 class HelmCore:
@@ -54,11 +66,16 @@ class HelmCore:
         # N_s is the yaw moment the interaction adds to the vehicle's own model, as the sim applies
         # it: the interaction increment in "increment" mode, the surrogate's total otherwise.
         self.interaction_mode = "increment" if mission.apps.sim.interaction == "increment" else "replace"
+        if self.surrogate is not None:
+            prepare(self.interaction_mode)
         self.cross_flow = None
         if self.settings.modified:
             u_sub = mission.environment.u_sub
             self.cross_flow = behaviours.CrossFlow(u_sub, self.settings.alpha, mission.vehicle_model.length)
         self.progress_state = behaviours.initial_progress(self.legs, (mission.start.x, mission.start.y))
+        self.guard_clearance = guard_clearance(mission)
+        self.guard_step = math.radians(self.settings.guard_rate_deg) * mission.dt * self.settings.period
+        self.delta_psi = 0.0  # the guarded offset of the last iteration (the rate limit's reference)
         self.state: State | None = None
         self.straying = False
 
@@ -73,14 +90,27 @@ class HelmCore:
         s = self.state
         decision = behaviours.waypoints(self.legs, self.progress_state, s.x, s.y, s.psi, self.cross_flow)
         self.progress_state = decision.progress
-        psi_d, delta_psi, n_s = decision.psi_d, 0.0, 0.0
+        psi_d, delta_psi, n_s, commanded, guard = decision.psi_d, 0.0, 0.0, 0.0, None
         if self.surrogate is not None and not decision.progress.complete:
             seen = interaction_at(self.surrogate, state_array(s), self.vehicle, self.rho, self.interaction_mode)
-            n_s = float(seen.interaction.weight * seen.interaction.forces[2])
-            delta_psi = float(
+            n_s = float(seen.applied[0, 2])
+            commanded = float(
                 behaviours.nuv_heading_offset(n_s, decision.u_d, self.vehicle.compensation_N_uv, self.gamma)
             )
+            guard = behaviours.guard_heading_offset(
+                s.x,
+                s.y,
+                decision.psi_d,
+                commanded,
+                self.delta_psi,
+                self.vehicle.length,
+                self.vehicle.diameter,
+                self.guard_clearance,
+                self.guard_step,
+            )
+            delta_psi = float(guard.delta_psi)
             psi_d = decision.psi_d + delta_psi
+        self.delta_psi = delta_psi
         result = Iteration()
         for leg, index, point in decision.captured:
             result.events.append(
@@ -127,6 +157,11 @@ class HelmCore:
                     cross_track=cross_track,
                     n_s=n_s,
                     complete=progress.complete,
+                    delta_psi_commanded=commanded,
+                    guard_active=guard is not None and bool(guard.active),
+                    guard_saturated=guard is not None and bool(guard.saturated),
+                    guard_limit=math.inf if guard is None else float(guard.limit),
+                    guard_clearance=self.guard_clearance,
                 ),
             )
         )
@@ -135,11 +170,12 @@ class HelmCore:
         return result
 
     def progress(self) -> dict:
-        return {"waypoints": self.progress_state.to_dict(), "straying": self.straying}
+        return {"waypoints": self.progress_state.to_dict(), "straying": self.straying, "delta_psi": self.delta_psi}
 
     def restore(self, progress: dict) -> None:
         self.progress_state = behaviours.WaypointProgress.from_dict(progress["waypoints"])
         self.straying = bool(progress["straying"])
+        self.delta_psi = float(progress["delta_psi"])
 
 
 class PidCore:
@@ -197,7 +233,7 @@ class PidCore:
 
 class SimCore:
     """uSimMarine: integrates (5.10)/(5.12) from x_k and u_k to x_{k+1}; near the submarine with
-    the surrogate's interaction forces, (5.20) (SPEC section 5)."""
+    the surrogate's interaction forces, (5.20) (docs/design.md, "Physics decisions")."""
 
     role = "sim"
     inputs = ("input",)
@@ -211,6 +247,8 @@ class SimCore:
         if wanted and surrogate is None:
             raise ValueError("the sim's interaction forces need the surrogate (a force model)")
         self.surrogate = surrogate if wanted else None
+        if self.surrogate is not None:
+            prepare(self.interaction_mode)
         self.settings = mission.apps.sim
         self.env = mission.environment.dynamics()
         self.submarine = mission.environment.submarine
@@ -237,22 +275,7 @@ class SimCore:
                 result.events.append(event(self.role, step, t, "info", outside))
             seen = interaction_at(self.surrogate, self.x, self.vehicle, self.rho, self.interaction_mode)
             interaction = seen.interaction
-            (fx, fy, fn), (sx, sy, sn) = seen.forces[0].tolist(), seen.std[0].tolist()
-            forces = Forces(
-                step=step,
-                t=t,
-                source=self.role,
-                X_s=fx,
-                Y_s=fy,
-                N_s=fn,
-                std_X=sx,
-                std_Y=sy,
-                std_N=sn,
-                weight=float(interaction.weight),
-                in_domain=bool(seen.in_domain[0]),
-                constraints_ok=bool(seen.constraints_ok[0]),
-            )
-            result.outputs.append(("forces", forces))
+            result.outputs.append(("forces", forces_message(seen, step, t, self.role)))
         self.x = dynamics.step(
             self.x, command, self.vehicle, self.env, self.dt, self.settings.integrator, t, interaction
         )
@@ -303,6 +326,27 @@ class SimCore:
     def restore(self, progress: dict) -> None:
         self.x = np.asarray(progress["x"], dtype=float)
         self.close = bool(progress["close"])
+
+
+def forces_message(seen: InteractionAt, step: int, t: float, source: str) -> Forces:
+    """The forces topic for one vehicle's `interaction_at` answer."""
+    values = {}
+    for prefix, array in (("", seen.forces), ("applied_", seen.applied), ("model_", seen.model), ("lf_", seen.lf)):
+        names = ("X_s", "Y_s", "N_s") if prefix == "" else ("X", "Y", "N")
+        values.update({f"{prefix}{name}": float(v) for name, v in zip(names, array[0], strict=True)})
+    values.update({f"std_{name}": float(v) for name, v in zip("XYN", seen.std[0], strict=True)})
+    return Forces(
+        step=step,
+        t=t,
+        source=source,
+        weight=float(seen.interaction.weight),
+        delta_weight=float(seen.delta_weight[0]),
+        in_domain=bool(seen.in_domain[0]),
+        constraints_ok=bool(seen.constraints_ok[0]),
+        outside=seen.outside(0),
+        lf_held=bool(seen.lf_held[0]),
+        **values,
+    )
 
 
 def build_cores(mission: Mission, surrogate: ForceModel | None = None) -> dict:

@@ -93,6 +93,14 @@ class HelmSettings(AppSettings):
     behaviour: Literal[BEHAVIOURS] = "waypoints"
     alpha: float = Field(default=1.0, ge=0.0, le=1.0, description="modified waypoints: alpha of (6.2)")
     gamma: float | None = Field(default=None, gt=0, description="N_uv compensation gain; default from (6.4)")
+    # The guard on (6.1)'s offset (behaviours.guard_heading_offset). Default clearance: one UUV
+    # diameter, the close-call distance of thesis section 5.11.2, so the compensation itself never
+    # steers a tip into a close call. Default rate: 5 deg/s, nearsub's choice: a 5 deg offset
+    # builds up over 1 s instead of within one helm step, where N_s can change sign.
+    guard_clearance: float | None = Field(
+        default=None, ge=0, description="N_uv compensation: least tip clearance from the hull [m]; default D_uuv"
+    )
+    guard_rate_deg: float = Field(default=5.0, gt=0, description="N_uv compensation: largest offset rate [deg/s]")
     legs: list[Leg] = Field(min_length=1)
 
     @property

@@ -1,7 +1,7 @@
 """Wire messages: pydantic models, msgpack codec and the topic -> model registry.
 
 Every message carries the schema version, the step index it describes and the simulated time
-(SPEC section 3). The thesis vectors travel as named fields: state [u, v, r, x, y, psi],
+(docs/design.md). The thesis vectors travel as named fields: state [u, v, r, x, y, psi],
 desired [u_d, psi_d], input [X_prop, delta_r]. Angles are radians on the wire.
 
 `decode` validates on receive: a malformed payload raises `MessageError` whose text names the
@@ -60,7 +60,7 @@ class FiniteMessage(Message):
 
 class State(FiniteMessage):
     """Vehicle state x = [u, v, r, x, y, psi]: velocities relative to the water, position in the
-    submarine frame (SPEC section 2)."""
+    submarine frame (docs/design.md, "Frames, units and signs")."""
 
     u: float
     v: float
@@ -86,7 +86,11 @@ class Input(FiniteMessage):
 
 
 class HelmProgress(Message):
-    """What the helm is doing: behaviour, leg and waypoint index, and compensation terms."""
+    """What the helm is doing: behaviour, leg and waypoint index, and compensation terms. With N_uv
+    compensation, delta_psi_commanded is (6.1)'s offset and delta_psi the one the helm used after
+    the tip-clearance guard (`behaviours.guard_heading_offset`): guard_limit is the largest offset
+    [rad] (signed, towards the submarine's side it limits) keeping the tip guard_clearance [m] off the
+    hull, guard_saturated says the limit or the rate limit cut the command."""
 
     behaviour: str
     leg: int
@@ -97,11 +101,25 @@ class HelmProgress(Message):
     cross_track: float = Field(default=0.0, description="distance to the current track-line [m]")
     n_s: float = Field(default=0.0, description="interaction yaw moment used by N_uv compensation [N m]")
     complete: bool = False
+    delta_psi_commanded: float = 0.0
+    guard_active: bool = False
+    guard_saturated: bool = False
+    guard_limit: float = math.inf
+    guard_clearance: float = 0.0
 
 
 class Forces(Message):
-    """Interaction forces on the vehicle at step `step` (surrogate mean and std, frame convention),
-    the blend weight with which they enter the dynamics, and the surrogate's domain flags."""
+    """Interaction forces on the vehicle at step `step` (frame convention, N and N m).
+
+    X_s, Y_s, N_s: the interaction before the weight (in "increment" mode the increment);
+    applied_X/Y/N = weight x X_s/Y_s/N_s, what the dynamics used at this step (in "increment" mode
+    exactly what is added to (5.11)); model_X/Y/N and std_X/Y/N: the model's raw answer and its
+    std (the discrepancy delta at the state clamped into table 4.2's box when the LF is in the
+    loop, the prediction otherwise; NaN where the model was not asked); lf_X/Y/N: the LF increment
+    LF - LF_free at the true pose and delta_weight the weight of delta (NaN when the mode does not
+    use them). in_domain and constraints_ok: table 4.2 and (4.4)-(4.7); `outside` names every
+    input and constraint the state is outside of; lf_held: the LF held its field at 1 cm from the
+    submarine's widest radius (`low_fidelity.lf_increment_terms`)."""
 
     X_s: float
     Y_s: float
@@ -112,6 +130,18 @@ class Forces(Message):
     weight: float
     in_domain: bool
     constraints_ok: bool
+    applied_X: float = 0.0
+    applied_Y: float = 0.0
+    applied_N: float = 0.0
+    model_X: float = math.nan
+    model_Y: float = math.nan
+    model_N: float = math.nan
+    lf_X: float = math.nan
+    lf_Y: float = math.nan
+    lf_N: float = math.nan
+    delta_weight: float = math.nan
+    outside: list[str] = Field(default_factory=list)
+    lf_held: bool = False
 
 
 class Tick(Message):

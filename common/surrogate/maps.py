@@ -5,7 +5,7 @@ held (figures 4-4, 4-5, 4-7 to 4-11). `THESIS_MAPS` lists those panels with the 
 values, `slice_grid` makes the inputs of a panel and `evaluate_map` the values, NaN where the
 constraints (4.4)-(4.7) exclude the point. Plotting is in tools/maps.py.
 
-One departure, forced by SPEC errata 7: nearsub's R_lat is centre to centre, so the thesis's
+One departure, forced by docs/design.md, "Thesis errata": nearsub's R_lat is centre to centre, so the thesis's
 R_lat = 0.08 violates (4.5) (the UUV more than two of its diameters off the hull) for every
 D_sub/D_uuv above 10.7, which includes the thesis's D_sub/D_uuv = 20 slices. Where the thesis
 holds R_lat at 0.08, these maps put the UUV in the middle of the lateral window that (4.4) and
@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from nearsub.common.surrogate.domain import BOUNDS, INPUT_NAMES, constraints_ok
+from nearsub.common.surrogate.modelfile import LFInLoopModel
 
 LABELS = {
     "R_long": "R_long",
@@ -145,7 +146,10 @@ def evaluate_map(model: Any, panel: MapPanel, nx: int = 121, ny: int = 81) -> di
 
 def training_points(model: Any, fidelity: str = "hf") -> np.ndarray:
     """The model's training inputs (n, 6): its high-fidelity samples, or for 'lf' the low-fidelity
-    samples of a multi-fidelity model (empty if it has none)."""
+    samples of a multi-fidelity model (empty if it has none; an LF-in-the-loop model evaluates
+    the LF exactly and has no LF samples)."""
     if fidelity == "lf":
         return model.lf.gps[0].X_train_.copy() if hasattr(model, "lf") else np.empty((0, len(INPUT_NAMES)))
+    if isinstance(model, LFInLoopModel):
+        return model.X.copy()  # its GPs hold the warped inputs
     return model.gps[0].X_train_.copy()

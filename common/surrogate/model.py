@@ -1,19 +1,25 @@
 """The loaded surrogate: predictions with their domain flags, and the surrogate server's messages.
 
 The thesis's reduced-order model (chapter 4) maps six inputs to the non-dimensional interaction
-coefficients X', Y', N' of the UUV (SPEC section 2). This module is pure numpy (no Zenoh): it says
-which inputs are valid (table 4.2, constraints (4.4)-(4.7) with SPEC errata 3 and 7), converts a
-dimensional state to inputs and coefficients back to forces (mirroring the -y side, section
-4.2.1), wraps a model file as a `Surrogate`, and defines the query/reply messages of the
-surrogate server (`apps/surrogate.py`).
+coefficients X', Y', N' of the UUV (thesis section 5.2). This module is pure numpy (no Zenoh): it
+says which inputs are valid (table 4.2, constraints (4.4)-(4.7) as corrected in docs/design.md,
+"Thesis errata"), converts a dimensional state to inputs and coefficients back to forces
+(mirroring the -y side, section 4.2.1), wraps a model file as a `Surrogate`, and defines the
+query/reply messages of the surrogate server (`apps/surrogate.py`).
+
+A `Surrogate` is one of three kinds (`Surrogate.kind`): "lf_in_loop", the exact low fidelity plus
+a residual GP (the shipped kind; `low_fidelity` and `discrepancy` give its two parts);
+"multi_fidelity", the thesis's GP of the LF plus a GP of the discrepancy (2.11); "gp", one GP per
+output (a user's table, the analytic fixture).
 
 A point outside the domain or the constraints is never refused and never extrapolated silently:
-it is answered with the GP's value at that point and flagged (`in_domain`, `constraints_ok`);
-the consumer (the sim's blend, SPEC section 5) decides what to do with it.
+it is answered with the model's value at that point and flagged (`in_domain`,
+`constraints_ok`); the consumer (the sim's interaction modes, docs/design.md, "Physics
+decisions") decides what to do with it.
 
-Until the hydrodynamics issue trains and ships the real model (`default_model_path()`), the
-server, CLI and tests use `analytic_model()`: a GP fitted to a made-up smooth function. It is a
-test fixture, it says so in its provenance, and whoever falls back to it says so on stderr.
+Without a shipped model (`default_model_path()`), the server, CLI and tests fall back to
+`analytic_model()`: a GP fitted to a made-up smooth function. It is a test fixture, it says so in
+its provenance, and whoever falls back to it says so on stderr.
 """
 
 from __future__ import annotations
@@ -52,7 +58,16 @@ from nearsub.common.surrogate.domain import (
     to_forces,
     to_inputs,
 )
-from nearsub.common.surrogate.modelfile import LoadedModel, ModelFileError, load_model, save_model
+from nearsub.common.surrogate.modelfile import (
+    LFInLoopModel,
+    LoadedModel,
+    ModelFileError,
+    MultiFidelitySurrogate,
+    lf_hash,
+    lf_identity,
+    load_model,
+    save_model,
+)
 
 # Largest batch one query may carry (a nearsub choice: bounds the server's memory per query,
 # about 1 MB of msgpack; a 10,000-point sweep is 10 queries).
@@ -60,7 +75,7 @@ MAX_QUERY_POINTS = 100_000
 
 
 def surrogate_key(community: str) -> str:
-    """The server's queryable: nearsub/<community>/surrogate (SPEC section 3, a service key)."""
+    """The server's queryable: nearsub/<community>/surrogate (a service key, docs/design.md, "Keys")."""
     return f"{keys.community_root(community)}/surrogate"
 
 
@@ -91,10 +106,14 @@ class Prediction:
         return self.in_domain & self.constraints_ok
 
 
-def _model_id(model: MultiOutputGP) -> str:
-    """A short content hash of a fitted model (data and hyperparameters): names a model in replies
-    independently of where its file lives."""
+def _model_id(model: MultiOutputGP | MultiFidelitySurrogate | LFInLoopModel) -> str:
+    """A short content hash of a fitted model (data and hyperparameters; for the LF-in-the-loop
+    kind also the warping and the LF's identity): names a model in replies independently of where
+    its file lives."""
     digest = hashlib.sha256()
+    if isinstance(model, LFInLoopModel):
+        digest.update(",".join(model.warping.names).encode())
+        digest.update(lf_hash(lf_identity()).encode())
     for gp in getattr(model, "all_gps", model.gps):
         for array in (gp.X_train_, gp.y_train_, gp.lower_, gp.width_, gp.theta_):
             digest.update(np.ascontiguousarray(array, dtype=float).tobytes())
@@ -117,9 +136,38 @@ class Surrogate:
         self.model_id = _model_id(loaded.model)
         self.source = source or str(loaded.path)
 
+    @property
+    def kind(self) -> str:
+        """ "lf_in_loop" (exact LF + residual GP), "multi_fidelity" (GP of the LF + GP of the
+        discrepancy, thesis (2.11)) or "gp" (one GP per output)."""
+        if isinstance(self.model, LFInLoopModel):
+            return "lf_in_loop"
+        return "multi_fidelity" if isinstance(self.model, MultiFidelitySurrogate) else "gp"
+
+    def _in_loop(self, what: str) -> LFInLoopModel:
+        if not isinstance(self.model, LFInLoopModel):
+            raise TypeError(f"{what}: only an LF-in-the-loop model has it; {self.source} is of kind {self.kind!r}")
+        return self.model
+
+    def low_fidelity(self, inputs: Any) -> np.ndarray:
+        """The exact LF coefficients [X', Y', N'] (n, 3) at inputs (n, 6) or (6,)
+        (`hydro.low_fidelity.lf_coefficients`; NaN where the UUV is within 1 cm of the hull).
+        Raises TypeError for another kind of model."""
+        return self._in_loop("low_fidelity").low_fidelity(_as_inputs(inputs))
+
+    def discrepancy(self, inputs: Any, return_std: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+        """The residual GP alone: mean (n, 3) of HF - LF and its std (n, 3) (None unless asked).
+        Raises TypeError for another kind of model."""
+        model = self._in_loop("discrepancy")
+        X = _as_inputs(inputs)
+        if return_std:
+            return model.discrepancy(X, return_std=True)
+        return model.discrepancy(X), None
+
     def predict(self, inputs: Any, return_std: bool = True) -> Prediction:
-        """GP mean (and std) of [X', Y', N'] at inputs (n, 6) or (6,), flagged (see `Prediction`).
-        `in_domain` uses the model file's bounds (table 4.2 for models saved by `save_surrogate`)."""
+        """Mean (and std) of [X', Y', N'] at inputs (n, 6) or (6,), flagged (see `Prediction`): the
+        GP's, or for the LF-in-the-loop kind LF(x) + delta(x) with std = std_delta. `in_domain`
+        uses the model file's bounds (table 4.2 for models saved by `save_surrogate`)."""
         X = _as_inputs(inputs)
         # Row-wise arithmetic: a vehicle asking alone and a sweep asking for 800 get the same bits.
         if return_std:
@@ -160,8 +208,8 @@ class Surrogate:
 
 
 # ----------------------------------------------------------------- model files and fixture
-def save_surrogate(path: str | os.PathLike, model: MultiOutputGP, provenance: dict[str, Any]) -> Path:
-    """Save a fitted (n, 6) -> (n, 3) GP as a surrogate model file with this domain's metadata."""
+def save_surrogate(path: str | os.PathLike, model: MultiOutputGP | LFInLoopModel, provenance: dict[str, Any]) -> Path:
+    """Save a fitted (n, 6) -> (n, 3) model as a surrogate model file with this domain's metadata."""
     return save_model(
         path,
         model,
@@ -207,8 +255,7 @@ def analytic_model(n: int = 100, seed: int = 0, path: str | os.PathLike | None =
         "method": "ANALYTIC TEST FIXTURE: GP fitted to nearsub.common.surrogate.model.analytic_coefficients, "
         "a made-up smooth function; NOT hydrodynamics",
         "command": f"nearsub.common.surrogate.model.analytic_model(n={n}, seed={seed})",
-        "notes": "For tests and plumbing only, until the hydrodynamics issue trains and ships the real "
-        "model (SPEC section 7). Do not use its numbers.",
+        "notes": "For tests and plumbing only. Do not use its numbers.",
         "n_train": n,
         "seed": seed,
     }

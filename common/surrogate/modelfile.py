@@ -13,6 +13,14 @@ can inspect it. Entries:
 * ``model/seed`` and ``model/gp<j>/<key>``: each output's `GaussianProcess.get_state()` minus
   its X/y copies, including the precomputed alpha and L^-1, so predictions after loading are
   bit-identical to the saved model's, without refitting.
+* An LF-in-the-loop model (metadata ``kind = "lf-in-loop"``): y = LF(x) + delta(x), sigma =
+  sigma_delta, with LF the exact low fidelity (`hydro.low_fidelity.lf_coefficients`) and delta a
+  GP set ``delta/...`` on warped inputs (metadata ``warping``, one name per input; the GP state
+  holds the warped bounds) and the residuals y_HF - y_LF. ``X``/``Y`` are the raw HF inputs and
+  HF values. Metadata ``low_fidelity`` is the LF's identity (module, function, version,
+  N_STRIPS, N_FRUSTA) and ``lf_hash`` its hash; ``lf_probe/X``, ``lf_probe/Y`` are LF values at a
+  few points. Loading refuses a file whose identity, hash or probe values differ from this
+  nearsub's LF, naming both. ``fit`` records each output's log marginal likelihood.
 * A multi-fidelity model (metadata ``kind = "multi-fidelity"``, thesis (2.10)-(2.15)) stores two
   such GP sets with their own data, ``lf/...`` and ``delta/...``, and ``rho``; ``X``/``Y`` are then
   the high-fidelity sample points and the discrepancy targets y_HF - rho y_LF (2.15). It loads
@@ -23,6 +31,7 @@ The zip CRC-32 of every entry is checked on reading, so truncation and bit rot a
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 from collections.abc import Mapping, Sequence
@@ -36,11 +45,16 @@ import scipy
 from numpy.lib.npyio import NpzFile
 
 from nearsub import __version__ as nearsub_version
+from nearsub.common.hydro import low_fidelity as hydro_lf
 from nearsub.common.learning.gp import MultiOutputGP
+from nearsub.common.physics.hull import D_SUB, L_SUB
+from nearsub.common.surrogate.domain import BOUNDS, constraint_values, sample_feasible
+from nearsub.common.surrogate.warping import Warping
 
 __all__ = [
     "FORMAT_NAME",
     "FORMAT_VERSION",
+    "LFInLoopModel",
     "LoadedModel",
     "ModelFileError",
     "load_model",
@@ -89,12 +103,109 @@ class MultiFidelitySurrogate:
         return self.rho * y_lf + delta
 
 
+LF_MODULE = hydro_lf.__name__
+_LF_PROBES = 8  # feasible points whose LF values a model file keeps to detect a changed LF
+_LF_PROBE_SEED = 20261201
+_LF_PROBE_RTOL = 1e-9
+
+
+def lf_identity() -> dict[str, Any]:
+    """This nearsub's low fidelity: module, function, version and discretisation settings."""
+    return {
+        "module": LF_MODULE,
+        "function": "lf_coefficients",
+        "version": hydro_lf.LF_VERSION,
+        "n_strips": hydro_lf.N_STRIPS,
+        "n_frusta": hydro_lf.N_FRUSTA,
+    }
+
+
+def lf_hash(identity: Mapping[str, Any]) -> str:
+    """Short sha256 of an LF identity (canonical JSON)."""
+    return hashlib.sha256(json.dumps(dict(identity), sort_keys=True).encode()).hexdigest()[:16]
+
+
+def lf_probe_points() -> np.ndarray:
+    return sample_feasible(_LF_PROBES, seed=_LF_PROBE_SEED)
+
+
+class LFInLoopModel:
+    """y = LF(x) + delta(x), sigma = sigma_delta: the exact LF plus a residual GP `delta` fitted
+    on `warping`-ed inputs. X, Y: the HF samples (raw inputs, HF values) it was fitted to."""
+
+    kind = "lf_in_loop"
+
+    def __init__(self, delta: MultiOutputGP, warping: Warping, X: Any, Y: Any):
+        self.delta, self.warping = delta, warping
+        self.X, self.Y = np.asarray(X, dtype=float), np.asarray(Y, dtype=float)
+
+    @classmethod
+    def fit(cls, X: Any, Y: Any, warping: Warping, *, n_restarts: int, seed: int) -> LFInLoopModel:
+        """Fit the residual GP to HF samples X (n, 6), Y (n, 3): targets Y - LF(X)."""
+        X, Y = np.asarray(X, dtype=float), np.asarray(Y, dtype=float)
+        residual = Y - hydro_lf.lf_coefficients(X)
+        delta = MultiOutputGP(bounds=warping.bounds, n_restarts=n_restarts, seed=seed)
+        return cls(delta.fit(warping.forward(X), residual), warping, X, Y)
+
+    @property
+    def gps(self):
+        """The discrepancy GPs: they carry the HF information and the std."""
+        return self.delta.gps
+
+    @property
+    def all_gps(self):
+        return self.delta.gps
+
+    @property
+    def log_marginal_likelihoods(self) -> list[float]:
+        return [float(gp.log_marginal_likelihood_value_) for gp in self.delta.gps]
+
+    def low_fidelity(self, X: Any) -> np.ndarray:
+        """The exact LF [X', Y', N'] (n, 3) at inputs X (n, 6)."""
+        return hydro_lf.lf_coefficients(np.atleast_2d(np.asarray(X, dtype=float)))
+
+    def discrepancy(self, X: Any, return_std: bool = False):
+        """The residual GP alone at X (n, 6): mean (n, 3) and, if asked, std (n, 3)."""
+        W = self.warping.forward(np.atleast_2d(np.asarray(X, dtype=float)))
+        return self.delta.predict_rows(W, return_std=return_std)
+
+    def predict_rows(self, X: Any, return_std: bool = False):
+        """LF + delta with row-wise arithmetic (see `MultiOutputGP.predict_rows`). Where the LF is
+        undefined at finite inputs (the UUV within 1 cm of the hull, or beyond the LF's field)
+        the LF term is taken at `lf_defined_pose(x)`, so the answer stays finite; such rows are
+        always outside the bounds or (4.4), hence flagged by `Surrogate.predict`."""
+        X = np.atleast_2d(np.asarray(X, dtype=float))
+        lf = self.low_fidelity(X)
+        undefined = ~np.all(np.isfinite(lf), axis=1) & np.all(np.isfinite(X), axis=1)
+        if undefined.any():
+            lf[undefined] = self.low_fidelity(lf_defined_pose(X[undefined]))
+        if return_std:
+            mean, std = self.discrepancy(X, return_std=True)
+            return lf + mean, std
+        return lf + self.discrepancy(X)
+
+    predict = predict_rows
+
+    def predict_point(self, x: Any) -> tuple[np.ndarray, np.ndarray]:
+        mean, std = self.predict_rows(np.asarray(x, dtype=float)[None, :], return_std=True)
+        return mean[0], std[0]
+
+
+def lf_defined_pose(X: np.ndarray) -> np.ndarray:
+    """The nearest pose of the trained domain: inputs clamped into table 4.2's bounds, then R_lat
+    raised until (4.4) holds (its left side rises by L_sub/D_sub = 8.575 per unit R_lat)."""
+    X = np.clip(X, BOUNDS[:, 0], BOUNDS[:, 1])
+    shortfall = np.maximum(-constraint_values(X)[:, 0], 0.0)
+    X[:, 1] += shortfall / (L_SUB / D_SUB)
+    return X
+
+
 @dataclass(frozen=True)
 class LoadedModel:
     """A surrogate read from a model file, with everything needed to use it responsibly."""
 
     path: Path
-    model: MultiOutputGP | MultiFidelitySurrogate
+    model: MultiOutputGP | MultiFidelitySurrogate | LFInLoopModel
     input_names: tuple[str, ...]
     output_names: tuple[str, ...]
     units: dict[str, str]
@@ -126,10 +237,15 @@ def save_model(
     JSON-serialisable. Raises ValueError if the metadata does not fit the model.
     """
     path = Path(path)
-    multi = hasattr(model, "delta")  # a MultiFidelityGP (common/mfgp.py) or MultiFidelitySurrogate
-    parts = {"lf": model.lf.get_state(), "delta": model.delta.get_state()} if multi else {"": model.get_state()}
-    state = parts["delta"] if multi else parts[""]
-    X, Y = state["X"], state["Y"]
+    in_loop = isinstance(model, LFInLoopModel)
+    multi = not in_loop and hasattr(model, "delta")  # a MultiFidelityGP (common/mfgp.py) or MultiFidelitySurrogate
+    if in_loop:
+        parts = {"delta": model.delta.get_state()}
+        X, Y = model.X, model.Y
+    else:
+        parts = {"lf": model.lf.get_state(), "delta": model.delta.get_state()} if multi else {"": model.get_state()}
+        state = parts["delta"] if multi else parts[""]
+        X, Y = state["X"], state["Y"]
     if multi:
         rho = np.asarray(getattr(model, "rho_", getattr(model, "rho", 1.0)), dtype=float) * np.ones(Y.shape[1])
     d, m = X.shape[1], Y.shape[1]
@@ -165,8 +281,19 @@ def save_model(
             "scipy": scipy.__version__,
         },
         "n_outputs": m,
-        "kind": "multi-fidelity" if multi else "gp",
+        "kind": "lf-in-loop" if in_loop else "multi-fidelity" if multi else "gp",
     }
+    if in_loop:
+        identity = lf_identity()
+        meta["warping"] = list(model.warping.names)
+        meta["low_fidelity"] = identity
+        meta["lf_hash"] = lf_hash(identity)
+    if in_loop or multi:
+        delta_gps = model.delta.gps
+        meta["fit"] = {
+            "log_marginal_likelihood": [float(gp.log_marginal_likelihood_value_) for gp in delta_gps],
+            "n_restarts": [int(gp.n_restarts) for gp in delta_gps],
+        }
     try:
         meta_json = json.dumps(meta, allow_nan=False, sort_keys=True)
     except (TypeError, ValueError) as exc:
@@ -188,6 +315,9 @@ def save_model(
                 arrays[f"{base}model/gp{j}/{key}"] = np.asarray(value)
     if multi:
         arrays["rho"] = rho
+    if in_loop:
+        probes = lf_probe_points()
+        arrays["lf_probe/X"], arrays["lf_probe/Y"] = probes, hydro_lf.lf_coefficients(probes)
 
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     try:
@@ -254,7 +384,10 @@ def load_model(path: str | os.PathLike) -> LoadedModel:
             return MultiOutputGP.from_state(data)
 
         kind = meta.get("kind", "gp")
-        if kind == "multi-fidelity":
+        if kind == "lf-in-loop":
+            _check_lf(meta, entries, fail)
+            model = LFInLoopModel(gp_set("delta/"), Warping(meta["warping"]), entries["X"], entries["Y"])
+        elif kind == "multi-fidelity":
             model = MultiFidelitySurrogate(gp_set("lf/"), gp_set("delta/"), entries["rho"])
         elif kind == "gp":
             model = gp_set("")
@@ -272,9 +405,30 @@ def load_model(path: str | os.PathLike) -> LoadedModel:
             format_version=int(meta["version"]),
             saved_utc=str(meta["saved_utc"]),
         )
+    except ModelFileError:
+        raise
     except (KeyError, ValueError, TypeError, IndexError) as exc:
         raise fail(f"inconsistent model file ({type(exc).__name__}: {exc})") from exc
     d = entries["X"].shape[1]
     if len(loaded.input_names) != d or len(loaded.output_names) != m or loaded.bounds.shape != (d, 2):
         raise fail("metadata does not match the model (names or bounds vs. data shapes)")
     return loaded
+
+
+def _check_lf(meta: dict[str, Any], entries: dict[str, np.ndarray], fail) -> None:
+    """Refuse an LF-in-the-loop file made with another LF than this nearsub's, naming both."""
+    stored, current = dict(meta["low_fidelity"]), lf_identity()
+    here = f"this nearsub's LF is {current} (hash {lf_hash(current)})"
+    if stored != current or meta.get("lf_hash") != lf_hash(current):
+        raise fail(
+            f"trained with a different low fidelity: the file's LF is {stored} (hash {meta.get('lf_hash')}), "
+            f"{here}; retrain with `nearsub train`"
+        )
+    probe_y = hydro_lf.lf_coefficients(entries["lf_probe/X"])
+    if not np.allclose(probe_y, entries["lf_probe/Y"], rtol=_LF_PROBE_RTOL, atol=0.0):
+        worst = float(np.max(np.abs(probe_y - entries["lf_probe/Y"])))
+        raise fail(
+            f"trained with a different low fidelity: the file's LF {stored} (hash {meta['lf_hash']}) gave other "
+            f"values at its probe points than {here} (largest difference {worst:.3g}): the LF changed without a "
+            "new LF_VERSION; retrain with `nearsub train`"
+        )

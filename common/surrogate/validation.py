@@ -21,7 +21,7 @@ from scipy.stats import qmc
 
 from nearsub.common.physics.vehicles import REMUS100, Vehicle
 from nearsub.common.runtime.processes import single_blas_thread
-from nearsub.common.surrogate.domain import BOUNDS, INPUT_NAMES, OUTPUT_NAMES, constraints_ok
+from nearsub.common.surrogate.domain import BOUNDS, INPUT_NAMES, OUTPUT_NAMES, UNITS, constraints_ok
 
 # Thesis table 4.3: MAE of X', Y', N' on 500 test points, and its error equivalents
 # (% X_prop for X', equivalent rudder angle in degrees for Y' and N').
@@ -29,6 +29,10 @@ THESIS_MAE = np.array([7.492e-4, 7.220e-4, 7.629e-4])
 THESIS_EQUIVALENTS = np.array([10.26, 1.78, 3.95])
 EQUIVALENT_UNITS = ("% X_prop", "deg rudder", "deg rudder")
 THESIS_TEST_POINTS = 500  # section 4.6
+# The held-out set (docs/hydro/validation-points.csv): THESIS_TEST_POINTS Latin-hypercube points of
+# `latin_hypercube_feasible` with this seed. No training design uses the seed or the points.
+HELD_OUT_SEED = 0
+HELD_OUT_POINTS = THESIS_TEST_POINTS
 
 
 def latin_hypercube_feasible(n: int, seed: int = 0) -> np.ndarray:
@@ -89,6 +93,65 @@ def evaluate_rows(
     return Y, np.array([seconds for _, seconds in results])
 
 
+class PointsFileError(ValueError):
+    """A points file cannot be used; the message names the file, row, column and value."""
+
+
+def read_number_table(
+    path: Any,
+    names: tuple[str, ...],
+    error: type[ValueError],
+    nan_ok: tuple[str, ...] = (),
+    missing_hint: Callable[[list[str]], str] = lambda header: "",
+) -> np.ndarray:
+    """The columns `names` (in any order; others ignored) of a CSV as floats (n, len(names)): every
+    value a plain finite number in its column's unit (UNITS), or 'nan' in the `nan_ok` columns.
+    Raises `error` naming the file, row (data rows from 1, with the file's line), column and value
+    of the first problem; a missing column's message ends with missing_hint(header)."""
+    import csv
+
+    try:
+        with open(path, newline="") as fh:
+            reader = csv.reader(fh)
+            header = [name.strip() for name in next(reader, [])]
+            rows = list(reader)
+    except (OSError, UnicodeDecodeError) as exc:
+        raise error(f"{path}: cannot read: {exc}") from None
+    missing = [name for name in names if name not in header]
+    if missing:
+        raise error(
+            f"{path}: missing column(s) {', '.join(missing)} (expected {', '.join(names)}{missing_hint(header)})"
+        )
+    index = [header.index(name) for name in names]
+    values = np.empty((len(rows), len(names)))
+    for r, row in enumerate(rows):
+        for c, (name, k) in enumerate(zip(names, index, strict=True)):
+            text = row[k].strip() if k < len(row) else ""
+            try:
+                values[r, c] = float(text)
+            except ValueError:
+                unit = UNITS[name.removesuffix("_hf")]
+                raise error(
+                    f"{path}: row {r + 1} (line {r + 2}), column {name}: {text!r} is not a number "
+                    f"(give a plain number in the column's unit, {unit})"
+                ) from None
+            if not np.isfinite(values[r, c]) and not (name in nan_ok and np.isnan(values[r, c])):
+                raise error(f"{path}: row {r + 1} (line {r + 2}), column {name}: {text!r} is not finite")
+    return values
+
+
+def read_points_file(path: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Test inputs (n, 6) and their HF values (n, 3) from a CSV with the columns INPUT_NAMES and
+    <output>_hf for each output (as docs/hydro/validation-points.csv; other columns ignored). An
+    HF value may be 'nan' (the HF failed there: left out). Raises PointsFileError naming the file,
+    row, column and value (`read_number_table`)."""
+    hf_names = tuple(f"{n}_hf" for n in OUTPUT_NAMES)
+    values = read_number_table(path, (*INPUT_NAMES, *hf_names), PointsFileError, nan_ok=hf_names)
+    if not len(values):
+        raise PointsFileError(f"{path}: no data rows")
+    return values[:, : len(INPUT_NAMES)], values[:, len(INPUT_NAMES) :]
+
+
 def mean_absolute_error(predicted: Any, actual: Any) -> np.ndarray:
     """MAE per output column over the rows where both are finite (thesis section 4.6)."""
     predicted, actual = np.atleast_2d(predicted), np.atleast_2d(actual)
@@ -125,13 +188,23 @@ def error_equivalents(mae: Any, vehicle: Vehicle = REMUS100) -> np.ndarray:
     )
 
 
-def validation_summary(X: np.ndarray, actual: np.ndarray, predicted: np.ndarray, std: np.ndarray) -> dict[str, Any]:
-    """MAE, error equivalents and context for a test set, next to thesis table 4.3, as JSON-ready data.
+def validation_summary(
+    X: np.ndarray, actual: np.ndarray, predicted: np.ndarray, std: np.ndarray, lf: np.ndarray | None = None
+) -> dict[str, Any]:
+    """MAE, relative MAE (over the mean |HF|), 2-sigma coverage, error equivalents and context for a
+    test set, next to the LF alone (`lf`, the exact LF at X; default: computed) and thesis table
+    4.3, as JSON-ready data.
 
-    actual: the HF values (n, 3), NaN where the HF could not evaluate a row (excluded);
-    predicted, std: the surrogate's mean and std there."""
-    finite = np.all(np.isfinite(actual), axis=1)
-    mae = mean_absolute_error(predicted, actual)
+    actual: the HF values (n, 3), NaN where the HF could not evaluate a row (excluded, as are rows
+    where the LF is undefined); predicted, std: the surrogate's mean and std there."""
+    if lf is None:
+        from nearsub.common.hydro.low_fidelity import lf_coefficients
+
+        lf = lf_coefficients(X)
+    finite = np.all(np.isfinite(actual), axis=1) & np.all(np.isfinite(lf), axis=1)
+    mae = mean_absolute_error(predicted[finite], actual[finite])
+    lf_mae = mean_absolute_error(lf[finite], actual[finite])
+    mean_abs_hf = np.mean(np.abs(actual[finite]), axis=0)
     errors = np.abs(predicted[finite] - actual[finite])
     within_2_std = np.mean(errors <= 2.0 * std[finite], axis=0)
     return {
@@ -139,8 +212,12 @@ def validation_summary(X: np.ndarray, actual: np.ndarray, predicted: np.ndarray,
         "evaluated": int(finite.sum()),
         "outputs": list(OUTPUT_NAMES),
         "mae": mae.tolist(),
+        "relative_mae": (mae / mean_abs_hf).tolist(),
+        "lf_mae": lf_mae.tolist(),
+        "lf_relative_mae": (lf_mae / mean_abs_hf).tolist(),
+        "lf_over_model": (lf_mae / mae).tolist(),
         "max_abs_error": errors.max(axis=0).tolist(),
-        "mean_abs_hf": np.mean(np.abs(actual[finite]), axis=0).tolist(),
+        "mean_abs_hf": mean_abs_hf.tolist(),
         "fraction_within_2_std": within_2_std.tolist(),
         "equivalents": error_equivalents(mae).tolist(),
         "equivalent_units": list(EQUIVALENT_UNITS),

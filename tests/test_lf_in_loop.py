@@ -1,0 +1,247 @@
+"""The increment mode with the LF in the loop: [LF(x) - LF_free(x)] + w(x) delta(x_c) at every pose
+(common/surrogate/interaction.py), and the tip-clearance guard on the N_uv offset of (6.1)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from conftest import ALPHA
+from nearsub.common.autonomy import behaviours
+from nearsub.common.hydro import low_fidelity as hydro_lf
+from nearsub.common.mission.cores import run_mission
+from nearsub.common.mission.schema import load_mission
+from nearsub.common.physics.dynamics import body_forces
+from nearsub.common.physics.hull import R_SUB
+from nearsub.common.physics.vehicles import REMUS100, SDV
+from nearsub.common.surrogate import domain
+from nearsub.common.surrogate.interaction import (
+    CONSTRAINT_BAND,
+    LF_CUT,
+    LF_FULL,
+    blend_weight,
+    interaction_at,
+    lf_reach_weight,
+)
+from nearsub.common.surrogate.model import load_surrogate
+
+RHO = 1025.0
+
+
+@pytest.fixture(scope="module")
+def model():
+    surrogate = load_surrogate()
+    assert surrogate.kind == "lf_in_loop"  # the shipped model
+    return surrogate
+
+
+def states_at(x, y, psi_deg, u=1.5):
+    x, y, psi = np.broadcast_arrays(*(np.atleast_1d(np.asarray(a, dtype=float)) for a in (x, y, np.radians(psi_deg))))
+    zeros = np.zeros_like(x)
+    return np.column_stack([np.full_like(x, u), zeros, zeros, x, y, psi])
+
+
+def no_jump(values, factor=4.0):
+    """Steps between neighbours of a fine sweep (n, 3): none larger than `factor` times the larger
+    of its two neighbouring steps (plus a hair), which a smooth function on a fine grid satisfies
+    and a jump or a ramp much steeper than the rest does not."""
+    steps = np.abs(np.diff(values, axis=0))
+    neighbours = np.maximum(np.vstack([steps[1:], steps[-1:]]), np.vstack([steps[:1], steps[:-1]]))
+    return np.all(steps <= factor * neighbours + 1e-9 * np.abs(values).max(axis=0))
+
+
+@pytest.mark.parametrize("side", [1.0, -1.0])
+def test_increment_is_continuous_in_heading_across_the_trained_range(model, side):
+    """The SDV beside the afterbody: psi through +/-2 deg in 0.002 deg steps (the old blend ramped
+    the whole interaction off over 0.08 deg there, 40 of these steps). The increment (and the force
+    the dynamics add) moves smoothly, and it does not vanish beyond 2 deg: the LF carries it."""
+    for edge in (2.0, -2.0):
+        psi = np.linspace(edge - 0.5, edge + 0.5, 501)
+        seen = interaction_at(model, states_at(-30.0, side * 5.9, psi), SDV, RHO, "increment")
+        assert np.all(np.isfinite(seen.applied))
+        assert no_jump(seen.applied)
+        np.testing.assert_array_equal(seen.delta_weight, seen.delta_weight[0])  # never of psi
+        outer = np.abs(psi) > 2.0
+        assert np.all(np.abs(seen.applied[outer, 2]) > 0.3 * np.abs(seen.applied[~outer, 2]).max())
+    assert not no_jump(np.where(np.abs(psi) > 2.0, 0.0, 1.0)[:, None] * np.ones((1, 3)))  # the check can fail
+
+
+def test_increment_is_continuous_across_the_lateral_edge_of_constraint_4_5(model):
+    """The SDV moved outwards across (4.5) (2 D_uuv off the hull, y = 6.24 m) in 1 mm steps: delta's
+    weight ramps from 1 to 0 with smoothstep's slope, the LF increment continues without a jump, and
+    the total moves by no more than its parts allow."""
+    y = np.linspace(5.9, 6.6, 701)
+    seen = interaction_at(model, states_at(-30.0, y, 0.0), SDV, RHO, "increment")
+    w = seen.delta_weight
+    assert w[0] == 1.0 and w[-1] == 0.0 and np.all(np.diff(w) <= 0)
+    dw = np.abs(np.diff(w))
+    ramp = (w > 0) & (w < 1)
+    assert ramp.sum() > 0.9 * CONSTRAINT_BAND[1] / 8.575 * 88.86 / 1e-3  # about 5 cm of 1 mm steps
+    assert dw.max() <= 1.5 / ramp.sum() * 1.1  # smoothstep's steepest slope over the ramp's steps
+    assert no_jump(seen.lf)  # the LF increment knows nothing of (4.5)
+    assert np.all(np.abs(seen.applied[-1]) > 0)  # and it goes on beyond it
+    delta = seen.model
+    steps = np.abs(np.diff(seen.applied, axis=0))
+    allowed = dw[:, None] * np.abs(delta[1:]) + np.abs(np.diff(seen.lf, axis=0)) + np.abs(np.diff(delta, axis=0))
+    assert np.all(steps <= allowed + 1e-9)
+
+
+def test_blend_weight_of_the_discrepancy_does_not_depend_on_heading():
+    rng = np.random.default_rng(3)
+    X = domain.sample_feasible(200, seed=5)
+    turned = X.copy()
+    turned[:, 3] = rng.uniform(-40.0, 40.0, len(X))
+    np.testing.assert_array_equal(blend_weight(turned, heading=False), blend_weight(X, heading=False))
+    assert np.any(blend_weight(turned) != blend_weight(turned, heading=False))  # the old blend does
+
+
+def test_every_query_outside_the_trained_box_is_flagged_with_the_input_named(model):
+    cases = [
+        (states_at(-30.0, 5.9, 0.5), []),
+        (states_at(-30.0, 5.9, 6.0), ["psi_deg"]),
+        (states_at(-30.0, -5.9, -6.0), ["psi_deg"]),
+        (states_at(-30.0, 7.5, 0.5), ["(4.5)"]),
+        (states_at(-30.0, 9.8, 0.5), ["R_lat", "(4.5)"]),
+        (states_at(-30.0, 5.9, 0.5, u=0.5), ["u_kn"]),
+        (states_at(70.0, 5.9, 0.5), ["R_long"]),
+    ]
+    for state, names in cases:
+        seen = interaction_at(model, state, SDV, RHO, "increment")
+        assert seen.outside(0) == names, (state, names)
+        assert bool(seen.in_domain[0]) == (not [n for n in names if not n.startswith("(")])
+    remus = interaction_at(model, states_at(-30.0, 5.5, 0.5), REMUS100, RHO, "increment")
+    assert remus.outside(0) == ["d_ratio"]  # D_sub/D_uuv = 54.3 > 50: clamped, and said so
+
+
+def test_the_applied_force_is_what_the_dynamics_add(model):
+    states = states_at(np.linspace(-45.0, 45.0, 31), 6.1, np.linspace(-10.0, 10.0, 31))
+    states[:, 1] = 0.05  # some sway, so (5.11)'s own terms are not zero
+    seen = interaction_at(model, states, SDV, RHO, "increment")
+    command = np.zeros((len(states), 2))
+    added = body_forces(states, command, SDV, seen.interaction) - body_forces(states, command, SDV)
+    np.testing.assert_allclose(added, seen.applied, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(seen.forces, seen.lf + seen.delta_weight[:, None] * seen.model, rtol=1e-13, atol=1e-12)
+
+
+def test_forces_topic_publishes_what_the_sim_applied(model):
+    mission = load_mission(
+        ALPHA,
+        [
+            "environment.submarine=true",
+            "environment.u_sub=1.5",
+            "vehicle=sdv",
+            "start.x=-30",
+            "start.y=5.9",
+            "start.speed=1.5",
+            "apps.helm.legs=[{points = [[60.0, 5.9]], speed = 1.5, lead = 15.9, lead_to_start = true}]",
+            "time_limit=3",
+        ],
+    )
+    result = run_mission(mission, model)
+    states = {m.step: m for m in result.topic("state")}
+    for message in result.topic("forces"):
+        s = states[message.step]
+        state = np.array([s.u, s.v, s.r, s.x, s.y, s.psi])
+        seen = interaction_at(model, state, SDV, mission.environment.rho, "increment")
+        applied = [message.applied_X, message.applied_Y, message.applied_N]
+        np.testing.assert_array_equal(applied, seen.applied[0])
+        np.testing.assert_array_equal(applied, message.weight * np.array([message.X_s, message.Y_s, message.N_s]))
+        assert message.outside == seen.outside(0) and message.in_domain == bool(seen.in_domain[0])
+
+
+def test_where_the_lf_is_undefined_its_field_is_held_and_flagged(model):
+    """The SDV sliding in beside the middle body until it touches the hull: closer than 1 cm to the
+    widest radius the LF's field table ends (lf_coefficients is NaN); in the loop the field is held
+    at that edge, the forces stay finite and continuous, and the topic's lf_held says so."""
+    half = SDV.diameter / 2.0
+    y = R_SUB + half + np.linspace(0.05, -0.02, 141)  # 5 cm apart to 2 cm overlap, 0.5 mm steps
+    states = states_at(-30.0, y, 0.0)
+    inputs, _ = domain.to_inputs(states[:, 3], states[:, 4], 1.5, 0.0, SDV.length, SDV.diameter)
+    inputs[:, 4:] = np.clip(inputs[:, 4:], domain.BOUNDS[4:, 0], domain.BOUNDS[4:, 1])
+    plain = hydro_lf.lf_coefficients(inputs)
+    seen = interaction_at(model, states, SDV, RHO, "increment")
+    undefined = np.isnan(plain).any(axis=1)
+    assert undefined.any() and not undefined.all()
+    np.testing.assert_array_equal(seen.lf_held, undefined)
+    assert np.all(np.isfinite(seen.applied))
+    assert no_jump(seen.lf)
+    increment = domain.to_forces(plain - hydro_lf.lf_free_stream(inputs), 1.0, 1.5, SDV.length, RHO)
+    np.testing.assert_allclose(seen.lf[~undefined], increment[~undefined], rtol=1e-12, atol=0)
+
+
+def test_lf_increment_reaches_out_and_is_cut_off_smoothly():
+    clearance = np.linspace(0.0, 20.0, 2001)
+    y = R_SUB + clearance  # beside the parallel middle body, where the clearance is |y| - R_sub
+    w = lf_reach_weight(np.zeros_like(y), y)
+    assert np.all(w[clearance <= LF_FULL] == 1.0) and np.all(w[clearance >= LF_CUT] == 0.0)
+    assert np.abs(np.diff(w)).max() <= 1.5 * (clearance[1] - clearance[0]) / (LF_CUT - LF_FULL) * 1.01
+
+
+# --- the guard on the N_uv offset -------------------------------------------------------------
+def test_guard_keeps_the_tip_clearance_that_unguarded_compensation_would_break():
+    """The SDV 0.6 m off the middle body on a track parallel to it; (6.1) asks for 15 deg of bow
+    towards the hull (or away, which swings the stern in). Unguarded, a tip comes within the
+    clearance; guarded, it stays at it, and the offset is the largest that does."""
+    clearance = SDV.diameter
+    y = R_SUB + SDV.diameter / 2 + 0.6
+    for commanded in (math.radians(-15.0), math.radians(15.0)):
+        unguarded = behaviours.tip_clearance(0.0, y, commanded, SDV.length, SDV.diameter)
+        assert unguarded < clearance
+        guard = behaviours.guard_heading_offset(
+            0.0, y, 0.0, commanded, commanded, SDV.length, SDV.diameter, clearance, math.inf
+        )
+        assert guard.active and guard.saturated
+        assert abs(guard.delta_psi) < abs(commanded) and np.sign(guard.delta_psi) == np.sign(commanded)
+        kept = behaviours.tip_clearance(0.0, y, guard.delta_psi, SDV.length, SDV.diameter)
+        assert kept >= clearance - 2e-3  # the limit is interpolated between samples 0.6 deg apart
+        wider = behaviours.tip_clearance(0.0, y, guard.delta_psi * 1.05, SDV.length, SDV.diameter)
+        assert wider < clearance  # and it is (nearly) the largest offset that keeps it
+    far = behaviours.guard_heading_offset(-30.0, 20.0, 0.0, 0.3, 0.3, SDV.length, SDV.diameter, clearance, math.inf)
+    assert not far.active and not far.saturated and far.delta_psi == 0.3 and math.isinf(far.limit)
+
+
+def test_guard_rate_limits_the_offset():
+    step = math.radians(5.0) * 0.25  # 5 deg/s at a 4 Hz helm
+    guard = behaviours.guard_heading_offset(-30.0, 20.0, 0.0, 0.3, 0.0, SDV.length, SDV.diameter, 0.53, step)
+    assert guard.delta_psi == pytest.approx(step) and guard.saturated and not guard.active
+    safe = behaviours.guard_heading_offset(-30.0, 20.0, 0.0, 0.3, 0.28, SDV.length, SDV.diameter, 0.53, step)
+    assert safe.delta_psi == 0.3 and not safe.saturated
+
+
+def test_guarded_compensation_mission_keeps_the_tip_clearance(model):
+    """N_uv compensation in a mission beside the SDV's afterbody, 0.72 m of tip clearance on the
+    track, guard clearance 0.7 m: the helm's progress carries the guard's state, the offset it flew
+    never exceeds the guard's limit (which does bind), and the heading it asks for never brings a
+    tip closer than the clearance (or than the track itself does)."""
+    mission = load_mission(
+        ALPHA,
+        [
+            "environment.submarine=true",
+            "environment.u_sub=1.5",
+            "vehicle=sdv",
+            "start.x=-25",
+            "start.y=5.9",
+            "start.psi_deg=0",
+            "start.speed=1.5",
+            "apps.helm.behaviour=nuv_compensation",
+            "apps.helm.guard_clearance=0.7",
+            "apps.helm.legs=[{points = [[60.0, 5.9]], speed = 1.5, lead = 15.9, lead_to_start = true}]",
+            "time_limit=30",
+        ],
+    )
+    result = run_mission(mission, model)
+    assert result.outcome == "time_limit"
+    helm = result.topic("helm")
+    states = {m.step: m for m in result.topic("state")}
+    assert all(m.guard_clearance == 0.7 for m in helm)
+    step = math.radians(5.0) * mission.dt * mission.apps.helm.period
+    for before, m in zip(helm[:-1], helm[1:], strict=True):
+        assert abs(m.delta_psi) <= abs(m.guard_limit) + 1e-12
+        assert m.guard_saturated == (m.delta_psi != m.delta_psi_commanded)
+        assert abs(m.delta_psi - before.delta_psi) <= step + 1e-12 or m.delta_psi == m.guard_limit
+        s = states[m.step]
+        track = m.psi_d - m.delta_psi
+        flown = behaviours.tip_clearance(s.x, s.y, m.psi_d, SDV.length, SDV.diameter)
+        straight = behaviours.tip_clearance(s.x, s.y, track, SDV.length, SDV.diameter)
+        assert flown >= min(0.7, straight) - 2e-3  # the heading the helm asks for keeps the tips off
+    assert any(m.guard_active for m in helm)  # the mission does test the guard
