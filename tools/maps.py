@@ -156,6 +156,7 @@ def plot_figure(surrogate, name: str, out_dir: Path, nx: int = 121, ny: int = 81
 
 
 def maps_command(args) -> int:
+    from nearsub.common.surrogate.maps import has_low_fidelity
     from nearsub.common.surrogate.model import load_surrogate
     from nearsub.common.surrogate.modelfile import ModelFileError
 
@@ -164,7 +165,7 @@ def maps_command(args) -> int:
     except ModelFileError as exc:
         print(f"nearsub maps: {exc}", file=sys.stderr)
         return 2
-    multi_fidelity = hasattr(surrogate.model, "lf")
+    multi_fidelity = has_low_fidelity(surrogate.model)
     out_dir = Path(args.out)
     for name, panels in THESIS_MAPS.items():
         if not multi_fidelity and any(p.fidelity == "lf" for p in panels):
