@@ -33,7 +33,7 @@ THESIS_TEST_POINTS = 500  # section 4.6
 # `latin_hypercube_feasible` with this seed. No training design uses the seed or the points.
 HELD_OUT_SEED = 0
 HELD_OUT_POINTS = THESIS_TEST_POINTS
-_THREAD_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+THREAD_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 
 
 def latin_hypercube_feasible(n: int, seed: int = 0) -> np.ndarray:
@@ -83,7 +83,7 @@ def evaluate_rows(
             if on_row is not None:
                 on_row(i)
     else:
-        for var in _THREAD_VARS:  # inherited by the spawned workers
+        for var in THREAD_VARS:  # inherited by the spawned workers
             os.environ.setdefault(var, "1")
         with ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
             futures = {pool.submit(_timed_rows, function, row[None, :]): i for i, row in enumerate(X)}
