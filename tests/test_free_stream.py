@@ -182,7 +182,7 @@ INCREMENT = [*BESIDE, "time_limit=10", "apps.sim.interaction=increment"]
 def test_multi_process_increment_equals_in_process(launches, community):
     """The sim app asks the surrogate server which model it serves, and finds the shipped table."""
     code, summary, err = launches.run(ALPHA, *sum((["--set", s] for s in INCREMENT), []), "--set", f"name={community}")
-    assert code == 0, err
+    assert summary.get("outcome") in ("time_limit", "collision"), err  # the run ends by itself, not by an error
     mission = load_mission(ALPHA, INCREMENT + [f"name={community}"])
     reference = run_inprocess(
         build_cores(mission, load_surrogate()), Schedule(mission.periods()), mission.dt, mission.max_steps

@@ -14,7 +14,7 @@ DEFAULT_OUT = Path("docs") / "maps"
 
 
 def maps_command(args) -> int:
-    from nearsub.common.surrogate.maps import THESIS_MAPS
+    from nearsub.common.surrogate.maps import THESIS_MAPS, has_low_fidelity
     from nearsub.common.surrogate.model import load_surrogate
     from nearsub.common.surrogate.modelfile import ModelFileError
 
@@ -25,7 +25,7 @@ def maps_command(args) -> int:
     except ModelFileError as exc:
         print(f"nearsub maps: {exc}", file=sys.stderr)
         return 2
-    multi_fidelity = hasattr(surrogate.model, "lf")
+    multi_fidelity = has_low_fidelity(surrogate.model)
     out_dir = Path(args.out)
     for name, panels in THESIS_MAPS.items():
         if not multi_fidelity and any(p.fidelity == "lf" for p in panels):

@@ -131,17 +131,24 @@ def slice_grid(panel: MapPanel, nx: int = 121, ny: int = 81) -> tuple[np.ndarray
 def evaluate_map(model: Any, panel: MapPanel, nx: int = 121, ny: int = 81) -> dict[str, np.ndarray]:
     """A panel's values (ny, nx), NaN where (4.4)-(4.7) exclude the point, with its axes and inputs.
 
-    model: a loaded model's `.model` (MultiOutputGP or MultiFidelitySurrogate); fidelity 'lf' needs
-    the multi-fidelity one (its low-fidelity GP, the thesis's "low fidelity surrogate")."""
+    model: a loaded model's `.model`; fidelity 'lf' needs one with a low-fidelity part
+    (`has_low_fidelity`): the exact LF of an LF-in-the-loop model, or the LF GP of a
+    multi-fidelity one (the thesis's "low fidelity surrogate")."""
     X, xs, ys = slice_grid(panel, nx, ny)
+    predict = model.predict
     if panel.fidelity == "lf":
-        if not hasattr(model, "lf"):
-            raise ValueError(f"{panel.name}: the model has no low-fidelity part (not a multi-fidelity model)")
-        model = model.lf
+        if not has_low_fidelity(model):
+            raise ValueError(f"{panel.name}: the model has no low-fidelity part")
+        predict = model.low_fidelity if isinstance(model, LFInLoopModel) else model.lf.predict
     flat = X.reshape(-1, len(INPUT_NAMES))
-    values = model.predict(flat)[:, ("X_p", "Y_p", "N_p").index(panel.output)]
+    values = predict(flat)[:, ("X_p", "Y_p", "N_p").index(panel.output)]
     values = np.where(constraints_ok(flat), values, np.nan).reshape(X.shape[:2])
     return {"values": values, "x": xs, "y": ys, "inputs": X}
+
+
+def has_low_fidelity(model: Any) -> bool:
+    """True for an LF-in-the-loop model (the exact LF) and a multi-fidelity one (its LF GP)."""
+    return isinstance(model, LFInLoopModel) or hasattr(model, "lf")
 
 
 def training_points(model: Any, fidelity: str = "hf") -> np.ndarray:

@@ -40,8 +40,10 @@ from nearsub.common.hydro import low_fidelity as hydro_lf
 from nearsub.common.learning.active import candidate_set, initial_design
 from nearsub.common.learning.gp import FINAL_FIT_RESTARTS, MultiOutputGP
 from nearsub.common.learning.testproblems import Problem
+from nearsub.common.runtime.processes import single_blas_thread
 from nearsub.common.surrogate import domain
 from nearsub.common.surrogate.modelfile import LFInLoopModel
+from nearsub.common.surrogate.validation import HELD_OUT_POINTS, HELD_OUT_SEED, latin_hypercube_feasible
 from nearsub.common.surrogate.warping import DEFAULT_WARPING, Warping
 
 DESIGNS = ("nmmf", "sobol", "residual-us")
@@ -51,8 +53,8 @@ DEFAULT_N_SEED = 20  # space-filling HF points that seed the adaptive designs
 # optimum); the final fit uses FINAL_FIT_RESTARTS.
 _CAMPAIGN_RESTARTS = 2
 _CANDIDATES_PER_DIM = 500  # about 3000 d box draws, ~500 feasible candidates per pick
-_THREAD_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 HF_DESCRIPTION = (
+    # "common/hydro_hf.py" is the mark tools/free_stream.py looks for in a model's provenance.
     "nearsub two-way Hess-Smith panel method with viscous corrections (common/hydro_hf.py, MEDIUM panels); "
     "NOT RANS CFD (docs/hydro/README.md)"
 )
@@ -66,7 +68,7 @@ def interaction_problem(
 ) -> Problem:
     """The surrogate's domain (table 4.2, constraints (4.4)-(4.7)) with the LF physics and an HF
     evaluator (default: the HF physics; `nearsub campaign` names its own problem, whose HF is a
-    user's CFD, so that `train --resume` never fills such a campaign with panel-method samples)."""
+    user's CFD, so that its campaign is never filled with panel-method samples)."""
     return Problem(
         name=name,
         bounds=domain.BOUNDS,
@@ -91,8 +93,6 @@ def sobol_design(n: int, seed: int = DEFAULT_SEED) -> np.ndarray:
 
 def held_out_overlap(X: np.ndarray) -> int:
     """How many rows of X coincide (to 1e-9 of the box width) with held-out validation points."""
-    from nearsub.common.surrogate.validation import HELD_OUT_POINTS, HELD_OUT_SEED, latin_hypercube_feasible
-
     held = latin_hypercube_feasible(HELD_OUT_POINTS, HELD_OUT_SEED)
     width = domain.BOUNDS[:, 1] - domain.BOUNDS[:, 0]
     close = np.all(np.abs(X[:, None, :] - held[None, :, :]) <= 1e-9 * width, axis=2)
@@ -101,8 +101,6 @@ def held_out_overlap(X: np.ndarray) -> int:
 
 def check_seed(seed: int) -> None:
     """Refuse the held-out set's seed (ValueError naming it)."""
-    from nearsub.common.surrogate.validation import HELD_OUT_SEED
-
     if seed == HELD_OUT_SEED:
         raise ValueError(f"--seed {seed}: reserved for the held-out validation set; use another seed")
 
@@ -187,8 +185,7 @@ def hf_runner(workers: int | None = None, scheduler: str | None = None) -> Itera
         return
     from distributed import Client, LocalCluster, as_completed
 
-    for var in _THREAD_VARS:  # inherited by the local workers
-        os.environ.setdefault(var, "1")
+    single_blas_thread()  # inherited by the local workers
     cluster = None
     if scheduler is None:
         cluster = LocalCluster(
