@@ -51,14 +51,15 @@ class Clock:
             mission.pause_at_step,
         )
         self.bus = bus
-        self.stream = bus.stream(keys.everything(c))
-        bus.on_liveliness_lost(keys.alive(c, "launcher", "*"), signal_self())
-        self.tick_pub = bus.publisher(keys.tick(c))
-        self.end_pub = bus.publisher(keys.mission_end(c))
         self.ack_prefix = keys.ack(c, "")
         self.control_key = keys.control(c, "clock")
         self.end_key = keys.mission_end(c)
         self.done_topics = {keys.vehicle_topic(c, mission.vehicle_name, leaf): leaf for leaf in DONE_TOPIC.values()}
+        # The done topics, acks, its control key and the end: not its own ticks, nor other data.
+        self.stream = bus.inputs([*self.done_topics, keys.all_acks(c), self.control_key, self.end_key])
+        bus.on_liveliness_lost(keys.alive(c, "launcher", "*"), signal_self())
+        self.tick_pub = bus.publisher(keys.tick(c))
+        self.end_pub = bus.publisher(keys.mission_end(c))
         self.ended = False
 
     def wait_for_apps(self) -> str | None:

@@ -1,6 +1,7 @@
 """The process shell of every lock-stepped app (helm, pid, sim): one lifecycle for all.
 
-Start-up: open the session, subscribe one FIFO stream to the community (nearsub/<c>/**), declare
+Start-up: open the session, subscribe one ordered stream to exactly what this app consumes (its
+input topics, the clock's traffic, its own control and reply keys; runtime/bus.py), declare
 publishers, optionally take over from a running instance, publish "running", declare the
 liveliness token. Then the loop drains the stream in arrival order:
 - a tick grants the steps up to the one it carries (runtime/clock.py);
@@ -114,7 +115,7 @@ class AppShell:
                 self.core, Schedule(mission.periods()), self.dt, mission.max_steps, recoverable=(ServiceError,)
             )
             self.input_of_key = {keys.vehicle_topic(c, self.vehicle, leaf): leaf for leaf in self.core.inputs}
-            self.stream = bus.stream(keys.everything(c))
+            self.stream = bus.inputs([*self.input_of_key, keys.clock_traffic(c), self.control_key, self.reply_key])
             bus.on_liveliness_lost(keys.alive(c, "launcher", "*"), signal_self())
             self.publishers = {
                 leaf: bus.publisher(keys.vehicle_topic(c, self.vehicle, leaf)) for leaf in self.core.outputs
