@@ -22,8 +22,10 @@ from __future__ import annotations
 
 import argparse
 import ctypes
+import math
 import signal
 import sys
+import time
 import uuid
 from collections.abc import Callable
 
@@ -48,6 +50,7 @@ from nearsub.common.runtime.messages import (
 from nearsub.common.surrogate.interaction import ServiceError
 
 HANDOVER_TIMEOUT = 30.0
+ERROR_INTERVAL = 1.0  # wall seconds between error events; the rejections in between are counted
 
 
 def prepare_process() -> None:
@@ -101,6 +104,8 @@ class AppShell:
         self.ack_prefix = keys.ack(c, "")
         self.handover_request: Control | None = None
         self.backlog: list[tuple[str, bytes]] = []
+        self.last_error_report = -math.inf
+        self.unreported_errors = 0
 
     # -- start-up -----------------------------------------------------------------------------
     def serve(self, takeover: str | None = None, resume_step: int | None = None) -> int:
@@ -130,6 +135,8 @@ class AppShell:
             try:
                 return self.loop()
             finally:
+                if self.unreported_errors:
+                    self.report_error("mission over", force=True)
                 self.publish_status("stopping")
 
     def take_over(self, old_instance: str, resume_step: int) -> None:
@@ -231,7 +238,16 @@ class AppShell:
             self.report_error(f"rejected message: {exc}")
             return None
 
-    def report_error(self, text: str) -> None:
+    def report_error(self, text: str, force: bool = False) -> None:
+        """An error event, at most one per ERROR_INTERVAL: a flood of bad messages must not flood
+        the events (nor cost the shell its pace); the next event counts those left unreported."""
+        now = time.monotonic()
+        if now - self.last_error_report < ERROR_INTERVAL and not force:
+            self.unreported_errors += 1
+            return
+        if self.unreported_errors:
+            text = f"{text} (and {self.unreported_errors} more errors since the last report)"
+        self.last_error_report, self.unreported_errors = now, 0
         print(f"[{self.instance}] error: {text}", file=sys.stderr, flush=True)
         step = self.stepper.step
         event = Event(step=step, t=step * self.dt, source=self.core.role, kind="error", detail=text)

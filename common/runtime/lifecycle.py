@@ -96,9 +96,11 @@ class Schedule:
 class Inbox:
     """The latest accepted message per input topic of one app, and what its core has seen.
 
-    `offer` accepts a message only from the topic's producer and only with a label newer than
-    the one held; anything else is returned as an error text (never raised), so a receiver can
-    report it and carry on.
+    `offer` accepts a message only from the topic's producer and only with the next label in
+    the producer's sequence (its period apart from the one held; the first one the label of the
+    app's current step). Anything else, a stale label, a label from the far future or one off the
+    producer's period, is returned as an error text (never raised), so a receiver can report it
+    and carry on; the inbox holds one message per topic whatever it is offered.
     """
 
     def __init__(self, inputs: tuple[str, ...], schedule: Schedule):
@@ -107,13 +109,19 @@ class Inbox:
         self.held: dict[str, Message] = {}
         self.delivered: dict[str, int] = {}
 
-    def offer(self, leaf: str, message: Message) -> str | None:
+    def offer(self, leaf: str, message: Message, step: int) -> str | None:
+        """Offer an input to an app that is about to run `step`."""
         producer = PRODUCER[leaf]
         if message.source != producer:
             return f"{leaf} from source {message.source!r} ignored: only {producer!r} publishes {leaf}"
         held = self.held.get(leaf)
-        if held is not None and message.step <= held.step:
-            return f"{leaf} with step {message.step} ignored: already holding step {held.step}"
+        if held is None:
+            expected = self.schedule.expected_label(leaf, step)
+        else:
+            expected = held.step + self.schedule.periods[producer]
+        if message.step != expected:
+            holding = "nothing" if held is None else f"step {held.step}"
+            return f"{leaf} with step {message.step} ignored: holding {holding}, the next is step {expected}"
         self.held[leaf] = message
         return None
 
@@ -211,7 +219,7 @@ class Stepper:
 
     def offer(self, leaf: str, message: Message) -> str | None:
         """Accept an input (see `Inbox.offer`); an error text when it is refused."""
-        return self.inbox.offer(leaf, message)
+        return self.inbox.offer(leaf, message, self.step)
 
     def grant(self, step: int) -> None:
         self.granted = max(self.granted, step)
