@@ -258,3 +258,28 @@ def test_a_control_reply_answers_its_request():
     assert reply.t == pytest.approx(0.7)
     refused = control_reply(request, "helm-1", 7, DT, ok=False, error="no")
     assert not refused.ok and refused.error == "no" and refused.data == {}
+
+
+def test_inputs_off_the_producers_sequence_are_refused_and_the_app_runs_on():
+    """A far-future step, a stale one, one off the producer's period or from the wrong source is
+    an error text: nothing is held for it and the steps run as if it never came."""
+    s = stepper(helm_period=5)
+    s.grant(9)
+    refused = [
+        ("desired", desired(10**9), "step 1000000000 ignored"),
+        ("desired", desired(5), "the next is step 0"),
+        ("desired", Desired(step=0, t=0.0, source="tap", u_d=1.0, psi_d=0.0), "only 'helm' publishes"),
+    ]
+    for leaf, message, text in refused:
+        assert text in s.offer(leaf, message)
+    assert s.offer("desired", desired(0)) is None
+    assert "the next is step 5" in s.offer("desired", desired(3))
+    assert "the next is step 5" in s.offer("desired", desired(0))
+    for k in range(6):
+        assert s.offer("state", state(k)) is None
+        assert "the next is step" in s.offer("state", state(k + 7))
+        s.run()
+    assert s.step == 5 and s.blocked() == ["desired"]
+    assert s.offer("desired", desired(5)) is None
+    assert inputs(s.run()) == [5]
+    assert s.inbox.held["desired"].step == 5 and len(s.inbox.held) == 2
