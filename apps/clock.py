@@ -6,7 +6,9 @@ polls), so it wakes a few hundred times a second rather than once per message.
 
 Control requests (messages on nearsub/<community>/control/clock) are answered on the requester's
 reply key:
-- status: the next step to complete and whether the clock is paused;
+- status: the next step to complete, its simulated time, whether the clock is paused, the warp
+  requested and the warp achieved (simulated seconds per wall second over the last 3 s);
+- warp: args.warp sets the pacing from the current step on (0: flat out);
 - pause: stop granting; answered when the apps have finished the step before the pause, with the
   step at which the mission will resume (args.at: pause before that step instead);
 - resume: grant again.

@@ -55,6 +55,10 @@ def wait_paused(community, timeout=30.0) -> dict:
     raise AssertionError(f"the clock of {community} did not pause")
 
 
+def subset(data: dict, *names: str) -> dict:
+    return {name: data[name] for name in names}
+
+
 @pytest.mark.parametrize("wait_for_the_pause", [False, True])
 def test_swap_at_a_fixed_step_keeps_the_trajectory(launches, community, wait_for_the_pause):
     """Swapping the helm for an identical one mid-mission must not change a single bit, whether
@@ -62,7 +66,7 @@ def test_swap_at_a_fixed_step_keeps_the_trajectory(launches, community, wait_for
     process = launches.start(ALPHA, "--set", f"name={community}", "--set", "pause_at_step=1000", "--until", "150")
     wait_registered(community)
     if wait_for_the_pause:
-        assert wait_paused(community) == {"step": 1000, "paused": True}
+        assert subset(wait_paused(community), "step", "paused") == {"step": 1000, "paused": True}
     swap = nearsub("swap", community, "helm", "--at-step", "1000", "--with", "behaviour=waypoints", "--json")
     assert swap.returncode == 0, swap.stderr
     result = json.loads(swap.stdout)
@@ -93,9 +97,41 @@ def test_swap_rejects_a_bad_setting_and_the_mission_goes_on(launches, community)
 def test_clock_pause_and_resume(launches, community):
     process = launches.start(ALPHA, "--set", f"name={community}", "--set", "pause_at_step=200", "--until", "20")
     wait_registered(community)
-    assert wait_paused(community) == {"step": 200, "paused": True}
+    assert subset(wait_paused(community), "step", "paused") == {"step": 200, "paused": True}
     assert process.poll() is None
     resumed = nearsub("clock", community, "resume")
     assert resumed.returncode == 0, resumed.stderr
     code, summary, err = finish(process)
     assert code == 0 and summary["steps"] == 400, err
+
+
+def test_warp_changes_at_run_time_is_reported_and_keeps_the_trajectory(launches, community):
+    process = launches.start(ALPHA, "--set", f"name={community}", "--set", "pause_at_step=200", "--until", "40")
+    wait_registered(community)
+    paused = wait_paused(community)
+    assert paused["warp"] == 0.0 and paused["t"] == pytest.approx(10.0)
+    assert nearsub("clock", community, "warp", "-1").returncode == 2
+    warp = nearsub("clock", community, "warp", "5")
+    assert warp.returncode == 0 and json.loads(warp.stdout)["warp"] == 5.0, warp.stderr
+    assert nearsub("clock", community, "resume").returncode == 0
+    mission = load_mission(ALPHA, [f"name={community}", "time_limit=40"])
+    deadline = time.monotonic() + mission.startup_timeout + mission.step_timeout
+    achieved = []
+    while time.monotonic() < deadline and process.poll() is None:
+        status = nearsub("clock", community, "status")
+        if status.returncode != 0:
+            break  # the mission ended between two polls
+        data = json.loads(status.stdout)
+        assert data["warp"] == 5.0
+        if data["achieved_warp"] is not None and data["step"] > 200:
+            achieved.append(data["achieved_warp"])
+            if achieved[-1] > 2.5:
+                break
+        time.sleep(0.2)
+    assert achieved and 2.5 < achieved[-1] <= 5.0 * 1.1, achieved  # paced, never ahead of the warp
+    code, summary, err = finish(process)
+    assert code == 0 and summary["steps"] == 800, err
+    reference = run_inprocess(build_cores(mission), Schedule(mission.periods()), mission.dt, mission.max_steps)
+    logged = per_topic(log_path(summary))
+    for leaf in ("state", "desired", "input"):
+        assert logged[f"remus100/{leaf}"] == [encode(m) for m in reference.topic(leaf)], leaf

@@ -76,6 +76,31 @@ def test_warp_n_grants_the_steps_whose_simulated_time_has_come():
     assert granted(core, 0.2) == 8
 
 
+def test_warp_changes_at_run_time_from_the_current_step_and_status_reports_it():
+    core = clock(warp=2.0)
+    assert granted(core, 0.0) == 0
+    assert core.on_control(request("status"), 0.0)[0][1].data["achieved_warp"] is None
+    for k in range(1, 41):  # 2 s of wall time at warp 2: the apps keep up
+        finish_up_to(core, core.granted)
+        granted(core, k * 0.05)
+    finish_up_to(core, core.granted)
+    [(_, status)] = core.on_control(request("status"), 2.0)
+    assert status.data["warp"] == 2.0 and status.data["achieved_warp"] == pytest.approx(2.0, rel=0.05)
+    assert status.data["step"] == 81
+    [(_, reply)] = core.on_control(request("warp", warp=10), 2.0)
+    assert reply.ok and reply.data["warp"] == 10.0
+    assert granted(core, 2.0) == 81  # rebased on the current step: it is due now, no jump
+    finish_up_to(core, 81)
+    assert granted(core, 2.05) == 81 + 10  # 0.05 s at warp 10 is 0.5 simulated seconds, 10 steps
+    for bad in (-1, "fast", float("nan"), float("inf"), None, True):
+        [(_, refused)] = core.on_control(request("warp", warp=bad), 2.2)
+        assert not refused.ok and "warp: must be a number >= 0" in refused.error
+    assert core.policy.warp == 10.0
+    [(_, reply)] = core.on_control(request("warp", warp=0), 2.2)
+    finish_up_to(core, core.granted)
+    assert reply.ok and granted(core, 2.2) == 91 + 20  # warp 0: a window ahead at once
+
+
 def test_pause_at_the_next_step_boundary_and_resume():
     core = clock()
     assert granted(core, 0.0) == 19
@@ -88,7 +113,8 @@ def test_pause_at_the_next_step_boundary_and_resume():
     [(to, reply)] = advance.replies
     assert to == "tool" and reply.ok and reply.data == {"step": 20}
     [(_, status)] = core.on_control(request("status"), 0.3)
-    assert status.data == {"step": 20, "paused": True}
+    achieved = 20 * DT / 0.3  # 20 steps since the first sample, at 0.0
+    assert status.data == {"step": 20, "t": 20 * DT, "paused": True, "warp": 0.0, "achieved_warp": achieved}
     assert granted(core, 0.4) is None  # paused: no grant
     [(_, resumed)] = core.on_control(request("resume"), 0.5)
     assert resumed.data == {"step": 20} and not core.paused

@@ -22,6 +22,7 @@ tested without processes (docs/design.md, "The lock-step protocol").
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass, field
 
 from nearsub.common.runtime.lifecycle import (
@@ -110,6 +111,29 @@ class GrantPolicy:
 # A control reply and the requester it goes to.
 Reply = tuple[str, ControlReply]
 
+# The achieved warp is measured over the last WARP_SPAN wall seconds, sampled every WARP_SAMPLE.
+WARP_SPAN = 3.0
+WARP_SAMPLE = 0.25
+
+
+@dataclass
+class WarpMeter:
+    """Simulated seconds per wall second over the last `WARP_SPAN` seconds of the run."""
+
+    dt: float
+    samples: deque = field(default_factory=lambda: deque(maxlen=round(WARP_SPAN / WARP_SAMPLE) + 1))
+
+    def record(self, now: float, completed: int) -> None:
+        if not self.samples or now - self.samples[-1][0] >= WARP_SAMPLE:
+            self.samples.append((now, completed))
+
+    def achieved(self, now: float, completed: int) -> float | None:
+        """None until a first sample lies in the past."""
+        if not self.samples or now <= self.samples[0][0]:
+            return None
+        then, before = self.samples[0]
+        return (completed - before) * self.dt / (now - then)
+
 
 @dataclass
 class Advance:
@@ -124,6 +148,9 @@ class Advance:
 class ClockCore:
     """The clock's state: progress, grants, pause and stall timer. `on_control` answers control
     requests (status, pause, resume); `advance` is called after each batch of mail.
+
+    `warp` sets the pacing at run time (0: as fast as the apps go), rebased on the current step
+    so that the simulated time does not jump; `status` reports the requested and the achieved warp.
 
     A pause takes effect at a step boundary: with pause before step P (the mission's
     `pause_at_step`, or a request's `at`, by default the step after the grant) the clock grants up
@@ -152,6 +179,7 @@ class ClockCore:
         self.paused = False
         self.owed_since: float | None = None  # when the apps last progressed on a granted step
         self.owed_completed = -1
+        self.meter = WarpMeter(dt)
 
     @property
     def step(self) -> int:
@@ -165,7 +193,14 @@ class ClockCore:
     def on_control(self, request: Control, now: float) -> list[Reply]:
         """The immediate answers to a control request (a pause is answered when it is reached)."""
         if request.cmd == "status":
-            return [self.reply(request, data={"step": self.step, "paused": self.paused})]
+            return [self.reply(request, data=self.status(now))]
+        if request.cmd == "warp":
+            warp = request.args.get("warp")
+            if not isinstance(warp, (int, float)) or isinstance(warp, bool) or not 0 <= warp < math.inf:
+                return [self.reply(request, ok=False, error=f"warp: must be a number >= 0, got {warp!r}")]
+            self.policy.warp = float(warp)
+            self.policy.rebase(now, self.step)
+            return [self.reply(request, data=self.status(now))]
         if request.cmd == "pause":
             at = request.args.get("at", self.granted + 1)
             if not isinstance(at, int) or isinstance(at, bool):
@@ -183,11 +218,24 @@ class ClockCore:
             return [self.reply(request, data={"step": self.step})]
         return [self.reply(request, ok=False, error=f"clock: unknown command {request.cmd!r}")]
 
+    def status(self, now: float) -> dict:
+        """The next step to complete, its simulated time, whether paused, and the warp requested
+        and achieved (None before the first measurement)."""
+        achieved = self.meter.achieved(now, self.progress.completed)
+        return {
+            "step": self.step,
+            "t": self.step * self.dt,
+            "paused": self.paused,
+            "warp": self.policy.warp,
+            "achieved_warp": achieved,
+        }
+
     def reply(self, request: Control, **answer) -> Reply:
         return request.reply_to, control_reply(request, "clock", self.step, self.dt, **answer)
 
     def advance(self, now: float) -> Advance:
         completed, end = self.progress.completed, self.progress.end
+        self.meter.record(now, completed)
         if end is None and completed >= self.max_steps - 1:
             end = time_limit_end(self.max_steps, self.dt)
         if end is not None and completed >= end.step:
