@@ -6,7 +6,9 @@ publishers, optionally take over from a running instance, publish "running", dec
 liveliness token. Then the loop drains the stream in arrival order:
 - a tick grants the steps up to the one it carries (runtime/clock.py);
 - an input is validated and offered to the stepper (malformed or out-of-protocol messages are
-  reported as error events and dropped; the app keeps running);
+  reported as rate-limited error events and dropped; the app keeps running); an operator's
+  desired state or input (source "operator", `nearsub tap pub`) overrides the producer's from
+  the next step this app runs, recorded in an info event with that step;
 - an end request (an Ack with `end`) from any app at step k: this app runs no step after k;
 - the stepper (runtime/lifecycle.py) then runs every step it may, and the shell publishes what
   it returns, in order;
@@ -33,7 +35,16 @@ from nearsub.apps.services import RemoteSurrogate
 from nearsub.common.mission.schema import MissionError, RunConfig, apply_overrides, mission_from_dict
 from nearsub.common.runtime import keys
 from nearsub.common.runtime.bus import Bus, DeadlineExceeded, Endpoints, deadline, signal_self
-from nearsub.common.runtime.lifecycle import ACK, EVENTS, Core, Schedule, Stepper, control_reply
+from nearsub.common.runtime.lifecycle import (
+    ACK,
+    EVENTS,
+    OPERATOR,
+    OPERATOR_TOPICS,
+    Core,
+    Schedule,
+    Stepper,
+    control_reply,
+)
 from nearsub.common.runtime.messages import (
     VEHICLE_TOPICS,
     Ack,
@@ -200,7 +211,11 @@ class AppShell:
     def on_input(self, leaf: str, payload: bytes) -> None:
         key = keys.vehicle_topic(self.community, self.vehicle, leaf)
         message = self.decode_or_report(payload, VEHICLE_TOPICS[leaf], key)
-        if message is not None:
+        if message is not None and message.source == OPERATOR and leaf in OPERATOR_TOPICS:
+            event = self.stepper.override(leaf, message)
+            print(f"[{self.instance}] {event.detail}", file=sys.stderr, flush=True)
+            self.publishers[EVENTS].put(encode(event))
+        elif message is not None:
             error = self.stepper.offer(leaf, message)
             if error:
                 self.report_error(error)

@@ -11,7 +11,7 @@ from nearsub.common.mission.cores import build_cores
 from nearsub.common.mission.schema import load_mission
 from nearsub.common.runtime.lifecycle import Schedule, run_inprocess
 from nearsub.common.runtime.logfile import read_log
-from nearsub.common.runtime.messages import encode
+from nearsub.common.runtime.messages import Desired, encode
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -135,3 +135,35 @@ def test_warp_changes_at_run_time_is_reported_and_keeps_the_trajectory(launches,
     logged = per_topic(log_path(summary))
     for leaf in ("state", "desired", "input"):
         assert logged[f"remus100/{leaf}"] == [encode(m) for m in reference.topic(leaf)], leaf
+
+
+def test_an_operator_steers_a_running_mission_and_the_log_replays_it(launches, community):
+    process = launches.start(ALPHA, "--set", f"name={community}", "--set", "pause_at_step=100", "--until", "30")
+    wait_registered(community)
+    wait_paused(community)
+    desired_key = f"nearsub/{community}/remus100/desired"
+    steer = nearsub("tap", "pub", desired_key, '{"u_d": 1.0, "psi_d": 0.5}')
+    assert steer.returncode == 0, steer.stderr
+    assert "pid: operator desired from step 100: u_d=1.0, psi_d=0.5" in steer.stdout
+    state = nearsub(
+        "tap", "pub", f"nearsub/{community}/remus100/state", '{"u": 1, "v": 0, "r": 0, "x": 0, "y": 0, "psi": 0}'
+    )
+    assert state.returncode == 2 and "state is accepted only from the app that computes it" in state.stderr
+    assert nearsub("clock", community, "resume").returncode == 0
+    code, summary, err = finish(process)
+    assert code == 0 and summary["outcome"] == "time_limit", err
+
+    records = read_log(log_path(summary)).records
+    events = [r.value() for r in records if r.topic.endswith("/events/pid-1")]
+    [override] = [e for e in events if e["detail"].startswith("operator")]
+    assert override["step"] == 100 and override["data"]["leaf"] == "desired"
+    replay = [("pid", "desired", override["step"], Desired(**override["data"]["message"]))]
+    mission = load_mission(ALPHA, [f"name={community}", "time_limit=30"])
+    cores, schedule = build_cores(mission), Schedule(mission.periods())
+    reference = run_inprocess(cores, schedule, mission.dt, mission.max_steps, operator=replay)
+    logged = per_topic(log_path(summary))
+    for leaf in ("state", "input"):
+        assert logged[f"remus100/{leaf}"] == [encode(m) for m in reference.topic(leaf)], leaf
+    unsteered = run_inprocess(build_cores(mission), schedule, mission.dt, mission.max_steps)
+    assert logged["remus100/state"][:101] == [encode(m) for m in unsteered.topic("state")][:101]
+    assert logged["remus100/state"][102] != encode(unsteered.topic("state")[102])  # it was steered

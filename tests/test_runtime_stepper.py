@@ -283,3 +283,46 @@ def test_inputs_off_the_producers_sequence_are_refused_and_the_app_runs_on():
     assert s.offer("desired", desired(5)) is None
     assert inputs(s.run()) == [5]
     assert s.inbox.held["desired"].step == 5 and len(s.inbox.held) == 2
+
+
+class MailPid(FakePid):
+    """A fake pid that also records the desired heading it was given at each step."""
+
+    def __init__(self):
+        super().__init__()
+        self.psi_d: list[tuple[int, float]] = []
+        self.desired = None
+
+    def new_mail(self, mail):
+        super().new_mail(mail)
+        self.desired = mail.get("desired", self.desired)
+
+    def iterate(self, step, t):
+        self.psi_d.append((step, self.desired.psi_d))
+        return super().iterate(step, t)
+
+
+def test_an_operator_override_holds_from_the_next_step_and_survives_a_handover():
+    steer = Desired(step=0, t=0.0, source="operator", u_d=1.0, psi_d=9.0)
+    old = stepper(MailPid())
+    old.grant(3)
+    drive(old, range(3))
+    event = old.override("desired", steer)
+    assert (event.kind, event.step, event.data["leaf"]) == ("info", 3, "desired")
+    assert event.detail == "operator desired from step 3: u_d=1.0, psi_d=9.0"
+    drive(old, range(3, 5))  # the pause before step 4
+    new = stepper(MailPid())
+    new.take_over(old.handover(4), 4)
+    new.grant(8)
+    new.run()
+    drive(new, range(5, 9))
+    seen = old.core.psi_d + new.core.psi_d
+    assert seen == [(0, 0.0), (1, 0.1), (2, 0.2), (3, 9.0), (4, 9.0), (5, 9.0), (6, 9.0), (7, 9.0), (8, 9.0)]
+
+    # The replay: the same override given with its step before the run.
+    replay = stepper(MailPid())
+    replay.override("desired", steer, 3)
+    replay.grant(8)
+    drive(replay, range(9))
+    assert replay.core.psi_d == seen
+    assert len(replay.overrides["desired"]) == 1
