@@ -4,7 +4,7 @@ import pytest
 
 from nearsub.common.runtime.clock import ClockCore
 from nearsub.common.runtime.lifecycle import ORDER, Schedule
-from nearsub.common.runtime.messages import Ack, Control, Desired, Input, State
+from nearsub.common.runtime.messages import Ack, Control
 
 DT = 0.05
 TIMEOUT = 2.0
@@ -18,17 +18,15 @@ def clock(warp=0.0, max_steps=1000, helm_period=5, pause_at_step=None, dt=DT) ->
 
 def finish(core: ClockCore, step: int, roles=ORDER) -> None:
     """The apps in `roles` that run at `step` finish it, each with its done output."""
-    t = step * core.dt
     for role in roles:
         if role not in core.progress.schedule.runners(step):
             continue
         if role == "helm":
-            core.progress.record_output("desired", Desired(step=step, t=t, source="helm", u_d=1.0, psi_d=0.0))
+            core.progress.record_output("desired", "helm", step)
         elif role == "pid":
-            core.progress.record_output("input", Input(step=step, t=t, source="pid", X_prop=0.0, delta_r=0.0))
+            core.progress.record_output("input", "pid", step)
         else:
-            x = State(step=step + 1, t=t + core.dt, source="sim", u=0.0, v=0.0, r=0.0, x=0.0, y=0.0, psi=0.0)
-            core.progress.record_output("state", x)
+            core.progress.record_output("state", "sim", step + 1)  # x_{k+1} is labelled k + 1
 
 
 def finish_up_to(core: ClockCore, last: int) -> None:
@@ -218,3 +216,15 @@ def test_the_most_severe_end_request_of_a_step_wins(first, second, expected):
     core.progress.record_ack(Ack(step=3, t=3 * DT, source="sim", end=second, reason=second))
     end = core.advance(0.2).end
     assert (end.outcome, end.reason, end.step) == (expected, expected, 4)
+
+
+def test_claims_of_steps_not_granted_are_ignored_and_hold_no_memory():
+    core = clock()
+    assert granted(core, 0.0) == 19
+    for step in range(20, 5020):  # forged done outputs, far beyond the grant
+        core.progress.record_output("input", "pid", step)
+        core.progress.record_output("state", "sim", step + 1)
+    core.progress.record_ack(Ack(step=10**9, t=0.0, source="helm"))
+    assert core.progress.done == {} and core.progress.completed == -1
+    finish_up_to(core, 19)
+    assert core.progress.completed == 19 and core.progress.done == {}

@@ -35,24 +35,27 @@ from nearsub.common.runtime.lifecycle import (
     first_end,
     time_limit_end,
 )
-from nearsub.common.runtime.messages import Ack, Control, ControlReply, Message, MissionEnd, Tick
+from nearsub.common.runtime.messages import Ack, Control, ControlReply, MissionEnd, Tick
 
 
 @dataclass
 class Progress:
-    """Which apps have finished which steps; `completed` is the last step every app finished."""
+    """Which apps have finished which steps; `completed` is the last step every app finished.
+    A step beyond `granted` cannot have been run: claims of it are ignored, so the bookkeeping
+    stays bounded whatever is published."""
 
     schedule: Schedule
     completed: int = -1
+    granted: int = -1
     done: dict[int, set[str]] = field(default_factory=dict)
     end: EndRequest | None = None
 
-    def record_output(self, leaf: str, message: Message) -> None:
-        """A lock-stepped output counts when it is its producer's done topic."""
-        role = message.source
+    def record_output(self, leaf: str, role: str, label: int) -> None:
+        """A lock-stepped output (its topic leaf, source and step label) counts when it is its
+        producer's done topic."""
         if DONE_TOPIC.get(role) != leaf:
             return
-        step = message.step - (self.schedule.periods[role] if leaf in NEXT_STEP_TOPICS else 0)
+        step = label - (self.schedule.periods[role] if leaf in NEXT_STEP_TOPICS else 0)
         if step >= 0:
             self._mark(role, step)
 
@@ -62,7 +65,7 @@ class Progress:
             self.end = first_end(self.end, EndRequest(ack.step, ack.end, ack.reason))
 
     def _mark(self, role: str, step: int) -> None:
-        if step > self.completed:
+        if self.completed < step <= self.granted:
             self.done.setdefault(step, set()).add(role)
         while set(self.schedule.runners(self.completed + 1)) <= self.done.get(self.completed + 1, set()):
             self.done.pop(self.completed + 1, None)
@@ -259,7 +262,7 @@ class ClockCore:
         limit = self.policy.limit(completed, now, self.pause_before, self.progress.end)
         window = self.policy.window
         if limit > self.granted and (limit - self.granted >= window // 2 or limit - completed < window):
-            self.granted = limit
+            self.granted = self.progress.granted = limit
             return Tick(step=limit, t=limit * self.dt, source="clock")
         return None
 
