@@ -1,11 +1,14 @@
 """The process shell of every lock-stepped app (helm, pid, sim): one lifecycle for all.
 
-Start-up: open the session, subscribe one FIFO stream to the community (nearsub/<c>/**), declare
+Start-up: open the session, subscribe one ordered stream to exactly what this app consumes (its
+input topics, the clock's traffic, its own control and reply keys; runtime/bus.py), declare
 publishers, optionally take over from a running instance, publish "running", declare the
 liveliness token. Then the loop drains the stream in arrival order:
 - a tick grants the steps up to the one it carries (runtime/clock.py);
 - an input is validated and offered to the stepper (malformed or out-of-protocol messages are
-  reported as error events and dropped; the app keeps running);
+  reported as rate-limited error events and dropped; the app keeps running); an operator's
+  desired state or input (source "operator", `nearsub tap pub`) overrides the producer's from
+  the next step this app runs, recorded in an info event with that step;
 - an end request (an Ack with `end`) from any app at step k: this app runs no step after k;
 - the stepper (runtime/lifecycle.py) then runs every step it may, and the shell publishes what
   it returns, in order;
@@ -21,8 +24,10 @@ from __future__ import annotations
 
 import argparse
 import ctypes
+import math
 import signal
 import sys
+import time
 import uuid
 from collections.abc import Callable
 
@@ -30,7 +35,16 @@ from nearsub.apps.services import RemoteSurrogate
 from nearsub.common.mission.schema import MissionError, RunConfig, apply_overrides, mission_from_dict
 from nearsub.common.runtime import keys
 from nearsub.common.runtime.bus import Bus, DeadlineExceeded, Endpoints, deadline, signal_self
-from nearsub.common.runtime.lifecycle import ACK, EVENTS, Core, Schedule, Stepper, control_reply
+from nearsub.common.runtime.lifecycle import (
+    ACK,
+    EVENTS,
+    OPERATOR,
+    OPERATOR_TOPICS,
+    Core,
+    Schedule,
+    Stepper,
+    control_reply,
+)
 from nearsub.common.runtime.messages import (
     VEHICLE_TOPICS,
     Ack,
@@ -47,6 +61,7 @@ from nearsub.common.runtime.messages import (
 from nearsub.common.surrogate.interaction import ServiceError
 
 HANDOVER_TIMEOUT = 30.0
+ERROR_INTERVAL = 1.0  # wall seconds between error events; the rejections in between are counted
 
 
 def prepare_process() -> None:
@@ -100,6 +115,8 @@ class AppShell:
         self.ack_prefix = keys.ack(c, "")
         self.handover_request: Control | None = None
         self.backlog: list[tuple[str, bytes]] = []
+        self.last_error_report = -math.inf
+        self.unreported_errors = 0
 
     # -- start-up -----------------------------------------------------------------------------
     def serve(self, takeover: str | None = None, resume_step: int | None = None) -> int:
@@ -114,7 +131,7 @@ class AppShell:
                 self.core, Schedule(mission.periods()), self.dt, mission.max_steps, recoverable=(ServiceError,)
             )
             self.input_of_key = {keys.vehicle_topic(c, self.vehicle, leaf): leaf for leaf in self.core.inputs}
-            self.stream = bus.stream(keys.everything(c))
+            self.stream = bus.inputs([*self.input_of_key, keys.clock_traffic(c), self.control_key, self.reply_key])
             bus.on_liveliness_lost(keys.alive(c, "launcher", "*"), signal_self())
             self.publishers = {
                 leaf: bus.publisher(keys.vehicle_topic(c, self.vehicle, leaf)) for leaf in self.core.outputs
@@ -129,6 +146,8 @@ class AppShell:
             try:
                 return self.loop()
             finally:
+                if self.unreported_errors:
+                    self.report_error("mission over", force=True)
                 self.publish_status("stopping")
 
     def take_over(self, old_instance: str, resume_step: int) -> None:
@@ -192,7 +211,11 @@ class AppShell:
     def on_input(self, leaf: str, payload: bytes) -> None:
         key = keys.vehicle_topic(self.community, self.vehicle, leaf)
         message = self.decode_or_report(payload, VEHICLE_TOPICS[leaf], key)
-        if message is not None:
+        if message is not None and message.source == OPERATOR and leaf in OPERATOR_TOPICS:
+            event = self.stepper.override(leaf, message)
+            print(f"[{self.instance}] {event.detail}", file=sys.stderr, flush=True)
+            self.publishers[EVENTS].put(encode(event))
+        elif message is not None:
             error = self.stepper.offer(leaf, message)
             if error:
                 self.report_error(error)
@@ -230,7 +253,16 @@ class AppShell:
             self.report_error(f"rejected message: {exc}")
             return None
 
-    def report_error(self, text: str) -> None:
+    def report_error(self, text: str, force: bool = False) -> None:
+        """An error event, at most one per ERROR_INTERVAL: a flood of bad messages must not flood
+        the events (nor cost the shell its pace); the next event counts those left unreported."""
+        now = time.monotonic()
+        if now - self.last_error_report < ERROR_INTERVAL and not force:
+            self.unreported_errors += 1
+            return
+        if self.unreported_errors:
+            text = f"{text} (and {self.unreported_errors} more errors since the last report)"
+        self.last_error_report, self.unreported_errors = now, 0
         print(f"[{self.instance}] error: {text}", file=sys.stderr, flush=True)
         step = self.stepper.step
         event = Event(step=step, t=step * self.dt, source=self.core.role, kind="error", detail=text)

@@ -11,7 +11,7 @@ from nearsub.common.mission.cores import build_cores
 from nearsub.common.mission.schema import load_mission
 from nearsub.common.runtime.lifecycle import Schedule, run_inprocess
 from nearsub.common.runtime.logfile import read_log
-from nearsub.common.runtime.messages import encode
+from nearsub.common.runtime.messages import Desired, encode
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -55,6 +55,10 @@ def wait_paused(community, timeout=30.0) -> dict:
     raise AssertionError(f"the clock of {community} did not pause")
 
 
+def subset(data: dict, *names: str) -> dict:
+    return {name: data[name] for name in names}
+
+
 @pytest.mark.parametrize("wait_for_the_pause", [False, True])
 def test_swap_at_a_fixed_step_keeps_the_trajectory(launches, community, wait_for_the_pause):
     """Swapping the helm for an identical one mid-mission must not change a single bit, whether
@@ -62,7 +66,7 @@ def test_swap_at_a_fixed_step_keeps_the_trajectory(launches, community, wait_for
     process = launches.start(ALPHA, "--set", f"name={community}", "--set", "pause_at_step=1000", "--until", "150")
     wait_registered(community)
     if wait_for_the_pause:
-        assert wait_paused(community) == {"step": 1000, "paused": True}
+        assert subset(wait_paused(community), "step", "paused") == {"step": 1000, "paused": True}
     swap = nearsub("swap", community, "helm", "--at-step", "1000", "--with", "behaviour=waypoints", "--json")
     assert swap.returncode == 0, swap.stderr
     result = json.loads(swap.stdout)
@@ -93,9 +97,76 @@ def test_swap_rejects_a_bad_setting_and_the_mission_goes_on(launches, community)
 def test_clock_pause_and_resume(launches, community):
     process = launches.start(ALPHA, "--set", f"name={community}", "--set", "pause_at_step=200", "--until", "20")
     wait_registered(community)
-    assert wait_paused(community) == {"step": 200, "paused": True}
+    assert subset(wait_paused(community), "step", "paused") == {"step": 200, "paused": True}
     assert process.poll() is None
     resumed = nearsub("clock", community, "resume")
     assert resumed.returncode == 0, resumed.stderr
     code, summary, err = finish(process)
     assert code == 0 and summary["steps"] == 400, err
+
+
+def test_warp_changes_at_run_time_is_reported_and_keeps_the_trajectory(launches, community):
+    process = launches.start(ALPHA, "--set", f"name={community}", "--set", "pause_at_step=200", "--until", "40")
+    wait_registered(community)
+    paused = wait_paused(community)
+    assert paused["warp"] == 0.0 and paused["t"] == pytest.approx(10.0)
+    assert nearsub("clock", community, "warp", "-1").returncode == 2
+    warp = nearsub("clock", community, "warp", "5")
+    assert warp.returncode == 0 and json.loads(warp.stdout)["warp"] == 5.0, warp.stderr
+    resumed = time.monotonic()  # the clock resumes after this
+    assert nearsub("clock", community, "resume").returncode == 0
+    mission = load_mission(ALPHA, [f"name={community}", "time_limit=40"])
+    deadline = time.monotonic() + mission.startup_timeout + mission.step_timeout
+    achieved = []
+    while time.monotonic() < deadline and process.poll() is None:
+        status = nearsub("clock", community, "status")
+        if status.returncode != 0:
+            break  # the mission ended between two polls
+        data = json.loads(status.stdout)
+        assert data["warp"] == 5.0
+        # Paced: never ahead of 100 steps per wall second since the resume (plus the grant window).
+        assert data["step"] - 200 <= (time.monotonic() - resumed) * 5.0 / mission.dt + 20
+        if data["achieved_warp"] is not None and data["step"] > 200:
+            achieved.append(data["achieved_warp"])
+            if achieved[-1] > 2.5:
+                break
+        time.sleep(0.2)
+    assert achieved and achieved[-1] > 2.5, achieved
+    code, summary, err = finish(process)
+    assert code == 0 and summary["steps"] == 800, err
+    reference = run_inprocess(build_cores(mission), Schedule(mission.periods()), mission.dt, mission.max_steps)
+    logged = per_topic(log_path(summary))
+    for leaf in ("state", "desired", "input"):
+        assert logged[f"remus100/{leaf}"] == [encode(m) for m in reference.topic(leaf)], leaf
+
+
+def test_an_operator_steers_a_running_mission_and_the_log_replays_it(launches, community):
+    process = launches.start(ALPHA, "--set", f"name={community}", "--set", "pause_at_step=100", "--until", "30")
+    wait_registered(community)
+    wait_paused(community)
+    desired_key = f"nearsub/{community}/remus100/desired"
+    steer = nearsub("tap", "pub", desired_key, '{"u_d": 1.0, "psi_d": 0.5}')
+    assert steer.returncode == 0, steer.stderr
+    assert "pid: operator desired from step 100: u_d=1.0, psi_d=0.5" in steer.stdout
+    state = nearsub(
+        "tap", "pub", f"nearsub/{community}/remus100/state", '{"u": 1, "v": 0, "r": 0, "x": 0, "y": 0, "psi": 0}'
+    )
+    assert state.returncode == 2 and "state is accepted only from the app that computes it" in state.stderr
+    assert nearsub("clock", community, "resume").returncode == 0
+    code, summary, err = finish(process)
+    assert code == 0 and summary["outcome"] == "time_limit", err
+
+    records = read_log(log_path(summary)).records
+    events = [r.value() for r in records if r.topic.endswith("/events/pid-1")]
+    [override] = [e for e in events if e["detail"].startswith("operator")]
+    assert override["step"] == 100 and override["data"]["leaf"] == "desired"
+    replay = [("pid", "desired", override["step"], Desired(**override["data"]["message"]))]
+    mission = load_mission(ALPHA, [f"name={community}", "time_limit=30"])
+    cores, schedule = build_cores(mission), Schedule(mission.periods())
+    reference = run_inprocess(cores, schedule, mission.dt, mission.max_steps, operator=replay)
+    logged = per_topic(log_path(summary))
+    for leaf in ("state", "input"):
+        assert logged[f"remus100/{leaf}"] == [encode(m) for m in reference.topic(leaf)], leaf
+    unsteered = run_inprocess(build_cores(mission), schedule, mission.dt, mission.max_steps)
+    assert logged["remus100/state"][:101] == [encode(m) for m in unsteered.topic("state")][:101]
+    assert logged["remus100/state"][102] != encode(unsteered.topic("state")[102])  # it was steered

@@ -4,7 +4,7 @@ import pytest
 
 from nearsub.common.runtime.clock import ClockCore
 from nearsub.common.runtime.lifecycle import ORDER, Schedule
-from nearsub.common.runtime.messages import Ack, Control, Desired, Input, State
+from nearsub.common.runtime.messages import Ack, Control
 
 DT = 0.05
 TIMEOUT = 2.0
@@ -18,17 +18,15 @@ def clock(warp=0.0, max_steps=1000, helm_period=5, pause_at_step=None, dt=DT) ->
 
 def finish(core: ClockCore, step: int, roles=ORDER) -> None:
     """The apps in `roles` that run at `step` finish it, each with its done output."""
-    t = step * core.dt
     for role in roles:
         if role not in core.progress.schedule.runners(step):
             continue
         if role == "helm":
-            core.progress.record_output("desired", Desired(step=step, t=t, source="helm", u_d=1.0, psi_d=0.0))
+            core.progress.record_output("desired", "helm", step)
         elif role == "pid":
-            core.progress.record_output("input", Input(step=step, t=t, source="pid", X_prop=0.0, delta_r=0.0))
+            core.progress.record_output("input", "pid", step)
         else:
-            x = State(step=step + 1, t=t + core.dt, source="sim", u=0.0, v=0.0, r=0.0, x=0.0, y=0.0, psi=0.0)
-            core.progress.record_output("state", x)
+            core.progress.record_output("state", "sim", step + 1)  # x_{k+1} is labelled k + 1
 
 
 def finish_up_to(core: ClockCore, last: int) -> None:
@@ -76,6 +74,31 @@ def test_warp_n_grants_the_steps_whose_simulated_time_has_come():
     assert granted(core, 0.2) == 8
 
 
+def test_warp_changes_at_run_time_from_the_current_step_and_status_reports_it():
+    core = clock(warp=2.0)
+    assert granted(core, 0.0) == 0
+    assert core.on_control(request("status"), 0.0)[0][1].data["achieved_warp"] is None
+    for k in range(1, 41):  # 2 s of wall time at warp 2: the apps keep up
+        finish_up_to(core, core.granted)
+        granted(core, k * 0.05)
+    finish_up_to(core, core.granted)
+    [(_, status)] = core.on_control(request("status"), 2.0)
+    assert status.data["warp"] == 2.0 and status.data["achieved_warp"] == pytest.approx(2.0, rel=0.05)
+    assert status.data["step"] == 81
+    [(_, reply)] = core.on_control(request("warp", warp=10), 2.0)
+    assert reply.ok and reply.data["warp"] == 10.0
+    assert granted(core, 2.0) == 81  # rebased on the current step: it is due now, no jump
+    finish_up_to(core, 81)
+    assert granted(core, 2.05) == 81 + 10  # 0.05 s at warp 10 is 0.5 simulated seconds, 10 steps
+    for bad in (-1, "fast", float("nan"), float("inf"), None, True):
+        [(_, refused)] = core.on_control(request("warp", warp=bad), 2.2)
+        assert not refused.ok and "warp: must be a number >= 0" in refused.error
+    assert core.policy.warp == 10.0
+    [(_, reply)] = core.on_control(request("warp", warp=0), 2.2)
+    finish_up_to(core, core.granted)
+    assert reply.ok and granted(core, 2.2) == 91 + 20  # warp 0: a window ahead at once
+
+
 def test_pause_at_the_next_step_boundary_and_resume():
     core = clock()
     assert granted(core, 0.0) == 19
@@ -88,7 +111,8 @@ def test_pause_at_the_next_step_boundary_and_resume():
     [(to, reply)] = advance.replies
     assert to == "tool" and reply.ok and reply.data == {"step": 20}
     [(_, status)] = core.on_control(request("status"), 0.3)
-    assert status.data == {"step": 20, "paused": True}
+    achieved = 20 * DT / 0.3  # 20 steps since the first sample, at 0.0
+    assert status.data == {"step": 20, "t": 20 * DT, "paused": True, "warp": 0.0, "achieved_warp": achieved}
     assert granted(core, 0.4) is None  # paused: no grant
     [(_, resumed)] = core.on_control(request("resume"), 0.5)
     assert resumed.data == {"step": 20} and not core.paused
@@ -192,3 +216,15 @@ def test_the_most_severe_end_request_of_a_step_wins(first, second, expected):
     core.progress.record_ack(Ack(step=3, t=3 * DT, source="sim", end=second, reason=second))
     end = core.advance(0.2).end
     assert (end.outcome, end.reason, end.step) == (expected, expected, 4)
+
+
+def test_claims_of_steps_not_granted_are_ignored_and_hold_no_memory():
+    core = clock()
+    assert granted(core, 0.0) == 19
+    for step in range(20, 5020):  # forged done outputs, far beyond the grant
+        core.progress.record_output("input", "pid", step)
+        core.progress.record_output("state", "sim", step + 1)
+    core.progress.record_ack(Ack(step=10**9, t=0.0, source="helm"))
+    assert core.progress.done == {} and core.progress.completed == -1
+    finish_up_to(core, 19)
+    assert core.progress.completed == 19 and core.progress.done == {}

@@ -258,3 +258,71 @@ def test_a_control_reply_answers_its_request():
     assert reply.t == pytest.approx(0.7)
     refused = control_reply(request, "helm-1", 7, DT, ok=False, error="no")
     assert not refused.ok and refused.error == "no" and refused.data == {}
+
+
+def test_inputs_off_the_producers_sequence_are_refused_and_the_app_runs_on():
+    """A far-future step, a stale one, one off the producer's period or from the wrong source is
+    an error text: nothing is held for it and the steps run as if it never came."""
+    s = stepper(helm_period=5)
+    s.grant(9)
+    refused = [
+        ("desired", desired(10**9), "step 1000000000 ignored"),
+        ("desired", desired(5), "the next is step 0"),
+        ("desired", Desired(step=0, t=0.0, source="tap", u_d=1.0, psi_d=0.0), "only 'helm' publishes"),
+    ]
+    for leaf, message, text in refused:
+        assert text in s.offer(leaf, message)
+    assert s.offer("desired", desired(0)) is None
+    assert "the next is step 5" in s.offer("desired", desired(3))
+    assert "the next is step 5" in s.offer("desired", desired(0))
+    for k in range(6):
+        assert s.offer("state", state(k)) is None
+        assert "the next is step" in s.offer("state", state(k + 7))
+        s.run()
+    assert s.step == 5 and s.blocked() == ["desired"]
+    assert s.offer("desired", desired(5)) is None
+    assert inputs(s.run()) == [5]
+    assert s.inbox.held["desired"].step == 5 and len(s.inbox.held) == 2
+
+
+class MailPid(FakePid):
+    """A fake pid that also records the desired heading it was given at each step."""
+
+    def __init__(self):
+        super().__init__()
+        self.psi_d: list[tuple[int, float]] = []
+        self.desired = None
+
+    def new_mail(self, mail):
+        super().new_mail(mail)
+        self.desired = mail.get("desired", self.desired)
+
+    def iterate(self, step, t):
+        self.psi_d.append((step, self.desired.psi_d))
+        return super().iterate(step, t)
+
+
+def test_an_operator_override_holds_from_the_next_step_and_survives_a_handover():
+    steer = Desired(step=0, t=0.0, source="operator", u_d=1.0, psi_d=9.0)
+    old = stepper(MailPid())
+    old.grant(3)
+    drive(old, range(3))
+    event = old.override("desired", steer)
+    assert (event.kind, event.step, event.data["leaf"]) == ("info", 3, "desired")
+    assert event.detail == "operator desired from step 3: u_d=1.0, psi_d=9.0"
+    drive(old, range(3, 5))  # the pause before step 4
+    new = stepper(MailPid())
+    new.take_over(old.handover(4), 4)
+    new.grant(8)
+    new.run()
+    drive(new, range(5, 9))
+    seen = old.core.psi_d + new.core.psi_d
+    assert seen == [(0, 0.0), (1, 0.1), (2, 0.2), (3, 9.0), (4, 9.0), (5, 9.0), (6, 9.0), (7, 9.0), (8, 9.0)]
+
+    # The replay: the same override given with its step before the run.
+    replay = stepper(MailPid())
+    replay.override("desired", steer, 3)
+    replay.grant(8)
+    drive(replay, range(9))
+    assert replay.core.psi_d == seen
+    assert len(replay.overrides["desired"]) == 1

@@ -50,33 +50,50 @@ def inprocess_rate(mission_path: Path) -> tuple[float, int]:
     return result.steps / (time.perf_counter() - start), result.steps
 
 
-def pipeline_rate(mission_path: Path, log_dir: str, index: int) -> tuple[float, int, str]:
+def children_cpu() -> float:
+    """CPU seconds (user + system) of every child process that has ended."""
+    import resource
+
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
+def pipeline_rate(mission_path: Path, log_dir: str, index: int, *overrides: str) -> tuple[float, int, str, float]:
+    """Steps per second of one launch, its steps and outcome, and the CPU seconds of all the
+    processes it started."""
     from nearsub.common.mission.schema import load_mission
 
     from .launcher import Launcher
 
-    mission = load_mission(mission_path, [f"name=bench{index}_{int(time.time())}", "warp=0"])
+    mission = load_mission(mission_path, [f"name=bench{index}_{int(time.time())}", "warp=0", *overrides])
+    cpu = children_cpu()
     summary = Launcher(mission, str(mission_path), log_dir, quiet=True).run()
-    return summary.steps_per_second, summary.steps, summary.outcome
+    return summary.steps_per_second, summary.steps, summary.outcome, children_cpu() - cpu
 
 
 def bench_pipeline(args) -> int:
     mission_path = Path(args.mission) if args.mission else DEFAULT_MISSION
-    rates = []
+    rates, cpus = [], []
     with tempfile.TemporaryDirectory() as log_dir:
+        # A launch of a few steps costs the start-up and shutdown: the CPU per step is what a
+        # full run costs beyond it.
+        _, short_steps, _, fixed_cpu = pipeline_rate(mission_path, log_dir, args.repeats, "time_limit=0.5")
         for index in range(args.repeats):
-            rate, steps, outcome = pipeline_rate(mission_path, log_dir, index)
+            rate, steps, outcome, cpu = pipeline_rate(mission_path, log_dir, index)
             if outcome not in ("completed", "time_limit"):
                 print(f"nearsub bench: run {index} ended with {outcome}", file=sys.stderr)
                 return 1
             rates.append(rate)
+            cpus.append((cpu - fixed_cpu) * 1e3 / max(steps - short_steps, 1))
             if not args.json:
-                print(f"  multi-process run {index + 1}: {steps} steps, {rate:.0f} steps/s", file=sys.stderr)
+                line = f"{steps} steps, {rate:.0f} steps/s, {cpus[-1]:.2f} CPU-ms per step (all processes)"
+                print(f"  multi-process run {index + 1}: {line}", file=sys.stderr)
     local = [inprocess_rate(mission_path)[0] for _ in range(args.repeats)]
     result = {
         "mission": str(mission_path),
         "repeats": args.repeats,
         "pipeline_steps_per_second": {"median": statistics.median(rates), "min": min(rates), "max": max(rates)},
+        "pipeline_cpu_ms_per_step": {"median": statistics.median(cpus), "min": min(cpus), "max": max(cpus)},
         "inprocess_steps_per_second": {"median": statistics.median(local)},
         "ratio_inprocess_over_pipeline": statistics.median(local) / statistics.median(rates),
         "target_steps_per_second": 1000,
@@ -87,6 +104,8 @@ def bench_pipeline(args) -> int:
         p = result["pipeline_steps_per_second"]
         spread = f"min {p['min']:.0f}, max {p['max']:.0f}"
         print(f"lock-stepped pipeline: median {p['median']:.0f} steps/s ({spread}) over {args.repeats} runs")
+        c = result["pipeline_cpu_ms_per_step"]
+        print(f"CPU per step:          median {c['median']:.2f} ms over all processes (start-up and shutdown apart)")
         print(f"in-process loop:       median {result['inprocess_steps_per_second']['median']:.0f} steps/s")
         print(f"in-process / pipeline: {result['ratio_inprocess_over_pipeline']:.1f}x   (target: >= 1000 steps/s)")
     return 0

@@ -165,11 +165,22 @@ def _print_rates(times, as_json: bool) -> None:
 
 def tap_pub(args) -> int:
     """Publish one message by hand (uPokeDB). It is validated against the topic's schema unless
-    --no-validate; --raw-hex sends arbitrary bytes (for fault injection)."""
+    --no-validate; --raw-hex sends arbitrary bytes (for fault injection).
+
+    On a vehicle topic only the operator's inputs are accepted (docs/design.md, "Steering a
+    running mission"): a desired state, which the pid follows instead of the helm's, or an input,
+    which the sim applies instead of the pid's, from the next step the consumer runs to the end of
+    the mission or the next override. They go out with source "operator", and the command waits
+    for the consumer's event that records the step. Other vehicle topics are refused (exit 2):
+    their only accepted source is the app that computes them."""
     import msgpack
 
-    from nearsub.common.runtime.messages import MessageError, decode, encode, model_for_key
+    from nearsub.common.runtime.lifecycle import OPERATOR, OPERATOR_TOPICS
+    from nearsub.common.runtime.messages import VEHICLE_TOPICS, MessageError, decode, encode, model_for_key
 
+    parts = args.key.split("/")
+    leaf = parts[3] if len(parts) == 4 and parts[3] in VEHICLE_TOPICS else None
+    operator = leaf in OPERATOR_TOPICS and args.raw_hex is None and not args.no_validate
     if args.raw_hex is not None:
         payload = bytes.fromhex(args.raw_hex)
     else:
@@ -185,16 +196,57 @@ def tap_pub(args) -> int:
             if model is None:
                 print(f"nearsub tap pub: no message schema for key {args.key!r}", file=sys.stderr)
                 return 2
-            fields = {"step": 0, "t": 0.0, "source": "tap", **fields}
+            fields = {"step": 0, "t": 0.0, "source": OPERATOR if operator else "tap", **fields}
             try:
-                payload = encode(decode(msgpack.packb(fields), model, args.key))
+                message = decode(msgpack.packb(fields), model, args.key)
             except MessageError as exc:
                 print(f"nearsub tap pub: {exc}", file=sys.stderr)
                 return 2
+            if leaf is not None and not operator:
+                print(
+                    f"nearsub tap pub: {leaf} is accepted only from the app that computes it; an operator may "
+                    f"set {' or '.join(OPERATOR_TOPICS)} (docs/design.md, 'Steering a running mission')",
+                    file=sys.stderr,
+                )
+                return 2
+            if operator and message.source != OPERATOR:
+                print(f"nearsub tap pub: an operator's {leaf} goes out with source {OPERATOR!r}", file=sys.stderr)
+                return 2
+            payload = encode(message)
     bus, _ = open_bus(args, args.key)
+    from nearsub.common.runtime.bus import Mailbox
+
     with bus:
+        mailbox = Mailbox()
+        if operator:
+            bus.subscribe(f"{'/'.join(parts[:2])}/events/*", mailbox)
         # A fresh session drops data put before it knows a subscriber (docs/design.md, "Transport").
         if not bus.put_when_matched(args.key, payload, wait=5.0):
+            if operator:
+                print(f"nearsub tap pub: nobody consumes {args.key} (is the mission running?)", file=sys.stderr)
+                return 1
             print(f"nearsub tap pub: nobody subscribes to {args.key}; published anyway", file=sys.stderr)
+        if operator:
+            return _confirm_override(mailbox, leaf)
         time.sleep(0.1)  # let the session flush before it closes
     return 0
+
+
+def _confirm_override(mailbox, leaf: str, timeout: float = 10.0) -> int:
+    """Wait for the consumer's event recording the override; print its step."""
+    from nearsub.common.runtime.messages import Event, MessageError, decode
+
+    end = time.monotonic() + timeout
+    while (remaining := end - time.monotonic()) > 0:
+        mail = mailbox.get(timeout=remaining)
+        if mail is None:
+            break
+        try:
+            event = decode(mail.payload, Event, mail.key)
+        except MessageError:
+            continue
+        if event.kind == "info" and event.data.get("leaf") == leaf and event.detail.startswith("operator"):
+            print(f"{event.source}: {event.detail}")
+            return 0
+    print(f"nearsub tap pub: no app confirmed the {leaf} override within {timeout:g} s", file=sys.stderr)
+    return 1

@@ -7,12 +7,16 @@ Rules it enforces for every app:
 - apps receive through Zenoh FIFO channels drained by their own main loop (`Stream`); nothing
   blocks or calls Zenoh inside a callback.
 
-Why one wide `Stream` per app rather than a subscriber per topic: a Python callback per sample
-costs about 27 us of CPU (the receive thread must take the GIL), a FifoChannel about 1.5 us
-(measured on this 2-core machine), and a FifoChannel cannot be waited on together with another.
-So each lock-stepped app drains a single FIFO subscription that covers every key it needs
-(nearsub/<community>/**), in arrival order, and filters by key. Deadlines use SIGALRM
-(`deadline`), which interrupts a blocked `recv` at once.
+Why a `Stream` holds exactly the keys an app consumes (docs/design.md, "Transport"): Zenoh key
+expressions have no alternation and a FifoChannel cannot be waited on together with another, so
+one wide FifoChannel on nearsub/<community>/** woke every app for every message (about 2.5 per
+step each, most of them filtered out again). A `Stream` is instead fed by one subscription per
+key expression the app consumes, each a direct callback (run on Zenoh's receive thread) that
+appends the sample to one `queue.SimpleQueue`. Zenoh dispatches one link's samples on one thread
+in arrival order, so the queue keeps the order of a single subscription across keys; it never
+drops a sample. The key expressions must not overlap (a sample matching two would be queued
+twice). The logger, which sees everything, keeps one FifoChannel (`Bus.stream`); apps use `Bus.inputs`. Deadlines use
+SIGALRM (`deadline`), which interrupts a blocked `recv` at once.
 
 The launcher and the tools, which see little traffic, use a `Mailbox`: direct callbacks that
 append to a `queue.SimpleQueue`, which allows timeouts and mixes samples, queries and liveliness.
@@ -176,17 +180,29 @@ def deadline(seconds: float):
 
 
 class Stream:
-    """One FIFO subscription drained by the app's main loop: yields (key, payload)."""
+    """Samples of one or more subscriptions in arrival order, drained by the app's main loop:
+    yields (key, payload). See the module docstring for why and how order is kept."""
 
-    def __init__(self, handler):
+    def __init__(self, handler=None):
         self._handler = handler
+        self._queue: queue.SimpleQueue[zenoh.Sample] = queue.SimpleQueue()
+
+    def put(self, sample: zenoh.Sample) -> None:
+        """The subscription callback: queue the sample, nothing else (Zenoh's receive thread)."""
+        self._queue.put(sample)
 
     def recv(self) -> tuple[str, bytes]:
-        sample = self._handler.recv()
+        sample = self._handler.recv() if self._handler is not None else self._queue.get()
         return str(sample.key_expr), sample.payload.to_bytes()
 
     def try_recv(self) -> tuple[str, bytes] | None:
-        sample = self._handler.try_recv()
+        if self._handler is not None:
+            sample = self._handler.try_recv()
+        else:
+            try:
+                sample = self._queue.get_nowait()
+            except queue.Empty:
+                sample = None
         if sample is None:
             return None
         return str(sample.key_expr), sample.payload.to_bytes()
@@ -343,12 +359,21 @@ class Bus:
             pub.undeclare()
 
     def stream(self, key: str, capacity: int = 8192, lossy: bool = False) -> Stream:
-        """A FIFO subscription. Lossless (back-pressure) by default; `lossy` keeps only the newest
-        `capacity` samples, for displays that must never slow the mission down."""
+        """One FIFO-channel subscription (the logger's view of everything). Lossless
+        (back-pressure) by default; `lossy` keeps only the newest `capacity` samples, for displays
+        that must never slow the mission down."""
         handler = zenoh.handlers.RingChannel(capacity) if lossy else zenoh.handlers.FifoChannel(capacity)
         sub = self._session.declare_subscriber(key, handler)
         self._keep.append(sub)
         return Stream(sub.handler)
+
+    def inputs(self, keys: Iterable[str]) -> Stream:
+        """One ordered, lossless stream of the samples under `keys` (non-overlapping key
+        expressions), and nothing else."""
+        stream = Stream()
+        for key in keys:
+            self._keep.append(self._session.declare_subscriber(key, _direct(stream.put)))
+        return stream
 
     def on_liveliness_lost(self, key: str, callback: Callable[[Any], None]) -> None:
         """Call `callback(sample)` (from Zenoh's thread) on liveliness changes under `key`."""

@@ -22,6 +22,7 @@ tested without processes (docs/design.md, "The lock-step protocol").
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass, field
 
 from nearsub.common.runtime.lifecycle import (
@@ -34,24 +35,27 @@ from nearsub.common.runtime.lifecycle import (
     first_end,
     time_limit_end,
 )
-from nearsub.common.runtime.messages import Ack, Control, ControlReply, Message, MissionEnd, Tick
+from nearsub.common.runtime.messages import Ack, Control, ControlReply, MissionEnd, Tick
 
 
 @dataclass
 class Progress:
-    """Which apps have finished which steps; `completed` is the last step every app finished."""
+    """Which apps have finished which steps; `completed` is the last step every app finished.
+    A step beyond `granted` cannot have been run: claims of it are ignored, so the bookkeeping
+    stays bounded whatever is published."""
 
     schedule: Schedule
     completed: int = -1
+    granted: int = -1
     done: dict[int, set[str]] = field(default_factory=dict)
     end: EndRequest | None = None
 
-    def record_output(self, leaf: str, message: Message) -> None:
-        """A lock-stepped output counts when it is its producer's done topic."""
-        role = message.source
+    def record_output(self, leaf: str, role: str, label: int) -> None:
+        """A lock-stepped output (its topic leaf, source and step label) counts when it is its
+        producer's done topic."""
         if DONE_TOPIC.get(role) != leaf:
             return
-        step = message.step - (self.schedule.periods[role] if leaf in NEXT_STEP_TOPICS else 0)
+        step = label - (self.schedule.periods[role] if leaf in NEXT_STEP_TOPICS else 0)
         if step >= 0:
             self._mark(role, step)
 
@@ -61,7 +65,7 @@ class Progress:
             self.end = first_end(self.end, EndRequest(ack.step, ack.end, ack.reason))
 
     def _mark(self, role: str, step: int) -> None:
-        if step > self.completed:
+        if self.completed < step <= self.granted:
             self.done.setdefault(step, set()).add(role)
         while set(self.schedule.runners(self.completed + 1)) <= self.done.get(self.completed + 1, set()):
             self.done.pop(self.completed + 1, None)
@@ -110,6 +114,29 @@ class GrantPolicy:
 # A control reply and the requester it goes to.
 Reply = tuple[str, ControlReply]
 
+# The achieved warp is measured over the last WARP_SPAN wall seconds, sampled every WARP_SAMPLE.
+WARP_SPAN = 3.0
+WARP_SAMPLE = 0.25
+
+
+@dataclass
+class WarpMeter:
+    """Simulated seconds per wall second over the last `WARP_SPAN` seconds of the run."""
+
+    dt: float
+    samples: deque = field(default_factory=lambda: deque(maxlen=round(WARP_SPAN / WARP_SAMPLE) + 1))
+
+    def record(self, now: float, completed: int) -> None:
+        if not self.samples or now - self.samples[-1][0] >= WARP_SAMPLE:
+            self.samples.append((now, completed))
+
+    def achieved(self, now: float, completed: int) -> float | None:
+        """None until a first sample lies in the past."""
+        if not self.samples or now <= self.samples[0][0]:
+            return None
+        then, before = self.samples[0]
+        return (completed - before) * self.dt / (now - then)
+
 
 @dataclass
 class Advance:
@@ -124,6 +151,9 @@ class Advance:
 class ClockCore:
     """The clock's state: progress, grants, pause and stall timer. `on_control` answers control
     requests (status, pause, resume); `advance` is called after each batch of mail.
+
+    `warp` sets the pacing at run time (0: as fast as the apps go), rebased on the current step
+    so that the simulated time does not jump; `status` reports the requested and the achieved warp.
 
     A pause takes effect at a step boundary: with pause before step P (the mission's
     `pause_at_step`, or a request's `at`, by default the step after the grant) the clock grants up
@@ -152,6 +182,7 @@ class ClockCore:
         self.paused = False
         self.owed_since: float | None = None  # when the apps last progressed on a granted step
         self.owed_completed = -1
+        self.meter = WarpMeter(dt)
 
     @property
     def step(self) -> int:
@@ -165,7 +196,14 @@ class ClockCore:
     def on_control(self, request: Control, now: float) -> list[Reply]:
         """The immediate answers to a control request (a pause is answered when it is reached)."""
         if request.cmd == "status":
-            return [self.reply(request, data={"step": self.step, "paused": self.paused})]
+            return [self.reply(request, data=self.status(now))]
+        if request.cmd == "warp":
+            warp = request.args.get("warp")
+            if not isinstance(warp, (int, float)) or isinstance(warp, bool) or not 0 <= warp < math.inf:
+                return [self.reply(request, ok=False, error=f"warp: must be a number >= 0, got {warp!r}")]
+            self.policy.warp = float(warp)
+            self.policy.rebase(now, self.step)
+            return [self.reply(request, data=self.status(now))]
         if request.cmd == "pause":
             at = request.args.get("at", self.granted + 1)
             if not isinstance(at, int) or isinstance(at, bool):
@@ -183,11 +221,24 @@ class ClockCore:
             return [self.reply(request, data={"step": self.step})]
         return [self.reply(request, ok=False, error=f"clock: unknown command {request.cmd!r}")]
 
+    def status(self, now: float) -> dict:
+        """The next step to complete, its simulated time, whether paused, and the warp requested
+        and achieved (None before the first measurement)."""
+        achieved = self.meter.achieved(now, self.progress.completed)
+        return {
+            "step": self.step,
+            "t": self.step * self.dt,
+            "paused": self.paused,
+            "warp": self.policy.warp,
+            "achieved_warp": achieved,
+        }
+
     def reply(self, request: Control, **answer) -> Reply:
         return request.reply_to, control_reply(request, "clock", self.step, self.dt, **answer)
 
     def advance(self, now: float) -> Advance:
         completed, end = self.progress.completed, self.progress.end
+        self.meter.record(now, completed)
         if end is None and completed >= self.max_steps - 1:
             end = time_limit_end(self.max_steps, self.dt)
         if end is not None and completed >= end.step:
@@ -211,7 +262,7 @@ class ClockCore:
         limit = self.policy.limit(completed, now, self.pause_before, self.progress.end)
         window = self.policy.window
         if limit > self.granted and (limit - self.granted >= window // 2 or limit - completed < window):
-            self.granted = limit
+            self.granted = self.progress.granted = limit
             return Tick(step=limit, t=limit * self.dt, source="clock")
         return None
 

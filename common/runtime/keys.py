@@ -21,6 +21,15 @@ def ack(community: str, app: str) -> str:
     return f"{ROOT}/{community}/clock/ack/{app}"
 
 
+def clock_traffic(community: str) -> str:
+    """The clock's ticks, the apps' acks and the mission end: what every lock-stepped app hears."""
+    return f"{ROOT}/{community}/clock/**"
+
+
+def all_acks(community: str) -> str:
+    return f"{ROOT}/{community}/clock/ack/*"
+
+
 def mission_end(community: str) -> str:
     return f"{ROOT}/{community}/clock/end"
 
@@ -60,4 +69,5 @@ def launcher_control(community: str) -> str:
 
 
 def everything(community: str) -> str:
+    """The whole community: only the logger subscribes to it."""
     return f"{ROOT}/{community}/**"

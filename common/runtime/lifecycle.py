@@ -45,6 +45,11 @@ PRODUCER = {"desired": "helm", "input": "pid", "state": "sim"}
 # sim on divergence); that halves the messages per step (see runtime/clock.py).
 DONE_TOPIC = {"helm": "desired", "pid": "input", "sim": "state"}
 
+# The source name of a person steering a running mission (`nearsub tap pub`), and the topics an
+# operator may override: the helm's desired state (at the pid) and the pid's input (at the sim).
+OPERATOR = "operator"
+OPERATOR_TOPICS = ("desired", "input")
+
 # Topics labelled with the step they lead to (the sim's x_{k+1} after step k).
 NEXT_STEP_TOPICS = frozenset({"state"})
 
@@ -96,9 +101,11 @@ class Schedule:
 class Inbox:
     """The latest accepted message per input topic of one app, and what its core has seen.
 
-    `offer` accepts a message only from the topic's producer and only with a label newer than
-    the one held; anything else is returned as an error text (never raised), so a receiver can
-    report it and carry on.
+    `offer` accepts a message only from the topic's producer and only with the next label in
+    the producer's sequence (its period apart from the one held; the first one the label of the
+    app's current step). Anything else, a stale label, a label from the far future or one off the
+    producer's period, is returned as an error text (never raised), so a receiver can report it
+    and carry on; the inbox holds one message per topic whatever it is offered.
     """
 
     def __init__(self, inputs: tuple[str, ...], schedule: Schedule):
@@ -107,13 +114,19 @@ class Inbox:
         self.held: dict[str, Message] = {}
         self.delivered: dict[str, int] = {}
 
-    def offer(self, leaf: str, message: Message) -> str | None:
+    def offer(self, leaf: str, message: Message, step: int) -> str | None:
+        """Offer an input to an app that is about to run `step`."""
         producer = PRODUCER[leaf]
         if message.source != producer:
             return f"{leaf} from source {message.source!r} ignored: only {producer!r} publishes {leaf}"
         held = self.held.get(leaf)
-        if held is not None and message.step <= held.step:
-            return f"{leaf} with step {message.step} ignored: already holding step {held.step}"
+        if held is None:
+            expected = self.schedule.expected_label(leaf, step)
+        else:
+            expected = held.step + self.schedule.periods[producer]
+        if message.step != expected:
+            holding = "nothing" if held is None else f"step {held.step}"
+            return f"{leaf} with step {message.step} ignored: holding {holding}, the next is step {expected}"
         self.held[leaf] = message
         return None
 
@@ -208,10 +221,34 @@ class Stepper:
         self.stop_after = max_steps - 1
         self.started = False
         self.step = 0  # the next step this app will run
+        self.overrides: dict[str, list[tuple[int, Message]]] = {}  # leaf -> [(from step, message)]
 
     def offer(self, leaf: str, message: Message) -> str | None:
         """Accept an input (see `Inbox.offer`); an error text when it is refused."""
-        return self.inbox.offer(leaf, message)
+        return self.inbox.offer(leaf, message, self.step)
+
+    def override(self, leaf: str, message: Message, from_step: int | None = None) -> Event:
+        """An operator's value for input `leaf`, which the core receives in place of the
+        producer's from `from_step` (by default the next step this app runs) to the end of the
+        mission or the next override. Returns the event that records it, with its step, so the
+        run can be replayed (`run_inprocess(operator=...)`)."""
+        step = self.step if from_step is None else from_step
+        pending = [(k, m) for k, m in self.overrides.get(leaf, []) if k < step]
+        self.overrides[leaf] = [*pending, (step, message)]
+        fields = message.model_dump(mode="json", exclude={"schema_version", "step", "t", "source"})
+        detail = f"operator {leaf} from step {step}: " + ", ".join(f"{k}={v}" for k, v in fields.items())
+        data = {"leaf": leaf, "step": step, "message": message.model_dump(mode="json")}
+        return Event(step=step, t=step * self.dt, source=self.core.role, kind="info", detail=detail, data=data)
+
+    def _overridden(self, step: int) -> dict[str, Message]:
+        """The operator values in force at `step`; the ones they replace are forgotten."""
+        mail = {}
+        for leaf, entries in self.overrides.items():
+            due = [entry for entry in entries if entry[0] <= step]
+            if due:
+                mail[leaf] = due[-1][1]
+                self.overrides[leaf] = [due[-1], *(entry for entry in entries if entry[0] > step)]
+        return mail
 
     def grant(self, step: int) -> None:
         self.granted = max(self.granted, step)
@@ -242,7 +279,7 @@ class Stepper:
     def _iterate(self, step: int) -> list[tuple[str, Message]]:
         role = self.core.role
         t = step * self.dt
-        self.core.new_mail(self.inbox.take(step))
+        self.core.new_mail(self.inbox.take(step) | self._overridden(step))
         try:
             result = self.core.iterate(step, t)
         except self.recoverable as exc:
@@ -264,7 +301,9 @@ class Stepper:
         if self.step != step or self.inbox.waiting_for(step):
             return None
         held = {leaf: encode(message) for leaf, message in self.inbox.held.items()}
-        return msgpack.packb({"progress": self.core.progress(), "held": held, "delivered": self.inbox.delivered})
+        overrides = {leaf: [(k, encode(m)) for k, m in entries] for leaf, entries in self.overrides.items()}
+        state = {"progress": self.core.progress(), "held": held, "delivered": self.inbox.delivered}
+        return msgpack.packb(state | {"overrides": overrides})
 
     def take_over(self, handover: bytes, step: int) -> None:
         """Continue from a predecessor's `handover` at `step`: no step is skipped or repeated."""
@@ -273,6 +312,9 @@ class Stepper:
         for leaf, raw in state["held"].items():
             self.inbox.held[leaf] = decode(raw, VEHICLE_TOPICS[leaf], f"handover {leaf}")
         self.inbox.delivered = dict(state["delivered"])
+        for leaf, entries in state["overrides"].items():
+            model = VEHICLE_TOPICS[leaf]
+            self.overrides[leaf] = [(k, decode(raw, model, f"handover {leaf}")) for k, raw in entries]
         self.started = True
         self.step = step
         self.granted = step - 1
@@ -295,16 +337,20 @@ def run_inprocess(
     dt: float,
     max_steps: int,
     swaps: dict[int, dict[str, Core]] | None = None,
+    operator: list[tuple[str, str, int, Message]] = (),
 ) -> InProcessResult:
     """Run the lock-stepped cores in one process, exactly as the clock and shells would: every
     step is granted at once, and the steppers run in loop order until none can go further.
 
     `swaps` maps a step to replacement cores ({role: core}), swapped in before that step as
     `nearsub swap --at-step` does: the grant stops before the step, the new core takes over
-    through the same handover as a swapped-in process, and the grant goes on.
+    through the same handover as a swapped-in process, and the grant goes on. `operator` replays
+    operator overrides (role, topic leaf, from step, message), as their events in a log record.
     """
     swaps = swaps or {}
     steppers = {role: Stepper(cores[role], schedule, dt, max_steps) for role in ORDER}
+    for role, leaf, step, message in operator:
+        steppers[role].override(leaf, message, step)
     messages: list[tuple[str, str, Message]] = []
     end: EndRequest | None = None
 

@@ -1,0 +1,140 @@
+"""A lock-stepped app's shell over a real Zenoh router, fed by hand: it receives exactly its
+declared inputs, the clock's traffic and its own control keys, and no message, however bad or
+however many, stops it or changes what it computes."""
+
+import re
+import threading
+import time
+from collections import Counter
+
+import pytest
+
+from conftest import ALPHA
+from nearsub.apps.shell import AppShell
+from nearsub.common.mission.cores import PidCore, build_cores
+from nearsub.common.mission.schema import RunConfig, load_mission
+from nearsub.common.runtime import keys
+from nearsub.common.runtime.bus import Bus, Endpoints, free_tcp_port, make_config
+from nearsub.common.runtime.lifecycle import Schedule, run_inprocess
+from nearsub.common.runtime.messages import (
+    Desired,
+    Event,
+    Input,
+    MissionEnd,
+    Tick,
+    decode,
+    encode,
+)
+
+pytestmark = pytest.mark.timeout(180)
+
+
+class CountingShell(AppShell):
+    """The pid's shell, counting every sample its stream hands it, by key."""
+
+    received: Counter
+
+    def loop(self) -> int:
+        self.received = Counter()
+        stream = self.stream
+
+        class Counting:
+            def recv(_):
+                key, payload = stream.recv()
+                self.received[key] += 1
+                return key, payload
+
+        self.stream = Counting()
+        return super().loop()
+
+
+def wait_until(condition, timeout: float, what: str) -> None:
+    end = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > end:
+            raise AssertionError(f"{what} within {timeout:g} s")
+        time.sleep(0.02)
+
+
+def test_pid_shell_receives_only_its_inputs_and_survives_bad_and_future_messages():
+    mission = load_mission(ALPHA, ["name=inputs-test", "time_limit=5"])
+    c, vehicle = mission.name, mission.vehicle_name
+    reference = run_inprocess(build_cores(mission), Schedule(mission.periods()), mission.dt, mission.max_steps)
+    states, desireds = reference.topic("state"), reference.topic("desired")
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    with Bus(make_config("router", listen=[endpoint])), Bus(Endpoints("client", (endpoint,))) as world:
+        outputs, events = [], []
+        world.session.declare_subscriber(keys.vehicle_topic(c, vehicle, "input"), lambda s: outputs.append(s))
+        world.session.declare_subscriber(keys.all_events(c), lambda s: events.append(s))
+        shell = CountingShell(lambda m, s: PidCore(m), RunConfig(mission=mission, connect=[endpoint]), "pid-1")
+        thread = threading.Thread(target=shell.serve, daemon=True)
+        thread.start()
+        wait_until(lambda: world.alive(keys.alive(c, "pid", "*")), mission.startup_timeout, "the pid did not start")
+
+        key = {leaf: keys.vehicle_topic(c, vehicle, leaf) for leaf in ("state", "desired", "input", "helm")}
+        sent = Counter()
+
+        def put(k: str, payload: bytes) -> None:
+            if not sent[k]:
+                world.put_when_matched(k, payload, wait=mission.startup_timeout)
+            else:
+                world.put(k, payload)
+            sent[k] += 1
+
+        # Traffic the pid does not consume: other topics, other apps' control keys, events, status.
+        noise = {
+            key["input"]: encode(Input(step=0, t=0.0, source="pid", X_prop=1.0, delta_r=0.0)),
+            key["helm"]: b"\x80",
+            keys.control(c, "helm-1"): b"\x80",
+            keys.events(c, "someone"): encode(Event(step=0, t=0.0, source="x", kind="info")),
+            keys.status(c, "someone"): b"\x80",
+        }
+        for k, payload in noise.items():
+            world.put(k, payload)
+        # A desired state from the far future, with the helm's name, then a flood of bad ones.
+        future = Desired(step=10**9, t=0.0, source="helm", u_d=1.0, psi_d=0.0)
+        put(key["desired"], encode(future))
+        bad = 1 + 3000
+        for i in range(bad - 1):
+            put(key["desired"], b"\xc1" if i % 2 else encode(Desired(step=0, t=0.0, source="tap", u_d=1.0, psi_d=0.0)))
+        put(keys.tick(c), encode(Tick(step=mission.max_steps - 1, t=0.0, source="clock")))
+        desired = iter(desireds)
+        for state in states[:-1]:  # the last state is the sim's x_N, which no pid step reads
+            if state.step % mission.periods()["helm"] == 0:
+                put(key["desired"], encode(next(desired)))
+            put(key["state"], encode(state))
+            for k, payload in noise.items():
+                world.put(k, payload)
+
+        expected = reference.topic("input")
+        timeout = mission.startup_timeout + mission.step_timeout
+        wait_until(lambda: len(outputs) >= len(expected) + len(states), timeout, "the pid did not publish every input")
+        put(keys.mission_end(c), encode(MissionEnd(step=mission.max_steps, t=0.0, source="clock", outcome="x")))
+        thread.join(timeout)
+        assert not thread.is_alive()
+        wait_until(lambda: rejections(events) == bad, timeout, f"not all {bad} rejections were reported")
+
+    published = [s.payload.to_bytes() for s in outputs]
+    assert [p for p in published if p != noise[key["input"]]] == [encode(m) for m in expected]
+    # It received exactly what was sent on its inputs, the clock's keys and nothing else.
+    assert shell.received == sent
+    assert set(sent) == {key["state"], key["desired"], keys.tick(c), keys.mission_end(c)}
+    # Every rejection is reported, in a few rate-limited events that count the rest.
+    errors = pid_errors(events)
+    assert "desired with step 1000000000 ignored" in errors[0].detail
+    assert len(errors) < 10
+
+
+def pid_errors(samples) -> list[Event]:
+    events = [decode(s.payload.to_bytes(), Event) for s in list(samples)]
+    return [e for e in events if e.kind == "error" and e.source == "pid"]
+
+
+def rejections(samples) -> int:
+    """Rejections reported: one per error event, plus the ones each event counts ("mission over"
+    only counts)."""
+    total = 0
+    for event in pid_errors(samples):
+        total += 0 if event.detail.startswith("mission over") else 1
+        total += sum(int(n) for n in re.findall(r"and (\d+) more errors", event.detail))
+    return total
