@@ -496,8 +496,42 @@ def bench_surrogate(args) -> int:
 
 
 # ------------------------------------------------------------------------------- parsers
+def sweep_command(args) -> int:
+    """HF, LF and the applied increment along the heading and lateral sweeps of surrogate/sweeps.py."""
+    from nearsub.common.analysis.envelope import surrogate_window
+    from nearsub.common.hydro.high_fidelity import COARSE, MEDIUM
+    from nearsub.common.physics.vehicles import get_vehicle
+    from nearsub.common.surrogate import sweeps
+
+    from .sweep_figures import draw_sweeps
+
+    surrogate = _load_or_report(args.model)
+    if surrogate is None:
+        return 2
+    if surrogate.kind != "lf_in_loop":
+        print(
+            f"nearsub surrogate sweep: {surrogate.source} is a {surrogate.kind} model; the sweep shows the "
+            "increment of an LF-in-the-loop model",
+            file=sys.stderr,
+        )
+        return 2
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    started = time.perf_counter()
+    rows = sweeps.sweep_table(surrogate, get_vehicle("sdv"), COARSE if args.panels == "coarse" else MEDIUM)
+    with open(out / "sweeps.csv", "w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    window = surrogate_window("sdv")
+    for path in [out / "sweeps.csv", *draw_sweeps(rows, out, window)]:
+        print(path)
+    print(f"{len(rows)} points in {time.perf_counter() - started:.0f} s", file=sys.stderr)
+    return 0
+
+
 def add_parser(subparsers) -> None:
-    """Register `surrogate info`, `predict` and `validate` on the `nearsub` command line."""
+    """Register `surrogate info`, `predict`, `validate` and `sweep` on the `nearsub` command line."""
     p = subparsers.add_parser("surrogate", help="inspect and query a surrogate model file")
     sub = p.add_subparsers(dest="surrogate_command", required=True)
     t = sub.add_parser("info", help="inputs, bounds, training size, hyperparameters and provenance")
@@ -537,6 +571,14 @@ def add_parser(subparsers) -> None:
     t.add_argument("--out", help="write the result: .json (summary and points) or .csv (points)")
     t.add_argument("--json", action="store_true", help="print the summary as JSON")
     t.set_defaults(func=validate_command)
+    t = sub.add_parser(
+        "sweep",
+        help="the interaction increment along heading and lateral sweeps: HF, LF and what the sim applies",
+    )
+    t.add_argument("model", nargs="?", help="model file (default: the shipped model)")
+    t.add_argument("--panels", choices=("coarse", "medium"), default="medium", help="HF panels (default medium)")
+    t.add_argument("-o", "--out", default="sweeps", help="folder for sweeps.csv and the PNGs (default: ./sweeps)")
+    t.set_defaults(func=sweep_command)
 
 
 def add_bench_parser(bench_subparsers) -> None:
