@@ -37,6 +37,7 @@ from nearsub.common.mission.schema import BEHAVIOURS, Mission, mission_from_dict
 from nearsub.common.physics import proximity as events
 from nearsub.common.physics.hull import D_SUB, L_SUB
 from nearsub.common.physics.vehicles import get_vehicle
+from nearsub.common.runtime.processes import completed, task_client
 from nearsub.common.surrogate import domain
 from nearsub.common.surrogate.maps import r_lat_window
 from nearsub.common.surrogate.model import Surrogate, load_surrogate
@@ -303,35 +304,13 @@ def sweep(
     the progress in completion order. A task computes exactly what this process would (the same
     functions, one BLAS thread, row-by-row arithmetic), so on workers with the same software and
     CPU family the results are identical to the bit; tests/test_envelope.py checks it."""
-    if scheduler is None and not workers:
-        results = []
-        for index, config in enumerate(configs):
-            results.append(envelope_task(config))
+    results: list[Envelope | None] = [None] * len(configs)
+    with task_client(workers, scheduler) as client:
+        for index, envelope in completed(client, envelope_task, configs):
+            results[index] = envelope
             if on_done:
-                on_done(index, results[-1])
-        return results
-    from distributed import Client, LocalCluster, as_completed
-
-    cluster = None
-    if scheduler is None:
-        # threads_per_worker=1: the numpy work of a task holds one core; processes scale it.
-        cluster = LocalCluster(
-            n_workers=workers, threads_per_worker=1, host="127.0.0.1", dashboard_address=None, processes=True
-        )
-    try:
-        with Client(scheduler or cluster) as client:
-            futures = client.map(envelope_task, list(configs), pure=False)
-            index_of = {future.key: index for index, future in enumerate(futures)}
-            results: list[Envelope | None] = [None] * len(futures)
-            for future in as_completed(futures):
-                index = index_of[future.key]
-                results[index] = future.result()
-                if on_done:
-                    on_done(index, results[index])
-            return results
-    finally:
-        if cluster is not None:
-            cluster.close()
+                on_done(index, envelope)
+    return results
 
 
 def save_summary(summary: dict, path: str | Path) -> Path:

@@ -10,7 +10,8 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Iterable, MutableMapping
+from collections.abc import Callable, Iterable, Iterator, MutableMapping
+from contextlib import contextmanager
 from typing import IO
 
 # One BLAS thread per process: nearsub is many small processes on few cores, where OpenBLAS's
@@ -72,3 +73,43 @@ def stop(
             deadline = time.monotonic() + wait
         while time.monotonic() < deadline and any(p.poll() is None for p in alive):
             time.sleep(0.02)
+
+
+@contextmanager
+def task_client(workers: int | None = None, scheduler: str | None = None) -> Iterator[object | None]:
+    """Where `completed` runs its tasks: None (this process) when neither is given, else a Dask
+    client of the running cluster at `scheduler`, or of a local cluster of `workers` processes on
+    127.0.0.1 with one thread and one BLAS thread each (a task's numpy work holds a core; more
+    processes, not threads, scale it)."""
+    if scheduler is None and not workers:
+        yield None
+        return
+    from distributed import Client, LocalCluster
+
+    single_blas_thread()  # inherited by the local workers
+    cluster = None
+    if scheduler is None:
+        cluster = LocalCluster(
+            n_workers=workers, threads_per_worker=1, host="127.0.0.1", dashboard_address=None, processes=True
+        )
+    try:
+        with Client(scheduler or cluster) as client:
+            yield client
+    finally:
+        if cluster is not None:
+            cluster.close()
+
+
+def completed(client: object | None, function: Callable, items: Iterable) -> Iterator[tuple[int, object]]:
+    """(index, function(item)) for every item, in completion order, on `client` (`task_client`)."""
+    items = list(items)
+    if client is None:
+        for index, item in enumerate(items):
+            yield index, function(item)
+        return
+    from distributed import as_completed
+
+    futures = client.map(function, items, pure=False)
+    index_of = {future.key: index for index, future in enumerate(futures)}
+    for future in as_completed(futures):
+        yield index_of[future.key], future.result()

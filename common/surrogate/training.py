@@ -40,7 +40,7 @@ from nearsub.common.hydro import low_fidelity as hydro_lf
 from nearsub.common.learning.active import candidate_set, initial_design
 from nearsub.common.learning.gp import FINAL_FIT_RESTARTS, MultiOutputGP
 from nearsub.common.learning.testproblems import Problem
-from nearsub.common.runtime.processes import single_blas_thread
+from nearsub.common.runtime.processes import completed, task_client
 from nearsub.common.surrogate import domain
 from nearsub.common.surrogate.modelfile import LFInLoopModel
 from nearsub.common.surrogate.validation import HELD_OUT_POINTS, HELD_OUT_SEED, latin_hypercube_feasible
@@ -175,35 +175,13 @@ def hf_runner(workers: int | None = None, scheduler: str | None = None) -> Itera
     row i finishes: in this process, on a local Dask cluster of `workers` processes on 127.0.0.1,
     or on the running Dask cluster at `scheduler` (as `nearsub envelope` does). Local workers
     use one BLAS thread."""
-    if scheduler is None and not workers:
+    with task_client(workers, scheduler) as client:
 
-        def run_here(X, done):
-            for i, x in enumerate(X):
-                done(i, *timed_hf(x))
+        def run(X, done):
+            for index, result in completed(client, timed_hf, X):
+                done(index, *result)
 
-        yield run_here
-        return
-    from distributed import Client, LocalCluster, as_completed
-
-    single_blas_thread()  # inherited by the local workers
-    cluster = None
-    if scheduler is None:
-        cluster = LocalCluster(
-            n_workers=workers, threads_per_worker=1, host="127.0.0.1", dashboard_address=None, processes=True
-        )
-    try:
-        with Client(scheduler or cluster) as client:
-
-            def run_on_cluster(X, done):
-                futures = client.map(timed_hf, list(X), pure=False)
-                index_of = {future.key: i for i, future in enumerate(futures)}
-                for future in as_completed(futures):
-                    done(index_of[future.key], *future.result())
-
-            yield run_on_cluster
-    finally:
-        if cluster is not None:
-            cluster.close()
+        yield run
 
 
 def evaluate_hf(X: np.ndarray, store: HFStore, run: Runner, on_row: Callable[[], None] | None = None) -> np.ndarray:
