@@ -6,5 +6,5 @@
 - lifecycle: the app core protocol (start-up, new mail, iterate), schedule, step runner and in-process runner.
 - clock: the clock's grants, pauses and stall timer (ClockCore), free of transport and of the wall clock.
 - logfile: MCAP mission logs (write and read).
-- processes: the processes nearsub starts: one BLAS thread, spawning apps, the stop ladder.
+- processes: the processes nearsub starts: one BLAS thread, spawning apps, the stop ladder, Dask tasks.
 """

@@ -4,7 +4,9 @@
 - model: the loaded surrogate, its predictions and the query messages of the surrogate server.
 - modelfile: one versioned file per trained surrogate.
 - interaction: the interaction forces the sim and the helm apply at a vehicle's state.
-- training: NMMF training of the shipped surrogate and fitting of a user's table.
+- training: the training designs (sobol, residual-us, nmmf), HF runs and the final fit of the shipped surrogate.
+- warping: input warpings applied before the unit-cube scaling (log clearance, log D_sub/D_uuv).
+- sweeps: heading and lateral sweeps of the interaction increment (HF, LF, applied).
 - maps: the thesis section 4.5 colour maps as data.
 - validation: MAE against the high fidelity in the form of thesis table 4.3.
 - campaign_cases: a surrogate input as the dimensional case a CFD user sets up.
