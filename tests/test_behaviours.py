@@ -57,7 +57,7 @@ def test_gamma_matches_the_thesis_values():
 
 def test_compensation_turns_the_bow_against_the_interaction_moment():
     """Where N_s turns the bow in (N_s < 0 on the +y side), the compensated heading turns it away
-    (Delta psi > 0), and the Munk moment N_uv u v at that heading opposes N_s (SPEC errata 5)."""
+    (Delta psi > 0), and the Munk moment N_uv u v at that heading opposes N_s (docs/design.md, "Thesis errata" 5)."""
     u_d, n_s = 1.5, -0.4
     delta = nuv_heading_offset(n_s, u_d, REMUS100.N_uv, gamma=1.0)
     assert delta > 0

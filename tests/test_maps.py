@@ -1,4 +1,4 @@
-"""`nearsub maps`: the colour maps of thesis section 4.5 from a model file (issue 6 item 7)."""
+"""`nearsub maps`: the colour maps of thesis section 4.5 from a model file ."""
 
 import numpy as np
 import pytest
@@ -33,7 +33,8 @@ def test_mid_window_r_lat_satisfies_4_4_and_4_5_for_every_uuv_size():
         ]
     )
     assert np.all(constraint_values(rows)[:, :2] >= 0.0)  # (4.4) and (4.5)
-    # Why the maps need it: the thesis's R_lat = 0.08 at D_sub/D_uuv = 20 breaks (4.5) (SPEC errata 7).
+    # Why the maps need it: the thesis's R_lat = 0.08 at D_sub/D_uuv = 20 breaks (4.5)
+    # (docs/design.md, "Thesis errata" 7).
     assert not constraints_ok([0.0, 0.08, 3.5, 0.0, 20.0, 8.0])[0]
 
 

@@ -1,5 +1,5 @@
 """`nearsub train --data FILE.csv`: a surrogate fitted to a user's own table, with clear errors
-for missing columns, units and out-of-domain rows (issue 6 item 6)."""
+for missing columns, units and out-of-domain rows."""
 
 import csv
 import hashlib

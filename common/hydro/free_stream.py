@@ -1,5 +1,5 @@
 """Free-stream table of the high-fidelity model: the UUV alone, for the "increment" interaction
-mode (SPEC section 5).
+mode (docs/design.md, "Physics decisions").
 
 The increment mode adds to the vehicle's own coefficients only the surrogate's interaction
 increment: its prediction minus the same hydrodynamic model's value for the UUV alone at that

@@ -1,4 +1,4 @@
-"""A surrogate input row as the dimensional case a CFD user sets up (issue 6, external data).
+"""A surrogate input row as the dimensional case a CFD user sets up (for a CFD campaign: `nearsub campaign`).
 
 The training campaign asks for high-fidelity samples at rows [R_long, R_lat, u_kn, psi_deg,
 d_ratio, ld_ratio]; someone with real CFD needs hulls, lengths and positions in metres instead.
@@ -17,7 +17,8 @@ from nearsub.common.physics.hull import D_SUB, L_SUB, SUB_CB_FROM_NOSE, explorer
 from nearsub.common.physics.proximity import closest_distance
 from nearsub.common.surrogate.domain import INPUT_NAMES, KNOT, RHO_SEA
 
-SUBMARINE_HULL = "DARPA SUBOFF bare hull (no sail or appendages) scaled to D = 34 ft (thesis section 4.4, hulls.md)"
+# Thesis section 4.4; the offsets are those of Groves, Huang and Chang (1989), DTRC/SHD-1298-01.
+SUBMARINE_HULL = "DARPA SUBOFF bare hull (no sail or appendages) scaled to D = 34 ft"
 UUV_HULL = "Explorer shape: bow ellipse over 2R (thesis (3.1)), cylinder, stern paraboloid over 4R (thesis (3.2))"
 ANSWER_CONVENTION = (
     "UUV body axes, moments about the UUV's centre of buoyancy (its volume centroid); "
@@ -29,11 +30,11 @@ ANSWER_CONVENTION = (
 def case_geometry(row: Any) -> dict[str, Any]:
     """The dimensional case of one input row (6,): hulls, sizes, positions [m], heading, speed, fluid.
 
-    Frames (SPEC section 2, hull.py): submarine frame with its origin at the submarine's centre of
-    buoyancy (CB), x towards the bow; the UUV's CB at (x, y) with y > 0 on the UUV's side; both
-    vehicles move at u through the water (thesis section 4.2.2, steady, quasi-static), so in the
-    submarine frame the stream is -u along x and the UUV's bow is turned psi away from the
-    submarine."""
+    Frames (docs/design.md, "Frames, units and signs"; physics/hull.py): submarine frame with its
+    origin at the submarine's centre of buoyancy (CB), x towards the bow; the UUV's CB at (x, y)
+    with y > 0 on the UUV's side; both vehicles move at u through the water (thesis section 4.2.2,
+    steady, quasi-static), so in the submarine frame the stream is -u along x and the UUV's bow is
+    turned psi away from the submarine."""
     row = np.asarray(row, dtype=float).reshape(len(INPUT_NAMES))
     x, y, speed, psi, diameter, length = (float(column[0]) for column in input_columns(row[None, :]))
     return {
@@ -52,7 +53,7 @@ def case_geometry(row: Any) -> dict[str, Any]:
         },
         "position": {
             "x_m": x,  # UUV CB ahead of the submarine's CB (R_long L_sub)
-            "y_m": y,  # lateral, centre to centre (R_lat L_sub, SPEC errata 7)
+            "y_m": y,  # lateral, centre to centre (R_lat L_sub, docs/design.md, "Thesis errata" 7)
             "uuv_cb_behind_submarine_nose_m": SUB_CB_FROM_NOSE - x,
             "clearance_m": float(closest_distance(x, y, psi, length, diameter)),
         },

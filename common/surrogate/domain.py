@@ -13,19 +13,19 @@ import numpy as np
 
 from nearsub.common.physics.hull import D_SUB, L_SUB
 
-# The six inputs in model-column order, and their bounds (thesis table 4.2; SPEC section 5).
+# The six inputs in model-column order, and their bounds (thesis table 4.2; docs/design.md, "Physics decisions").
 INPUT_NAMES = ("R_long", "R_lat", "u_kn", "psi_deg", "d_ratio", "ld_ratio")
 BOUNDS = np.array(
     [
-        [-0.7, 0.7],  # R_long = x / L_sub (SPEC errata 2)
-        [0.059, 0.105],  # R_lat = |y| / L_sub, centre-to-centre (SPEC errata 2 and 7)
+        [-0.7, 0.7],  # R_long = x / L_sub (docs/design.md, "Thesis errata" 2)
+        [0.059, 0.105],  # R_lat = |y| / L_sub, centre-to-centre (docs/design.md, "Thesis errata" 2 and 7)
         [2.0, 5.0],  # u: UUV speed through the water [kn]
         [-2.0, 2.0],  # psi: heading relative to the submarine axis, + = bow away [deg] (section 4.2.1)
         [5.0, 50.0],  # D_sub / D_uuv
         [4.3, 13.0],  # L / D_uuv
     ]
 )
-# X' = X / (0.5 rho u^2 L_uuv^2), Y' likewise, N' = N / (0.5 rho u^2 L_uuv^3) (SPEC section 2).
+# X' = X / (0.5 rho u^2 L_uuv^2), Y' likewise, N' = N / (0.5 rho u^2 L_uuv^3) (thesis section 5.2).
 OUTPUT_NAMES = ("X_p", "Y_p", "N_p")
 UNITS = {
     "R_long": "-",
@@ -41,15 +41,15 @@ UNITS = {
 CONSTRAINT_NAMES = ("(4.4)", "(4.5)", "(4.6)", "(4.7)")
 CONSTRAINTS = {
     "(4.4)": "8.575 R_lat - 0.5 (D_sub/D_uuv)^-1 - 9.425e-3 (D_sub/D_uuv)^-1 (L/D_uuv) - 0.5048 >= 0 "
-    "(clearance >= 0.05 m; no speed term, SPEC errata 3)",
+    "(clearance >= 0.05 m; no speed term: the corrected form, docs/design.md)",
     "(4.5)": "-8.575 R_lat + 2 (D_sub/D_uuv)^-1 + 0.5 >= 0 (y_dist <= 2 D_uuv + D_sub/2)",
     "(4.6)": "65.44 (D_sub/D_uuv)^-1 + L/D_uuv - 8 >= 0 (not too short)",
     "(4.7)": "-58.81 (D_sub/D_uuv)^-1 - L/D_uuv + 17 >= 0 (not too long)",
-    "R_lat": "centre-to-centre: y_dist between the centres of buoyancy over L_sub (SPEC errata 7)",
+    "R_lat": "centre-to-centre: y_dist between the centres of buoyancy over L_sub (docs/design.md)",
 }
 
 KNOT = 1852.0 / 3600.0  # international knot [m/s]; thesis 4.2.3: 2-5 kn ~ 1.03-2.57 m/s
-RHO_SEA = 1025.0  # sea water [kg/m^3] (SPEC section 2)
+RHO_SEA = 1025.0  # sea water [kg/m^3] (docs/design.md, "Frames, units and signs")
 
 
 # ------------------------------------------------------------------------------- the domain
@@ -71,13 +71,13 @@ def in_domain(X: Any, bounds: Any = BOUNDS) -> np.ndarray:
 
 # Constraints (4.4)-(4.7), one row each: g = coefficients . [R_lat, (D_sub/D_uuv)^-1,
 # (D_sub/D_uuv)^-1 L/D_uuv, L/D_uuv, 1], feasible where g >= 0 (thesis section 4.3).
-# (4.4) is the corrected form of SPEC errata 3 (no speed term): 8.575 = L_sub/D_sub,
+# (4.4) is the corrected form of docs/design.md, "Thesis errata" 3 (no speed term): 8.575 = L_sub/D_sub,
 # 0.5048 = 0.5 + 0.05 m/D_sub (clearance c >= 0.05 m, thesis (4.3)), 9.425e-3 = 0.27 sin(2 deg)
 # ((1 - CB) L_uuv sin psi_max over D_sub).
 _CONSTRAINT_COEFFICIENTS = np.array(
     [
         # R_lat  1/d_ratio  ld/d_ratio  ld_ratio  1
-        [8.575, -0.5, -9.425e-3, 0.0, -0.5048],  # (4.4), SPEC errata 3
+        [8.575, -0.5, -9.425e-3, 0.0, -0.5048],  # (4.4), docs/design.md, "Thesis errata" 3
         [-8.575, 2.0, 0.0, 0.0, 0.5],  # (4.5)
         [0.0, 65.44, 0.0, 1.0, -8.0],  # (4.6)
         [0.0, -58.81, 0.0, -1.0, 17.0],  # (4.7)
@@ -88,7 +88,7 @@ _CONSTRAINT_COEFFICIENTS = np.array(
 def constraint_values(X: Any) -> np.ndarray:
     """(n, 4) left-hand sides of (4.4)-(4.7), feasible where >= 0 (columns as CONSTRAINT_NAMES).
 
-    With R_lat centre-to-centre (SPEC errata 7) the low corner R_lat = 0.059 is infeasible
+    With R_lat centre-to-centre (docs/design.md, "Thesis errata" 7) the low corner R_lat = 0.059 is infeasible
     everywhere in the domain: (4.4) needs R_lat >= 0.5048 / 8.575 = 0.0589 plus the UUV's share.
     """
     X = _as_inputs(X)
@@ -105,7 +105,7 @@ def constraints_ok(X: Any) -> np.ndarray:
 
 def sample_feasible(n: int, seed: int = 0) -> np.ndarray:
     """n points (n, 6) uniform in table 4.2's box restricted to (4.4)-(4.7), by rejection: every
-    sampler must respect the constraints (SPEC errata 7). About 1 box draw in 6 is feasible."""
+    sampler must respect the constraints (docs/design.md, "Thesis errata" 7). About 1 box draw in 6 is feasible."""
     rng = np.random.default_rng(seed)
     lower, width = BOUNDS[:, 0], BOUNDS[:, 1] - BOUNDS[:, 0]
     kept: list[np.ndarray] = []
@@ -137,8 +137,9 @@ def to_inputs(
     """Dimensional state -> surrogate inputs (n, 6) and the mirror sign (n,) (+1, or -1 for y < 0).
 
     x, y [m] in the submarine frame, u [m/s] surge through the water, psi [rad] from +x towards
-    +y (SPEC section 2); the arguments broadcast together and are flattened. On the -y side the
-    geometry is mirrored (SPEC section 2, thesis 4.2.1): R_lat uses |y| and psi changes sign, so
+    +y; the arguments broadcast together and are flattened. On the -y side the geometry is
+    mirrored (thesis 4.2.1; docs/design.md, "Frames, units and signs"): R_lat uses |y| and psi
+    changes sign, so
     that + always means bow away from the submarine; `to_forces` flips Y' and N' back.
     """
     x, y, u, psi, length, diameter = _flat_broadcast(x, y, u, psi, uuv_length, uuv_diameter)
@@ -146,7 +147,7 @@ def to_inputs(
     psi_wrapped = np.remainder(psi + math.pi, 2.0 * math.pi) - math.pi  # heading in [-pi, pi)
     inputs = np.column_stack(
         [
-            x / l_sub,  # R_long (3.3), SPEC errata 2
+            x / l_sub,  # R_long (3.3), docs/design.md, "Thesis errata" 2
             np.abs(y) / l_sub,  # R_lat (3.4), centre-to-centre (errata 7)
             u / KNOT,
             mirror * np.degrees(psi_wrapped),
@@ -158,7 +159,7 @@ def to_inputs(
 
 
 def _force_scales(u: Any, uuv_length: Any, rho: float) -> np.ndarray:
-    """(n, 3) factors [q L^2, q L^2, q L^3], q = 0.5 rho u^2: coefficient -> force (SPEC section 2)."""
+    """(n, 3) factors [q L^2, q L^2, q L^3], q = 0.5 rho u^2: coefficient -> force (thesis section 5.2)."""
     u, length = _flat_broadcast(u, uuv_length)
     ql2 = 0.5 * rho * u**2 * length**2
     return np.column_stack([ql2, ql2, ql2 * length])
