@@ -262,7 +262,7 @@ def predict_command(args) -> int:
 
 
 # ------------------------------------------------------------------------------ validate
-PANEL_SPECS = ("coarse", "medium", "fine")  # hydro_hf.COARSE, MEDIUM, FINE
+PANEL_CHOICES = ("coarse", "medium", "fine")  # hydro_hf.COARSE, MEDIUM, FINE
 _EQUIVALENT_LABELS = ("{:.2f} % X_prop", "d_eq,Y = {:.2f} deg", "d_eq,N = {:.2f} deg")
 
 
@@ -557,7 +557,7 @@ def add_parser(subparsers) -> None:
     )
     t.add_argument("model", nargs="?", help="model file (default: the shipped model)")
     t.add_argument("--points", type=int, default=THESIS_TEST_POINTS, help="test points (default 500, as the thesis)")
-    t.add_argument("--panels", choices=PANEL_SPECS, default="medium", help="HF panel spec (default medium)")
+    t.add_argument("--panels", choices=PANEL_CHOICES, default="medium", help="HF panel spec (default medium)")
     t.add_argument(
         "--seed", type=int, default=HELD_OUT_SEED, help=f"seed of the Latin hypercube (default {HELD_OUT_SEED})"
     )
