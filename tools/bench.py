@@ -24,7 +24,7 @@ DEFAULT_MISSION = Path(__file__).resolve().parents[1] / "missions" / "alpha.toml
 
 
 def add_parser(subparsers) -> None:
-    from .surrogate_cli import add_bench_parser
+    from .surrogate import add_bench_parser
 
     p = subparsers.add_parser("bench")
     b = p.add_subparsers(dest="bench_command", required=True)
