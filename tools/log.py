@@ -21,7 +21,7 @@ def add_parser(subparsers) -> None:
     t.add_argument("log", nargs="+", help="MCAP files (a quoted glob is expanded too)")
     t.add_argument("--json", action="store_true")
     t.set_defaults(func=info_command)
-    t = lg.add_parser("export", help="export as csv, json lines or MOOS alog")
+    t = lg.add_parser("export", help="export as csv, json lines or a MOOS alog (alogview, aloggrep, alogsort)")
     t.add_argument("log")
     t.add_argument("--format", choices=("csv", "json", "alog"), default="json")
     t.add_argument("--topic", help="key expression to select (wildcards allowed)")
@@ -178,29 +178,15 @@ def export_command(args) -> int:
             for r in records:
                 out.write(json.dumps({"topic": r.topic, "t": r.sim_time, "value": r.value()}) + "\n")
         elif args.format == "alog":
-            _write_alog(records, contents, out)
+            from nearsub.common.runtime.alog import write_alog
+
+            write_alog(contents, out, records)
         else:
             return _write_csv(records, args.output)
     finally:
         if out is not sys.stdout:
             out.close()
     return 0
-
-
-def _write_alog(records, contents: LogContents, out) -> None:
-    """MOOS alog: a %% header, then `time VARIABLE SOURCE VALUE` per message (docs/design.md,
-    "MOOS-IvP conventions")."""
-    from nearsub.common.runtime.logfile import INVALID_SUFFIX
-
-    mission = contents.metadata.get("mission", {}).get("name", "")
-    out.write(f"%% LOG FILE:       nearsub mission {mission}\n%% LOGSTART        0.0\n")
-    for r in records:
-        value = r.value()
-        variable = "_".join(r.topic.split("/")[2:]).replace(INVALID_SUFFIX, "_INVALID").upper()
-        source = value.get("source", "?") if isinstance(value, dict) else "?"
-        fields = flatten(value) if isinstance(value, dict) else {"raw": value}
-        text = ",".join(f"{k}={v}" for k, v in fields.items() if k not in ("schema_version", "source"))
-        out.write(f"{r.sim_time:.5f} {variable} {source} {text}\n")
 
 
 def _write_csv(records, output: str | None) -> int:
