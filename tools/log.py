@@ -72,18 +72,6 @@ def check_log(path: Path) -> None:
         raise LogInputError(f"{path}: not an MCAP log (it does not start with the MCAP magic bytes)")
 
 
-def flatten(value: dict) -> dict:
-    """{'a': 1, 'd': {'x': 2}} -> {'a': 1, 'd.x': 2}."""
-    out = {}
-    for key, item in value.items():
-        if isinstance(item, dict):
-            for sub, v in flatten(item).items():
-                out[f"{key}.{sub}"] = v
-        else:
-            out[key] = item
-    return out
-
-
 def _select(contents: LogContents, topic: str | None):
     for record in contents.records:
         if topic is None or _matches(topic, record.topic):
@@ -191,6 +179,7 @@ def export_command(args) -> int:
 
 def _write_csv(records, output: str | None) -> int:
     from nearsub.common.runtime.logfile import INVALID_SUFFIX
+    from nearsub.logs import flatten
 
     by_topic = defaultdict(list)
     for r in records:
