@@ -27,6 +27,11 @@ def add_parser(subparsers) -> None:
     t.add_argument("--topic", help="key expression to select (wildcards allowed)")
     t.add_argument("-o", "--output", help="output file (json, alog) or folder (csv)")
     t.set_defaults(func=export_command)
+    t = lg.add_parser("play", help="republish a log onto the bus (uPlayBack, ros2 bag play)")
+    from .logplay import add_arguments, play_command
+
+    add_arguments(t)
+    t.set_defaults(func=play_command)
     t = lg.add_parser("plot", help="trajectory in the submarine frame and time series (PNG)")
     t.add_argument("log")
     t.add_argument("-o", "--output", help="PNG file (default: next to the log)")
