@@ -5,27 +5,15 @@ import io
 import json
 
 import pytest
+from logsample import write_sample_log
 
-from conftest import ALPHA, nearsub
-from nearsub.common.mission.cores import run_mission
-from nearsub.common.mission.schema import load_mission
-from nearsub.common.runtime.logfile import LogWriter
-from nearsub.common.runtime.messages import encode
+from conftest import nearsub
 
 
 @pytest.fixture(scope="module")
 def log(tmp_path_factory):
-    mission = load_mission(ALPHA, ["time_limit=10"])
-    result = run_mission(mission)
     path = tmp_path_factory.mktemp("log") / "alpha.mcap"
-    writer = LogWriter(path)
-    writer.metadata("mission", {"name": "alpha"})
-    for role, leaf, message in result.messages:
-        key = f"nearsub/alpha/events/{role}" if leaf == "events" else f"nearsub/alpha/remus100/{leaf}"
-        writer.write(key, encode(message), message.t)
-    writer.write("nearsub/alpha/remus100/state", b"\xc1", 10.0, valid=False)
-    writer.finish()
-    return path, result
+    return path, write_sample_log(path)
 
 
 def test_info_counts_topics_and_rates(log):
@@ -56,19 +44,6 @@ def test_export_json_lines(log, tmp_path):
     lines = [json.loads(line) for line in target.read_text().splitlines()]
     inputs = [line for line in lines if line["topic"].endswith("/input")]
     assert [line["value"]["X_prop"] for line in inputs] == [m.X_prop for m in result.topic("input")]
-
-
-def test_export_alog_in_moos_format(log):
-    path, result = log
-    out = nearsub("log", "export", str(path), "--format", "alog")
-    assert out.returncode == 0, out.stderr
-    lines = out.stdout.splitlines()
-    assert lines[0].startswith("%%")
-    body = [line.split(" ", 3) for line in lines if not line.startswith("%%")]
-    desired = [fields for fields in body if fields[1] == "REMUS100_DESIRED"]
-    assert len(desired) == len(result.topic("desired"))
-    time, variable, source, value = desired[1]
-    assert float(time) == pytest.approx(0.25) and source == "helm" and "psi_d=" in value
 
 
 def test_csv_of_several_topics_needs_a_folder(log, tmp_path):

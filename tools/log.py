@@ -21,12 +21,17 @@ def add_parser(subparsers) -> None:
     t.add_argument("log", nargs="+", help="MCAP files (a quoted glob is expanded too)")
     t.add_argument("--json", action="store_true")
     t.set_defaults(func=info_command)
-    t = lg.add_parser("export", help="export as csv, json lines or MOOS alog")
+    t = lg.add_parser("export", help="export as csv, json lines or a MOOS alog (alogview, aloggrep, alogsort)")
     t.add_argument("log")
     t.add_argument("--format", choices=("csv", "json", "alog"), default="json")
     t.add_argument("--topic", help="key expression to select (wildcards allowed)")
     t.add_argument("-o", "--output", help="output file (json, alog) or folder (csv)")
     t.set_defaults(func=export_command)
+    t = lg.add_parser("play", help="republish a log onto the bus (uPlayBack, ros2 bag play)")
+    from .logplay import add_arguments, play_command
+
+    add_arguments(t)
+    t.set_defaults(func=play_command)
     t = lg.add_parser("plot", help="trajectory in the submarine frame and time series (PNG)")
     t.add_argument("log")
     t.add_argument("-o", "--output", help="PNG file (default: next to the log)")
@@ -70,18 +75,6 @@ def check_log(path: Path) -> None:
         raise LogInputError(f"{path}: cannot read ({exc.strerror})") from None
     if head != MCAP_MAGIC:
         raise LogInputError(f"{path}: not an MCAP log (it does not start with the MCAP magic bytes)")
-
-
-def flatten(value: dict) -> dict:
-    """{'a': 1, 'd': {'x': 2}} -> {'a': 1, 'd.x': 2}."""
-    out = {}
-    for key, item in value.items():
-        if isinstance(item, dict):
-            for sub, v in flatten(item).items():
-                out[f"{key}.{sub}"] = v
-        else:
-            out[key] = item
-    return out
 
 
 def _select(contents: LogContents, topic: str | None):
@@ -178,7 +171,9 @@ def export_command(args) -> int:
             for r in records:
                 out.write(json.dumps({"topic": r.topic, "t": r.sim_time, "value": r.value()}) + "\n")
         elif args.format == "alog":
-            _write_alog(records, contents, out)
+            from nearsub.common.runtime.alog import write_alog
+
+            write_alog(contents, out, records)
         else:
             return _write_csv(records, args.output)
     finally:
@@ -187,24 +182,9 @@ def export_command(args) -> int:
     return 0
 
 
-def _write_alog(records, contents: LogContents, out) -> None:
-    """MOOS alog: a %% header, then `time VARIABLE SOURCE VALUE` per message (docs/design.md,
-    "MOOS-IvP conventions")."""
-    from nearsub.common.runtime.logfile import INVALID_SUFFIX
-
-    mission = contents.metadata.get("mission", {}).get("name", "")
-    out.write(f"%% LOG FILE:       nearsub mission {mission}\n%% LOGSTART        0.0\n")
-    for r in records:
-        value = r.value()
-        variable = "_".join(r.topic.split("/")[2:]).replace(INVALID_SUFFIX, "_INVALID").upper()
-        source = value.get("source", "?") if isinstance(value, dict) else "?"
-        fields = flatten(value) if isinstance(value, dict) else {"raw": value}
-        text = ",".join(f"{k}={v}" for k, v in fields.items() if k not in ("schema_version", "source"))
-        out.write(f"{r.sim_time:.5f} {variable} {source} {text}\n")
-
-
 def _write_csv(records, output: str | None) -> int:
     from nearsub.common.runtime.logfile import INVALID_SUFFIX
+    from nearsub.logs import flatten
 
     by_topic = defaultdict(list)
     for r in records:
