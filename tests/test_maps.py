@@ -68,6 +68,7 @@ def test_a_figure_is_a_png_with_its_panels(shipped, tmp_path):
     assert path == tmp_path / "fig4-9.png" and path.read_bytes().startswith(PNG_MAGIC)
 
 
+@pytest.mark.slow  # every thesis map of the shipped model: minutes; one map is drawn above
 def test_maps_writes_every_figure_for_the_shipped_model(tmp_path, capsys):
     assert main(["maps", "--out", str(tmp_path)]) == 0
     names = sorted(p.name for p in tmp_path.glob("*.png"))

@@ -77,6 +77,10 @@ def test_custom_vehicle_inline_and_its_errors(tmp_path):
     assert "vehicle" in str(info.value) and "Izz" in str(info.value) and "-3.0" in str(info.value)
 
 
+# The whole `nearsub validate` (every scenario mission with the LF in the loop): minutes; the
+# default run covers its parts in test_validation.py and test_scenarios.py.
+@pytest.mark.slow
+@pytest.mark.timeout(900)
 def test_validate_passes():
     result = nearsub("validate", "--json", timeout=120)
     assert result.returncode == 0, result.stdout[-2000:]
