@@ -211,6 +211,8 @@ class FieldTable:
         nx, ny = len(tx) - 4, len(ty) - 4
         coefficients = np.stack([cx.reshape(nx, ny), cy.reshape(nx, ny)], axis=-1)  # (nx, ny, 2)
         self.x_breaks, self.r_breaks = tx[3:-3].copy(), ty[3:-3].copy()
+        # Interval index = interior breakpoints at or below the point: in [0, cells - 1] as is.
+        self._x_inner, self._r_inner = self.x_breaks[1:-1].copy(), self.r_breaks[1:-1].copy()
         x_left, r_left = self.x_breaks[:-1], self.r_breaks[:-1]
         # Taylor coefficients in x at each x-cell's left end, still B-spline coefficients in R.
         in_x = BSpline(tx, coefficients, 3)
@@ -231,15 +233,10 @@ class FieldTable:
         x = np.asarray(x, dtype=float)
         r = np.asarray(r, dtype=float)
         out = np.empty((2, x.size))
-        last_x, last_r = len(self.x_left) - 1, self.n_r - 1
         for start in range(0, x.size, _CHUNK):
             xs, rs = x[start : start + _CHUNK], r[start : start + _CHUNK]
-            a = np.searchsorted(self.x_breaks, xs, side="right")
-            a -= 1
-            np.clip(a, 0, last_x, out=a)
-            b = np.searchsorted(self.r_breaks, rs, side="right")
-            b -= 1
-            np.clip(b, 0, last_r, out=b)
+            a = np.searchsorted(self._x_inner, xs, side="right")
+            b = np.searchsorted(self._r_inner, rs, side="right")
             dx = xs - self.x_left[a]
             dr = rs - self.r_left[b]
             a *= self.n_r
@@ -373,6 +370,7 @@ class _StripGeometry:
     sin_psi: np.ndarray
     speed: np.ndarray
     length: np.ndarray
+    radial: np.ndarray  # distance of the ring points from the submarine's axis (3, n, strips)
 
 
 def _strip_geometry(inputs, n_strips: int) -> _StripGeometry:
@@ -384,7 +382,7 @@ def _strip_geometry(inputs, n_strips: int) -> _StripGeometry:
     px = np.stack([axis_x - r * sin_psi, axis_x + r * sin_psi, axis_x])
     py = np.stack([axis_y + r * cos_psi, axis_y - r * cos_psi, axis_y])
     pz = np.stack([np.zeros_like(r), np.zeros_like(r), r])
-    return _StripGeometry(px, py, pz, xi, r, arc, cos_psi, sin_psi, speed, length)
+    return _StripGeometry(px, py, pz, xi, r, arc, cos_psi, sin_psi, speed, length, np.hypot(py, pz))
 
 
 def _submarine_velocity(geometry: _StripGeometry, n_frusta: int, hold: bool):
@@ -392,7 +390,7 @@ def _submarine_velocity(geometry: _StripGeometry, n_frusta: int, hold: bool):
     inside the tabulated field, and (with `hold`) which UUVs had points held at its inner edge."""
     field = submarine_field(n_frusta)
     px = geometry.px
-    radial = np.hypot(geometry.py, geometry.pz)
+    radial = geometry.radial
     near = radial < field.r_range[0]
     if hold:
         radial = np.maximum(radial, field.r_range[0])
@@ -402,9 +400,11 @@ def _submarine_velocity(geometry: _StripGeometry, n_frusta: int, hold: bool):
         & (radial >= field.r_range[0])
         & (radial <= field.r_range[1])
     )
-    ux = np.zeros(px.shape)
-    ur = np.zeros(px.shape)
-    ux[inside], ur[inside] = field.table.values(px[inside], radial[inside])
+    # Every point through the table (its edge cells continue outside), then zero outside: no
+    # gathers of the points inside, and each point's value is the same either way.
+    ux, ur = (part.reshape(px.shape) for part in field.table.values(px.ravel(), radial.ravel()))
+    if not inside.all():
+        ux, ur = np.where(inside, ux, 0.0), np.where(inside, ur, 0.0)
     return ux, ur, inside.all(axis=(0, 2)), near.any(axis=(0, 2))
 
 
@@ -412,11 +412,12 @@ def _strip_forces(geometry: _StripGeometry, ux: np.ndarray, ur: np.ndarray) -> n
     """[X', Y', N'] (n, 3) of the strips in the stream -U x plus the perturbation (ux, ur)."""
     py, pz, xi, r = geometry.py, geometry.pz, geometry.xi, geometry.r
     cos_psi, sin_psi = geometry.cos_psi, geometry.sin_psi
-    radial = np.hypot(py, pz)
+    radial = geometry.radial
     # Velocity per unit U (stream -U x plus the submarine's perturbation), in UUV body axes.
     vx = -1.0 + ux
-    vy = ur * py / np.where(radial > 0.0, radial, 1.0)
-    vz = ur * pz / np.where(radial > 0.0, radial, 1.0)
+    safe_radial = np.where(radial > 0.0, radial, 1.0)
+    vy = ur * py / safe_radial
+    vz = ur * pz / safe_radial
     v_xi = vx * cos_psi + vy * sin_psi
     v_eta = -vx * sin_psi + vy * cos_psi
     cp = -(vx**2 + vy**2 + vz**2)  # p / (rho U^2 / 2) up to a constant
