@@ -88,3 +88,10 @@ def test_a_malformed_option_value_is_named_by_argparse(argv, message):
     done = nearsub(*argv)
     assert done.returncode == 2
     assert message in done.stderr and "Traceback" not in done.stderr
+
+
+def test_version_prints_the_package_version():
+    from nearsub import __version__
+
+    result = subprocess.run([sys.executable, "-m", "nearsub", "--version"], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0 and result.stdout.strip() == f"nearsub {__version__}"

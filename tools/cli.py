@@ -13,6 +13,7 @@ import argparse
 import importlib
 import sys
 
+from nearsub import __version__
 from nearsub.common.runtime.processes import single_blas_thread
 
 # subcommand: (module in tools/, one line for `nearsub --help`)
@@ -39,6 +40,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The parser of `nearsub`, with the full parser of `command` (importing its module) and the
     other subcommands listed by name and help line only."""
     parser = argparse.ArgumentParser(prog="nearsub", description="UUV simulation near a moving submarine")
+    parser.add_argument("--version", action="version", version=f"nearsub {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name, (module, help_line) in TOOLS.items():
         if name == command:
