@@ -64,8 +64,11 @@ def test_stop_escalates_to_sigkill_for_a_process_ignoring_sigint_and_sigterm():
 
 def test_stop_returns_at_once_when_the_first_rung_is_heeded():
     process = subprocess.Popen(
-        [sys.executable, "-c", "import time; time.sleep(60)"], stderr=subprocess.DEVNULL, process_group=0
+        [sys.executable, "-c", "import time; print('ready', flush=True); time.sleep(60)"],
+        stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, process_group=0,
     )
+    # A SIGINT that lands while the interpreter is still starting may be lost; wait until it runs.
+    assert process.stdout.readline().strip() == "ready"
     start = time.monotonic()
     processes.stop([process], wait=10.0)
     assert process.returncode == -signal.SIGINT  # Python leaves by SIGINT on an uncaught KeyboardInterrupt
