@@ -23,15 +23,12 @@ skipped or repeated.
 from __future__ import annotations
 
 import argparse
-import ctypes
 import math
-import signal
 import sys
 import time
 import uuid
 from collections.abc import Callable
 
-from nearsub.apps.services import RemoteSurrogate
 from nearsub.common.mission.schema import MissionError, RunConfig, apply_overrides, mission_from_dict
 from nearsub.common.runtime import keys
 from nearsub.common.runtime.bus import Bus, DeadlineExceeded, Endpoints, deadline, signal_self
@@ -58,24 +55,11 @@ from nearsub.common.runtime.messages import (
     decode,
     encode,
 )
-from nearsub.common.surrogate.interaction import ServiceError
+from nearsub.common.runtime.processes import prepare_process
+from nearsub.common.surrogate.query import ServiceError
 
 HANDOVER_TIMEOUT = 30.0
 ERROR_INTERVAL = 1.0  # wall seconds between error events; the rejections in between are counted
-
-
-def prepare_process() -> None:
-    """Exit cleanly on SIGTERM (so `with` blocks close the session and files), and ask Linux to
-    send SIGTERM when the launcher dies, so no app outlives it."""
-
-    def handler(signum, frame):
-        raise SystemExit(128 + signum)
-
-    signal.signal(signal.SIGTERM, handler)
-    try:
-        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
-    except (OSError, AttributeError):
-        pass  # not Linux: the launcher's liveliness token still stops the app
 
 
 def app_arguments(description: str) -> argparse.ArgumentParser:
@@ -124,7 +108,11 @@ class AppShell:
             self.bus = bus
             c = self.community
             mission = self.run.mission
-            surrogate = RemoteSurrogate(bus, c) if mission.needs_surrogate else None
+            surrogate = None
+            if mission.needs_surrogate:
+                from nearsub.apps.services import RemoteSurrogate  # the pid never asks: no import
+
+                surrogate = RemoteSurrogate(bus, c)
             self.core = self.core_factory(mission, surrogate)
             # A surrogate server that stops answering ends the mission, naming it.
             self.stepper = Stepper(
