@@ -24,6 +24,7 @@ import time
 
 import msgpack
 
+from nearsub.apps.shell import wait_for_roles
 from nearsub.common.mission.schema import RunConfig
 from nearsub.common.runtime import keys
 from nearsub.common.runtime.bus import Bus, Endpoints, signal_self
@@ -65,16 +66,10 @@ class Clock:
 
     def wait_for_apps(self) -> str | None:
         """Block until helm, pid and sim have liveliness tokens; an error text on timeout."""
-        end = time.monotonic() + self.mission.startup_timeout
-        while True:
-            alive = self.bus.alive(keys.all_alive(self.community), timeout=0.5)
-            roles = {key.split("/")[3] for key in alive}
-            missing = [role for role in ORDER if role not in roles]
-            if not missing:
-                return None
-            if time.monotonic() > end:
-                return f"apps did not start within {self.mission.startup_timeout:g} s: {', '.join(missing)}"
-            time.sleep(0.02)
+        timeout = self.mission.startup_timeout
+        if missing := wait_for_roles(self.bus, self.community, list(ORDER), timeout):
+            return f"apps did not start within {timeout:g} s: {', '.join(missing)}"
+        return None
 
     def send(self, replies: list[Reply]) -> None:
         for requester, reply in replies:

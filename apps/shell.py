@@ -69,7 +69,21 @@ def app_arguments(description: str) -> argparse.ArgumentParser:
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="mission override")
     parser.add_argument("--takeover", metavar="INSTANCE", help="take over from a running instance (swap)")
     parser.add_argument("--resume-step", type=int, help="the step at which the clock paused (swap)")
+    parser.add_argument(
+        "--after", action="append", default=[], metavar="ROLE", help="wait for this role's liveliness token first"
+    )
     return parser
+
+
+def wait_for_roles(bus: Bus, community: str, roles: list[str], timeout: float) -> list[str]:
+    """Wait up to `timeout` wall seconds for a liveliness token of each role; the roles missing."""
+    end = time.monotonic() + timeout
+    while True:
+        alive = {key.split("/")[3] for key in bus.alive(keys.all_alive(community), timeout=0.5)}
+        missing = [role for role in roles if role not in alive]
+        if not missing or time.monotonic() > end:
+            return missing
+        time.sleep(0.02)
 
 
 def load_run(args) -> RunConfig:
@@ -103,11 +117,17 @@ class AppShell:
         self.unreported_errors = 0
 
     # -- start-up -----------------------------------------------------------------------------
-    def serve(self, takeover: str | None = None, resume_step: int | None = None) -> int:
+    def serve(self, takeover: str | None = None, resume_step: int | None = None, after: list[str] = ()) -> int:
+        """`after`: roles started beside this app whose tokens it waits for before it builds its
+        core (the surrogate server) and publishes anything (the logger, so the log misses nothing)."""
         with Bus(Endpoints("client", tuple(self.run.connect))) as bus:
             self.bus = bus
             c = self.community
             mission = self.run.mission
+            if missing := wait_for_roles(bus, c, list(after), mission.startup_timeout):
+                raise SystemExit(
+                    f"{self.instance}: {', '.join(missing)} did not start within {mission.startup_timeout:g} s"
+                )
             surrogate = None
             if mission.needs_surrogate:
                 from nearsub.apps.services import RemoteSurrogate  # the pid never asks: no import
@@ -275,6 +295,6 @@ def main_for(core_factory, description: str, argv=None) -> int:
         return 2
     shell = AppShell(core_factory, run, args.instance)
     try:
-        return shell.serve(args.takeover, args.resume_step)
+        return shell.serve(args.takeover, args.resume_step, args.after)
     except KeyboardInterrupt:
         return 130

@@ -1,8 +1,9 @@
 """The launcher of `nearsub launch`: a mission as separate processes (the pAntler of nearsub).
 
-Start order: router, logger, sim, pid, helm, clock. The router is started on loopback port 0 and
-reports the endpoint it really listens on in a ready file; each app is waited for (liveliness)
-before the next group starts, so nothing is published before the logger listens. Every wait is
+Start order: router, then logger, surrogate server, sim, pid, helm and clock at once. The router
+is started on loopback port 0 and reports the endpoint it really listens on in a ready file; the
+lock-stepped apps wait for the logger's and the server's liveliness before they publish, so
+nothing is published before the logger listens, and the clock waits for them. Every wait is
 bounded by the mission's startup_timeout, and so is every client's connect (on a loaded machine a
 process may take seconds just to import). The launcher supervises every process it started, the
 router, logger and surrogate server included: one that exits or crashes is reported with the step
@@ -363,25 +364,29 @@ class Launcher:
             )
 
     def start_apps(self, bus: Bus, log_path: Path) -> None:
-        timeout = self.mission.startup_timeout
+        """Start every process at once, so their imports overlap; the lock-stepped apps wait for
+        the logger and the surrogate server (`--after`) before they publish, and the clock for
+        them before it grants step 0, so the order of the mission is kept."""
+        services, wanted = [], []
         if self.mission.apps.logger.enabled:
             extra = ["--output", str(log_path)]
             if self.mission_path:
                 extra += ["--mission-file", self.mission_path]
             self.spawn("logger", "logger", "logger", extra)
-            self.wait_alive(bus, [("logger", "logger")], timeout)
+            services.append("logger")
             self.summary.log = str(log_path)
         if self.mission.needs_surrogate:
             self.spawn("surrogate", "surrogate", "surrogate")
-            self.wait_alive(bus, [("surrogate", "surrogate")], timeout)
-        wanted = []
+            services.append("surrogate")
+        after = [argument for role in services for argument in ("--after", role)]
         for role in reversed(ORDER):
             instance = self.next_instance(role)
-            self.spawn(role, instance, role)
+            self.spawn(role, instance, role, after)
             wanted.append((role, instance))
-        self.wait_alive(bus, wanted, timeout)
         self.spawn("clock", "clock", "clock")
-        self.wait_alive(bus, [("clock", "clock")], timeout)  # so control requests can reach it
+        self.wait_alive(
+            bus, [(role, role) for role in services] + wanted + [("clock", "clock")], self.mission.startup_timeout
+        )
         self.clock_started = time.monotonic()  # the clock grants step 0 as soon as its token is up
 
     def supervise(self) -> None:
