@@ -1,8 +1,9 @@
 """The clock app: a thin shell around `runtime.clock.ClockCore`, which grants lock-stepped steps
 to the helm, pid and sim and holds every rule.
 
-The clock is off the critical path: it drains its stream in batches (a short sleep between
-polls), so it wakes a few hundred times a second rather than once per message.
+The clock is off the critical path and event-driven: it sleeps until mail arrives or until it
+must act on its own (a paced step's release time, the stall deadline; `ClockCore.wake_in`), then
+handles all the mail that is there before deciding, so a burst of outputs costs one decision.
 
 Control requests (messages on nearsub/<community>/control/clock) are answered on the requester's
 reply key:
@@ -23,7 +24,7 @@ import time
 
 import msgpack
 
-from nearsub.apps.shell import prepare_process
+from nearsub.apps.shell import wait_for_roles
 from nearsub.common.mission.schema import RunConfig
 from nearsub.common.runtime import keys
 from nearsub.common.runtime.bus import Bus, Endpoints, signal_self
@@ -36,9 +37,7 @@ from nearsub.common.runtime.messages import (
     decode,
     encode,
 )
-
-POLL = 0.002  # seconds between stream polls while the apps work (the grant window covers it)
-IDLE_POLL = 0.01  # while paused or waiting for the warp's release time
+from nearsub.common.runtime.processes import leave, prepare_process
 
 
 class Clock:
@@ -67,16 +66,10 @@ class Clock:
 
     def wait_for_apps(self) -> str | None:
         """Block until helm, pid and sim have liveliness tokens; an error text on timeout."""
-        end = time.monotonic() + self.mission.startup_timeout
-        while True:
-            alive = self.bus.alive(keys.all_alive(self.community), timeout=0.5)
-            roles = {key.split("/")[3] for key in alive}
-            missing = [role for role in ORDER if role not in roles]
-            if not missing:
-                return None
-            if time.monotonic() > end:
-                return f"apps did not start within {self.mission.startup_timeout:g} s: {', '.join(missing)}"
-            time.sleep(0.02)
+        timeout = self.mission.startup_timeout
+        if missing := wait_for_roles(self.bus, self.community, list(ORDER), timeout):
+            return f"apps did not start within {timeout:g} s: {', '.join(missing)}"
+        return None
 
     def send(self, replies: list[Reply]) -> None:
         for requester, reply in replies:
@@ -118,8 +111,6 @@ class Clock:
             return 1
         self.core.start(time.monotonic())
         while not self.ended:
-            while (item := self.stream.try_recv()) is not None:
-                self.handle(*item)
             advance = self.core.advance(time.monotonic())
             self.send(advance.replies)
             if advance.end is not None:
@@ -130,7 +121,10 @@ class Clock:
                 return 0
             if advance.tick is not None:
                 self.tick_pub.put(encode(advance.tick))
-            time.sleep(POLL if self.core.granted > self.core.progress.completed else IDLE_POLL)
+            item = self.stream.try_recv(self.core.wake_in(time.monotonic()))
+            while item is not None:
+                self.handle(*item)
+                item = self.stream.try_recv()
         return 0
 
 
@@ -151,4 +145,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    leave(main())

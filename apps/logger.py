@@ -14,12 +14,12 @@ import time
 from pathlib import Path
 
 from nearsub import __version__
-from nearsub.apps.shell import prepare_process
 from nearsub.common.mission.schema import RunConfig
 from nearsub.common.runtime import keys
 from nearsub.common.runtime.bus import Bus, BusError, Endpoints, signal_self
 from nearsub.common.runtime.logfile import LogWriter
 from nearsub.common.runtime.messages import Event, MessageError, MissionEnd, decode, encode, model_for_key
+from nearsub.common.runtime.processes import prepare_process
 
 DRAIN_SECONDS = 0.3  # after the mission end, keep what is still in flight (status, app_left)
 

@@ -2,6 +2,7 @@
 
 from nearsub.apps.shell import main_for
 from nearsub.common.mission.cores import PidCore
+from nearsub.common.runtime.processes import leave
 
 
 def main(argv=None) -> int:
@@ -9,4 +10,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    leave(main())

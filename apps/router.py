@@ -17,8 +17,8 @@ import sys
 import threading
 from pathlib import Path
 
-from nearsub.apps.shell import prepare_process
 from nearsub.common.runtime.bus import Bus, BusError, make_config
+from nearsub.common.runtime.processes import leave, prepare_process
 
 
 def write_ready(path: str | Path, endpoints: list[str]) -> None:
@@ -63,4 +63,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    leave(main())

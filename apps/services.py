@@ -6,8 +6,8 @@ import numpy as np
 
 from nearsub.common.runtime.bus import Bus, ReplyError
 from nearsub.common.runtime.messages import MessageError
-from nearsub.common.surrogate import model as sg
-from nearsub.common.surrogate.interaction import ServiceError
+from nearsub.common.surrogate import query as sg
+from nearsub.common.surrogate.query import ServiceError
 
 
 def discrepancy_key(community: str) -> str:

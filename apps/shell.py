@@ -23,15 +23,12 @@ skipped or repeated.
 from __future__ import annotations
 
 import argparse
-import ctypes
 import math
-import signal
 import sys
 import time
 import uuid
 from collections.abc import Callable
 
-from nearsub.apps.services import RemoteSurrogate
 from nearsub.common.mission.schema import MissionError, RunConfig, apply_overrides, mission_from_dict
 from nearsub.common.runtime import keys
 from nearsub.common.runtime.bus import Bus, DeadlineExceeded, Endpoints, deadline, signal_self
@@ -58,24 +55,11 @@ from nearsub.common.runtime.messages import (
     decode,
     encode,
 )
-from nearsub.common.surrogate.interaction import ServiceError
+from nearsub.common.runtime.processes import prepare_process
+from nearsub.common.surrogate.query import ServiceError
 
 HANDOVER_TIMEOUT = 30.0
 ERROR_INTERVAL = 1.0  # wall seconds between error events; the rejections in between are counted
-
-
-def prepare_process() -> None:
-    """Exit cleanly on SIGTERM (so `with` blocks close the session and files), and ask Linux to
-    send SIGTERM when the launcher dies, so no app outlives it."""
-
-    def handler(signum, frame):
-        raise SystemExit(128 + signum)
-
-    signal.signal(signal.SIGTERM, handler)
-    try:
-        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
-    except (OSError, AttributeError):
-        pass  # not Linux: the launcher's liveliness token still stops the app
 
 
 def app_arguments(description: str) -> argparse.ArgumentParser:
@@ -85,7 +69,21 @@ def app_arguments(description: str) -> argparse.ArgumentParser:
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="mission override")
     parser.add_argument("--takeover", metavar="INSTANCE", help="take over from a running instance (swap)")
     parser.add_argument("--resume-step", type=int, help="the step at which the clock paused (swap)")
+    parser.add_argument(
+        "--after", action="append", default=[], metavar="ROLE", help="wait for this role's liveliness token first"
+    )
     return parser
+
+
+def wait_for_roles(bus: Bus, community: str, roles: list[str], timeout: float) -> list[str]:
+    """Wait up to `timeout` wall seconds for a liveliness token of each role; the roles missing."""
+    end = time.monotonic() + timeout
+    while True:
+        alive = {key.split("/")[3] for key in bus.alive(keys.all_alive(community), timeout=0.5)}
+        missing = [role for role in roles if role not in alive]
+        if not missing or time.monotonic() > end:
+            return missing
+        time.sleep(0.02)
 
 
 def load_run(args) -> RunConfig:
@@ -119,12 +117,22 @@ class AppShell:
         self.unreported_errors = 0
 
     # -- start-up -----------------------------------------------------------------------------
-    def serve(self, takeover: str | None = None, resume_step: int | None = None) -> int:
+    def serve(self, takeover: str | None = None, resume_step: int | None = None, after: list[str] = ()) -> int:
+        """`after`: roles started beside this app whose tokens it waits for before it builds its
+        core (the surrogate server) and publishes anything (the logger, so the log misses nothing)."""
         with Bus(Endpoints("client", tuple(self.run.connect))) as bus:
             self.bus = bus
             c = self.community
             mission = self.run.mission
-            surrogate = RemoteSurrogate(bus, c) if mission.needs_surrogate else None
+            if missing := wait_for_roles(bus, c, list(after), mission.startup_timeout):
+                raise SystemExit(
+                    f"{self.instance}: {', '.join(missing)} did not start within {mission.startup_timeout:g} s"
+                )
+            surrogate = None
+            if mission.needs_surrogate:
+                from nearsub.apps.services import RemoteSurrogate  # the pid never asks: no import
+
+                surrogate = RemoteSurrogate(bus, c)
             self.core = self.core_factory(mission, surrogate)
             # A surrogate server that stops answering ends the mission, naming it.
             self.stepper = Stepper(
@@ -287,6 +295,6 @@ def main_for(core_factory, description: str, argv=None) -> int:
         return 2
     shell = AppShell(core_factory, run, args.instance)
     try:
-        return shell.serve(args.takeover, args.resume_step)
+        return shell.serve(args.takeover, args.resume_step, args.after)
     except KeyboardInterrupt:
         return 130

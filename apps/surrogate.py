@@ -22,11 +22,11 @@ from typing import NoReturn
 import numpy as np
 
 from nearsub.apps.services import discrepancy_key, kind_key
-from nearsub.apps.shell import prepare_process
 from nearsub.common.mission.schema import MissionError, RunConfig
 from nearsub.common.runtime import keys
 from nearsub.common.runtime.bus import Bus, Endpoints, signal_self
 from nearsub.common.runtime.messages import MessageError, decode, encode
+from nearsub.common.runtime.processes import leave, prepare_process
 from nearsub.common.surrogate.domain import constraints_ok, in_domain
 from nearsub.common.surrogate.model import (
     Surrogate,
@@ -128,4 +128,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    leave(main())

@@ -228,3 +228,16 @@ def test_claims_of_steps_not_granted_are_ignored_and_hold_no_memory():
     assert core.progress.done == {} and core.progress.completed == -1
     finish_up_to(core, 19)
     assert core.progress.completed == 19 and core.progress.done == {}
+
+
+def test_the_clock_wakes_for_the_next_paced_step_or_the_stall_deadline_whichever_is_first():
+    paced = clock(warp=2.0)
+    granted(paced, 0.0)  # step 0 is due at once
+    assert paced.wake_in(0.0) == pytest.approx(DT / 2.0)  # step 1 is due at dt / warp
+    assert paced.wake_in(1.0) == 0.0  # overdue: act now
+    flat_out = clock()
+    assert granted(flat_out, 0.0) == 19
+    assert flat_out.wake_in(0.0) == pytest.approx(0.25)  # owed, stall far off: the meter's sample
+    assert flat_out.wake_in(TIMEOUT - 0.1) == pytest.approx(0.1)  # nothing done: the stall deadline
+    finish_up_to(flat_out, 19)
+    assert granted(flat_out, 0.5) == 39

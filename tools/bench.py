@@ -1,7 +1,8 @@
 """`nearsub bench`: benchmarks that print what they measured.
 
-`pipeline` runs a mission (alpha by default) at warp 0 through the multi-process launcher and
-in one process, and reports lock-stepped steps per second and their ratio.
+`pipeline` runs missions (alpha and overtake_stern_nuv by default) at warp 0 through the
+multi-process launcher and in one process, and reports lock-stepped steps per second, the CPU per
+step of each process, start-up and shutdown times, and whether MOOS-IvP could be compared.
 
 `envelope` times one operating envelope in the batch engine (vehicle-steps per second), the same
 cells flown one by one in-process (a sample, extrapolated) and the whole `--thesis-figures` set.
@@ -21,6 +22,7 @@ from pathlib import Path
 from .envelope import grid_size
 
 DEFAULT_MISSION = Path(__file__).resolve().parents[1] / "missions" / "alpha.toml"
+NUV_MISSION = DEFAULT_MISSION.with_name("overtake_stern_nuv.toml")  # submarine, surrogate server, N_uv helm
 
 
 def add_parser(subparsers) -> None:
@@ -28,8 +30,8 @@ def add_parser(subparsers) -> None:
 
     p = subparsers.add_parser("bench")
     b = p.add_subparsers(dest="bench_command", required=True)
-    t = b.add_parser("pipeline", help="lock-stepped steps per second of a mission at warp 0")
-    t.add_argument("--mission", default=None, help="mission file (default: missions/alpha.toml)")
+    t = b.add_parser("pipeline", help="lock-stepped steps per second, CPU per app, start-up and shutdown")
+    t.add_argument("--mission", default=None, help="one mission file (default: alpha and overtake_stern_nuv)")
     t.add_argument("--repeats", type=int, default=3)
     t.add_argument("--json", action="store_true")
     t.set_defaults(func=bench_pipeline)
@@ -40,74 +42,123 @@ def add_parser(subparsers) -> None:
 
 
 def inprocess_rate(mission_path: Path) -> tuple[float, int]:
+    """Steps per second of `run_inprocess` (the surrogate, when needed, loaded before the clock starts)."""
     from nearsub.common.mission.cores import build_cores
     from nearsub.common.mission.schema import load_mission
     from nearsub.common.runtime.lifecycle import Schedule, run_inprocess
 
     mission = load_mission(mission_path)
+    surrogate = None
+    if mission.needs_surrogate:
+        from nearsub.common.surrogate.model import load_surrogate
+
+        surrogate = load_surrogate(mission.surrogate.model or None)
+    cores = build_cores(mission, surrogate)
     start = time.perf_counter()
-    result = run_inprocess(build_cores(mission), Schedule(mission.periods()), mission.dt, mission.max_steps)
+    result = run_inprocess(cores, Schedule(mission.periods()), mission.dt, mission.max_steps)
     return result.steps / (time.perf_counter() - start), result.steps
 
 
-def children_cpu() -> float:
-    """CPU seconds (user + system) of every child process that has ended."""
-    import resource
-
-    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return usage.ru_utime + usage.ru_stime
-
-
-def pipeline_rate(mission_path: Path, log_dir: str, index: int, *overrides: str) -> tuple[float, int, str, float]:
-    """Steps per second of one launch, its steps and outcome, and the CPU seconds of all the
-    processes it started."""
+def launch_once(mission_path: Path, log_dir: str, tag: str, *overrides: str):
+    """One launch at warp 0 through the multi-process launcher: its `Summary`."""
     from nearsub.common.mission.schema import load_mission
 
     from .launcher import Launcher
 
-    mission = load_mission(mission_path, [f"name=bench{index}_{int(time.time())}", "warp=0", *overrides])
-    cpu = children_cpu()
-    summary = Launcher(mission, str(mission_path), log_dir, quiet=True).run()
-    return summary.steps_per_second, summary.steps, summary.outcome, children_cpu() - cpu
+    mission = load_mission(mission_path, [f"name=bench{tag}_{int(time.time())}", "warp=0", *overrides])
+    return Launcher(mission, str(mission_path), log_dir, quiet=True).run()
+
+
+def median_spread(values: list[float]) -> dict:
+    return {"median": statistics.median(values), "min": min(values), "max": max(values)}
+
+
+def bench_mission(mission_path: Path, log_dir: str, repeats: int, verbose: bool) -> dict | None:
+    """Steps per second, CPU-ms per step of each process, start-up and shutdown time of one mission.
+    A launch of a few steps costs the start-up and shutdown: the CPU per step is what a full run
+    costs beyond it (each process's CPU read at the mission end)."""
+    name = mission_path.stem
+    short = launch_once(mission_path, log_dir, f"{name}_short", "time_limit=0.5")
+    runs = []
+    for index in range(repeats):
+        summary = launch_once(mission_path, log_dir, f"{name}{index}")
+        if summary.outcome not in ("completed", "time_limit", "collision"):
+            print(
+                f"nearsub bench: {name} run {index + 1} ended with {summary.outcome}: {summary.reason}", file=sys.stderr
+            )
+            return None
+        steps = max(summary.steps - short.steps, 1)
+        per_app = {app: (cpu - short.cpu.get(app, 0.0)) * 1e3 / steps for app, cpu in summary.cpu.items()}
+        runs.append((summary, per_app))
+        if verbose:
+            line = (
+                f"{summary.steps} steps, {summary.steps_per_second:.0f} steps/s, {sum(per_app.values()):.2f} CPU-ms "
+                f"per step (all processes), start-up {summary.startup_time:.2f} s, "
+                f"shutdown {summary.shutdown_time:.2f} s"
+            )
+            print(f"  {name} run {index + 1}: {line}", file=sys.stderr)
+    apps = sorted({app for _, per_app in runs for app in per_app})
+    local = [inprocess_rate(mission_path)[0] for _ in range(repeats)]
+    return {
+        "mission": str(mission_path),
+        "steps": runs[-1][0].steps,
+        "pipeline_steps_per_second": median_spread([s.steps_per_second for s, _ in runs]),
+        "pipeline_cpu_ms_per_step": median_spread([sum(per_app.values()) for _, per_app in runs]),
+        "cpu_ms_per_step_by_app": {app: statistics.median(p.get(app, 0.0) for _, p in runs) for app in apps},
+        "startup_s": median_spread([s.startup_time for s, _ in runs] + [short.startup_time]),
+        "shutdown_s": median_spread([s.shutdown_time for s, _ in runs] + [short.shutdown_time]),
+        "inprocess_steps_per_second": {"median": statistics.median(local)},
+    }
+
+
+# The MOOS-IvP apps the alpha comparison needs (README, "Benchmarks").
+MOOS_APPS = ("pAntler", "MOOSDB", "pHelmIvP", "uSimMarineV22", "pMarinePIDV22")
+
+
+def moos_comparison() -> dict:
+    """Whether MOOS-IvP's alpha mission can be run beside nearsub's (its apps on PATH)."""
+    import shutil
+
+    missing = [app for app in MOOS_APPS if shutil.which(app) is None]
+    if missing:
+        return {"ran": False, "reason": f"MOOS-IvP not on PATH (missing {', '.join(missing)}): comparison skipped"}
+    return {"ran": False, "reason": "MOOS-IvP found, but its alpha run at warp 25 and 50 is not implemented yet"}
 
 
 def bench_pipeline(args) -> int:
-    mission_path = Path(args.mission) if args.mission else DEFAULT_MISSION
-    rates, cpus = [], []
+    import os
+
+    missions = [Path(args.mission)] if args.mission else [DEFAULT_MISSION, NUV_MISSION]
+    load_before = os.getloadavg()[0]
+    result = {"repeats": args.repeats, "target_steps_per_second": 1000, "target_startup_plus_shutdown_s": 2.0}
     with tempfile.TemporaryDirectory() as log_dir:
-        # A launch of a few steps costs the start-up and shutdown: the CPU per step is what a
-        # full run costs beyond it.
-        _, short_steps, _, fixed_cpu = pipeline_rate(mission_path, log_dir, args.repeats, "time_limit=0.5")
-        for index in range(args.repeats):
-            rate, steps, outcome, cpu = pipeline_rate(mission_path, log_dir, index)
-            if outcome not in ("completed", "time_limit"):
-                print(f"nearsub bench: run {index} ended with {outcome}", file=sys.stderr)
+        for path in missions:
+            measured = bench_mission(path, log_dir, args.repeats, not args.json)
+            if measured is None:
                 return 1
-            rates.append(rate)
-            cpus.append((cpu - fixed_cpu) * 1e3 / max(steps - short_steps, 1))
-            if not args.json:
-                line = f"{steps} steps, {rate:.0f} steps/s, {cpus[-1]:.2f} CPU-ms per step (all processes)"
-                print(f"  multi-process run {index + 1}: {line}", file=sys.stderr)
-    local = [inprocess_rate(mission_path)[0] for _ in range(args.repeats)]
-    result = {
-        "mission": str(mission_path),
-        "repeats": args.repeats,
-        "pipeline_steps_per_second": {"median": statistics.median(rates), "min": min(rates), "max": max(rates)},
-        "pipeline_cpu_ms_per_step": {"median": statistics.median(cpus), "min": min(cpus), "max": max(cpus)},
-        "inprocess_steps_per_second": {"median": statistics.median(local)},
-        "ratio_inprocess_over_pipeline": statistics.median(local) / statistics.median(rates),
-        "target_steps_per_second": 1000,
-    }
+            result[path.stem] = measured
+    result["moos_ivp"] = moos_comparison()
+    result["load_average"] = {"before": round(load_before, 2), "after": round(os.getloadavg()[0], 2)}
     if args.json:
         print(json.dumps(result))
-    else:
-        p = result["pipeline_steps_per_second"]
-        spread = f"min {p['min']:.0f}, max {p['max']:.0f}"
-        print(f"lock-stepped pipeline: median {p['median']:.0f} steps/s ({spread}) over {args.repeats} runs")
-        c = result["pipeline_cpu_ms_per_step"]
-        print(f"CPU per step:          median {c['median']:.2f} ms over all processes (start-up and shutdown apart)")
-        print(f"in-process loop:       median {result['inprocess_steps_per_second']['median']:.0f} steps/s")
-        print(f"in-process / pipeline: {result['ratio_inprocess_over_pipeline']:.1f}x   (target: >= 1000 steps/s)")
+        return 0
+    for path in missions:
+        m = result[path.stem]
+        p, c = m["pipeline_steps_per_second"], m["pipeline_cpu_ms_per_step"]
+        print(f"{path.stem} ({m['steps']} steps), over {args.repeats} runs:")
+        print(f"  lock-stepped pipeline: median {p['median']:.0f} steps/s (min {p['min']:.0f}, max {p['max']:.0f})")
+        by_app = ", ".join(f"{app} {ms:.2f}" for app, ms in m["cpu_ms_per_step_by_app"].items())
+        print(f"  CPU per step:          median {c['median']:.2f} ms over all processes ({by_app})")
+        local = m["inprocess_steps_per_second"]["median"]
+        print(f"  in-process loop:       median {local:.0f} steps/s ({local / p['median']:.1f}x the pipeline)")
+        up, down = m["startup_s"], m["shutdown_s"]
+        print(
+            f"  start-up {up['median']:.2f} s (min {up['min']:.2f}), shutdown {down['median']:.2f} s "
+            f"(min {down['min']:.2f})   (target: >= 1000 steps/s, start-up + shutdown <= 2 s)"
+        )
+    print(f"MOOS-IvP alpha at warp 25 and 50: {result['moos_ivp']['reason']}")
+    load = result["load_average"]
+    print(f"load average {load['before']} before, {load['after']} after (1 min)")
     return 0
 
 

@@ -1,8 +1,9 @@
 """The launcher of `nearsub launch`: a mission as separate processes (the pAntler of nearsub).
 
-Start order: router, logger, sim, pid, helm, clock. The router is started on loopback port 0 and
-reports the endpoint it really listens on in a ready file; each app is waited for (liveliness)
-before the next group starts, so nothing is published before the logger listens. Every wait is
+Start order: router, then logger, surrogate server, sim, pid, helm and clock at once. The router
+is started on loopback port 0 and reports the endpoint it really listens on in a ready file; the
+lock-stepped apps wait for the logger's and the server's liveliness before they publish, so
+nothing is published before the logger listens, and the clock waits for them. Every wait is
 bounded by the mission's startup_timeout, and so is every client's connect (on a loaded machine a
 process may take seconds just to import). The launcher supervises every process it started, the
 router, logger and surrogate server included: one that exits or crashes is reported with the step
@@ -49,12 +50,13 @@ from nearsub.common.runtime.messages import (
     encode,
     model_for_key,
 )
-from nearsub.common.runtime.processes import spawn_app, stop
+from nearsub.common.runtime.processes import cpu_seconds, spawn_app, stop
 
 from . import registry
 from .caller import Caller
 
 NORMAL_OUTCOMES = ("completed", "time_limit", "collision")
+STATUS_INTERVAL = 1.0  # wall seconds between two updates of the terminal status line
 EXIT_GRACE = 2.0  # wall seconds to wait for the mission end after an app left with code 0
 
 
@@ -96,11 +98,20 @@ class Summary:
     log: str = ""
     failed_app: str | None = None
     swaps: list[dict] = field(default_factory=list)
+    warp: float = 0.0
+    startup_time: float = 0.0  # launch until every process is up (the clock grants step 0)
+    shutdown_time: float = 0.0  # mission end until every process has gone
+    cpu: dict[str, float] = field(default_factory=dict)  # CPU seconds of each process at the end
 
     @property
     def steps_per_second(self) -> float:
         """Lock-stepped steps per wall second from the first tick to the mission end."""
         return self.steps / self.run_wall_time if self.run_wall_time > 0 else 0.0
+
+    @property
+    def achieved_warp(self) -> float:
+        """Simulated seconds per wall second from the first tick to the mission end."""
+        return self.sim_time / self.run_wall_time if self.run_wall_time > 0 else 0.0
 
     def as_dict(self) -> dict:
         return {
@@ -117,6 +128,11 @@ class Summary:
             "log": self.log,
             "failed_app": self.failed_app,
             "swaps": self.swaps,
+            "warp": self.warp,
+            "achieved_warp": round(self.achieved_warp, 2),
+            "startup_time": round(self.startup_time, 3),
+            "shutdown_time": round(self.shutdown_time, 3),
+            "cpu": {name: round(seconds, 3) for name, seconds in self.cpu.items()},
         }
 
     def text(self) -> str:
@@ -126,6 +142,8 @@ class Summary:
             f"  steps {self.steps}, simulated {self.sim_time:.2f} s, wall {self.wall_time:.2f} s "
             f"({self.run_wall_time:.2f} s running, {self.steps_per_second:.0f} steps/s)",
             f"  waypoints reached {self.waypoints_reached}; events: {events}",
+            f"  warp {self.warp:g} requested, {self.achieved_warp:.1f} achieved; start-up {self.startup_time:.2f} s, "
+            f"shutdown {self.shutdown_time:.2f} s",
         ]
         if self.swaps:
             lines.append("  swaps: " + "; ".join(f"{s['old']} -> {s['new']} at step {s['step']}" for s in self.swaps))
@@ -169,7 +187,12 @@ class Launcher:
         stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
         self.run_dir = Path(log_root) / f"{self.community}-{stamp}-{os.getpid()}"
         self.children: dict[str, Child] = {}
-        self.summary = Summary(self.community)
+        self.summary = Summary(self.community, warp=mission.warp)
+        self.ended_at: float | None = None
+        self.status_line = not quiet and sys.stdout.isatty()
+        self.next_status = 0.0
+        self.showing_status = False
+        self.launched = time.monotonic()
         self.stop_requested: int | None = None
         self.instance_counter = Counter()
         self.router: subprocess.Popen | None = None
@@ -183,7 +206,14 @@ class Launcher:
             process = spawn_app(module, ["--run", str(self.run_file), "--instance", instance, *extra], out)
         child = Child(instance, role, process, output)
         self.children[instance] = child
+        self.say(f"started {instance} (pid {process.pid})")
         return child
+
+    def say(self, text: str) -> None:
+        """A progress line for people (not with --json)."""
+        if not self.quiet:
+            self.clear_status()
+            print(f"[launch {time.monotonic() - self.launched:5.2f} s] {text}", file=sys.stderr, flush=True)
 
     def next_instance(self, role: str) -> str:
         self.instance_counter[role] += 1
@@ -233,12 +263,14 @@ class Launcher:
         of the same name is on the bus (a mission on a shared router)."""
         self.run_dir.mkdir(parents=True, exist_ok=True)
         self.run_file = self.run_dir / "run.json"
-        start_wall = time.monotonic()
+        start_wall = self.launched = time.monotonic()
         # Every process started from here keeps trying to reach its router this long.
         os.environ[CONNECT_TIMEOUT_VARIABLE] = f"{self.mission.startup_timeout:g}"
         previous_handlers = {s: signal.signal(s, self._on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
         try:
             connect = self.start_router()
+            if self.router is not None:
+                self.say(f"started router (pid {self.router.pid}) on {', '.join(connect)}")
             RunConfig(mission=self.mission, connect=connect, log_dir=str(self.run_dir)).save(self.run_file)
             log_path = self.run_dir / f"{self.community}.mcap"
             with Bus(Endpoints("client", tuple(connect), timeout=self.mission.startup_timeout)) as bus:
@@ -256,7 +288,16 @@ class Launcher:
                 bus.token(keys.alive(c, "launcher", "launcher"))
                 try:
                     self.start_apps(bus, log_path)
+                    self.summary.startup_time = time.monotonic() - start_wall
+                    self.say(
+                        f"mission {c} running: {len(self.children) + (self.router is not None)} processes up "
+                        f"in {self.summary.startup_time:.2f} s"
+                    )
                     registry.register(self.community, connect, str(log_path))  # tools can find it now
+                    if self.status_line:
+                        self.latest_state = bus.stream(
+                            keys.vehicle_topic(c, self.mission.vehicle_name, "state"), 1, True
+                        )
                     self.supervise()
                 except LaunchError as exc:
                     self.fail(exc)
@@ -281,7 +322,11 @@ class Launcher:
             (registry.runtime_dir() / f"{self.community}.json").unlink(missing_ok=True)
             if not self.children:  # nothing ran: leave no half-empty log folder behind
                 shutil.rmtree(self.run_dir, ignore_errors=True)
-        self.summary.wall_time = time.monotonic() - start_wall
+        self.clear_status()
+        now = time.monotonic()
+        self.summary.wall_time = now - start_wall
+        if self.ended_at is not None:
+            self.summary.shutdown_time = now - self.ended_at
         return self.summary
 
     def _on_signal(self, signum, frame) -> None:
@@ -319,29 +364,35 @@ class Launcher:
             )
 
     def start_apps(self, bus: Bus, log_path: Path) -> None:
-        timeout = self.mission.startup_timeout
+        """Start every process at once, so their imports overlap; the lock-stepped apps wait for
+        the logger and the surrogate server (`--after`) before they publish, and the clock for
+        them before it grants step 0, so the order of the mission is kept."""
+        services, wanted = [], []
         if self.mission.apps.logger.enabled:
             extra = ["--output", str(log_path)]
             if self.mission_path:
                 extra += ["--mission-file", self.mission_path]
             self.spawn("logger", "logger", "logger", extra)
-            self.wait_alive(bus, [("logger", "logger")], timeout)
+            services.append("logger")
             self.summary.log = str(log_path)
         if self.mission.needs_surrogate:
             self.spawn("surrogate", "surrogate", "surrogate")
-            self.wait_alive(bus, [("surrogate", "surrogate")], timeout)
-        wanted = []
+            services.append("surrogate")
+        after = [argument for role in services for argument in ("--after", role)]
         for role in reversed(ORDER):
             instance = self.next_instance(role)
-            self.spawn(role, instance, role)
+            self.spawn(role, instance, role, after)
             wanted.append((role, instance))
-        self.wait_alive(bus, wanted, timeout)
         self.spawn("clock", "clock", "clock")
-        self.clock_started = time.monotonic()
-        self.wait_alive(bus, [("clock", "clock")], timeout)  # so control requests can reach it
+        self.wait_alive(
+            bus, [(role, role) for role in services] + wanted + [("clock", "clock")], self.mission.startup_timeout
+        )
+        self.clock_started = time.monotonic()  # the clock grants step 0 as soon as its token is up
 
     def supervise(self) -> None:
         while True:
+            if self.status_line and time.monotonic() >= self.next_status:
+                self.show_status()
             mail = self.mailbox.get(timeout=0.05)
             if mail is not None and self.handle(mail):
                 self.blame_on_end()
@@ -349,6 +400,36 @@ class Launcher:
             if self.check_processes():
                 self.blame_on_end()
                 return
+
+    def show_status(self) -> None:
+        """One terminal line, rewritten each STATUS_INTERVAL: the clock's step, simulated time and
+        achieved warp (against the requested one), the vehicle's speed and position."""
+        self.next_status = time.monotonic() + STATUS_INTERVAL
+        reply = self.caller.call("clock", "status", timeout=0.5)
+        if reply is None or not reply.ok:
+            return
+        status = reply.data
+        achieved = status.get("achieved_warp")
+        warp = f"warp {'-' if achieved is None else f'{achieved:.1f}'}"
+        if status["warp"] > 0:
+            warp += f" of {status['warp']:g}"
+        line = f"t {status['t']:8.2f} s  step {status['step']:>6}  {warp}"
+        latest = self.latest_state.try_recv()
+        if latest is not None:
+            try:
+                state = decode(latest[1], model_for_key(latest[0]), latest[0])
+                line += f"  u {state.u:5.2f} m/s  at ({state.x:8.2f}, {state.y:8.2f})"
+            except MessageError:
+                pass
+        sys.stdout.write(f"\r\033[K{line}")
+        sys.stdout.flush()
+        self.showing_status = True
+
+    def clear_status(self) -> None:
+        if self.showing_status:
+            sys.stdout.write("\r\033[K")
+            sys.stdout.flush()
+            self.showing_status = False
 
     def blame_on_end(self) -> None:
         """A mission that ended badly because a process died (the sim ends it at once when the
@@ -424,7 +505,9 @@ class Launcher:
         except MessageError:
             return False  # the receiving app reports it; the launcher only watches
         if isinstance(message, MissionEnd):
-            self.summary.run_wall_time = time.monotonic() - self.clock_started
+            self.ended_at = time.monotonic()
+            self.summary.run_wall_time = self.ended_at - self.clock_started
+            self.summary.cpu = self.cpu_now()
             self.summary.outcome = message.outcome
             self.summary.reason = message.reason
             self.summary.steps = message.step
@@ -435,8 +518,17 @@ class Launcher:
             if message.kind == "waypoint":
                 self.summary.waypoints_reached += 1
             if not self.quiet and message.kind in ("waypoint", "collision", "swap", "error"):
+                self.clear_status()
                 print(f"  t={message.t:8.2f}  {message.kind:<10} {message.detail}", file=sys.stderr, flush=True)
         return False
+
+    def cpu_now(self) -> dict[str, float]:
+        """CPU seconds of each process so far, by instance (the router as "router")."""
+        processes = {c.instance: c.process for c in self.children.values()}
+        if self.router is not None:
+            processes["router"] = self.router
+        cpu = {name: cpu_seconds(p.pid) for name, p in processes.items()}
+        return {name: seconds for name, seconds in cpu.items() if seconds is not None}
 
     def drain_mailbox(self) -> None:
         while (mail := self.mailbox.get(timeout=0.0)) is not None:

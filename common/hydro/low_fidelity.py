@@ -29,6 +29,8 @@ import numpy as np
 from scipy.interpolate import BSpline, CubicSpline, RectBivariateSpline
 from scipy.special import ellipe, ellipk
 
+from nearsub.common.hydro.cache import cache_key, cached_arrays
+from nearsub.common.physics import hull as hull_module
 from nearsub.common.physics.hull import (
     L_SUB,
     R_SUB,
@@ -282,15 +284,22 @@ def submarine_field(n_frusta: int = N_FRUSTA) -> SubmarineField:
 
 @lru_cache(maxsize=4)
 def _submarine_field(n_frusta: int) -> SubmarineField:
-    panels = solve_ring_panels(suboff_profile(n_frusta + 1))
     x, r = _field_grid()
     xx, rr = np.meshgrid(x, r, indexing="ij")
-    ux = np.empty(xx.size)
-    ur = np.empty(xx.size)
-    chunk = 4000
-    for start in range(0, xx.size, chunk):
-        part = slice(start, start + chunk)
-        ux[part], ur[part] = panels.velocity(xx.ravel()[part], rr.ravel()[part])
+
+    def tabulate() -> tuple[np.ndarray, np.ndarray]:
+        panels = solve_ring_panels(suboff_profile(n_frusta + 1))
+        ux = np.empty(xx.size)
+        ur = np.empty(xx.size)
+        chunk = 4000
+        for start in range(0, xx.size, chunk):
+            part = slice(start, start + chunk)
+            ux[part], ur[part] = panels.velocity(xx.ravel()[part], rr.ravel()[part])
+        return ux, ur
+
+    # Seconds of CPU per process otherwise (a mission's server and sim both need it at start-up).
+    key = cache_key([__file__, hull_module.__file__], str(n_frusta), x.tobytes(), r.tobytes())
+    ux, ur = cached_arrays("lf-field", key, tabulate)
     shape = xx.shape
     return SubmarineField(
         RectBivariateSpline(x, r, ux.reshape(shape)),

@@ -6,6 +6,7 @@ nothing of Zenoh; `apps/` runs them as processes and `lifecycle.run_inprocess` r
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -15,14 +16,17 @@ from nearsub.common.physics import dynamics
 from nearsub.common.physics import proximity as events
 from nearsub.common.runtime.lifecycle import InProcessResult, Iteration, Schedule, run_inprocess
 from nearsub.common.runtime.messages import Desired, Event, Forces, HelmProgress, Input, Message, State
-from nearsub.common.surrogate.interaction import (
-    ForceModel,
-    InteractionAt,
-    geometry_outside,
-    interaction_at,
-    prepare,
-)
-from nearsub.common.surrogate.model import load_surrogate
+
+if TYPE_CHECKING:
+    from nearsub.common.surrogate.interaction import ForceModel, InteractionAt
+
+
+def interaction():
+    """The interaction module, imported only by a core that uses a surrogate: it loads the LF and
+    scipy, which the pid and a mission without a submarine never need (their start-up)."""
+    from nearsub.common.surrogate import interaction as module
+
+    return module
 
 
 def state_array(message: State) -> np.ndarray:
@@ -44,12 +48,19 @@ def guard_clearance(mission: Mission) -> float:
     return mission.vehicle_model.diameter if clearance is None else clearance
 
 
+def sim_forces(mission: Mission) -> bool:
+    """Whether the sim publishes the interaction forces at each state it publishes (a submarine
+    and an interaction mode other than "off")."""
+    return mission.environment.submarine and mission.apps.sim.interaction != "off"
+
+
 class HelmCore:
     """pHelmIvP: the waypoints behaviour (thesis 5.7) or the modified one (6.3.2), optionally with
-    N_uv compensation (6.3.1, which asks the surrogate for N_s), turning x_k into x_d,k."""
+    N_uv compensation (6.3.1), turning x_k into x_d,k. Its N_s at x_k is the sim's: the forces the
+    sim published with x_k, a declared input, so each vehicle-step asks the surrogate once; only
+    when the sim has no forces (interaction "off") does a compensating helm ask itself."""
 
     role = "helm"
-    inputs = ("state",)
     outputs = ("desired", "helm")
 
     def __init__(self, mission: Mission, surrogate: ForceModel | None = None):
@@ -65,9 +76,14 @@ class HelmCore:
         self.legs = self.settings.legs
         # N_s is the yaw moment the interaction adds to the vehicle's own model, as the sim applies
         # it: the interaction increment in "increment" mode, the surrogate's total otherwise.
+        # The sim's applied forces are the same numbers in "thesis" as in "replace" mode.
         self.interaction_mode = "increment" if mission.apps.sim.interaction == "increment" else "replace"
-        if self.surrogate is not None:
-            prepare(self.interaction_mode)
+        # The forces are an input whenever the sim has them, compensating or not, so a
+        # compensating helm swapped in holds them from its predecessor's handover.
+        self.inputs = ("state", "forces") if sim_forces(mission) else ("state",)
+        self.shares_forces = "forces" in self.inputs
+        if self.surrogate is not None and not self.shares_forces:
+            interaction().prepare(self.interaction_mode)
         self.cross_flow = None
         if self.settings.modified:
             u_sub = mission.environment.u_sub
@@ -77,14 +93,24 @@ class HelmCore:
         self.guard_step = math.radians(self.settings.guard_rate_deg) * mission.dt * self.settings.period
         self.delta_psi = 0.0  # the guarded offset of the last iteration (the rate limit's reference)
         self.state: State | None = None
+        self.forces: Forces | None = None
         self.straying = False
 
     def startup(self) -> list[tuple[str, Message]]:
         return []
 
     def new_mail(self, mail: dict[str, Message]) -> None:
-        if "state" in mail:
-            self.state = mail["state"]
+        self.state = mail.get("state", self.state)
+        self.forces = mail.get("forces", self.forces)
+
+    def yaw_moment(self, s: State) -> float:
+        """N_s at x_k, as the sim applies it (section 6.3.1)."""
+        if self.shares_forces:
+            return self.forces.applied_N
+        seen = interaction().interaction_at(
+            self.surrogate, state_array(s), self.vehicle, self.rho, self.interaction_mode
+        )
+        return float(seen.applied[0, 2])
 
     def iterate(self, step: int, t: float) -> Iteration:
         s = self.state
@@ -92,8 +118,7 @@ class HelmCore:
         self.progress_state = decision.progress
         psi_d, delta_psi, n_s, commanded, guard = decision.psi_d, 0.0, 0.0, 0.0, None
         if self.surrogate is not None and not decision.progress.complete:
-            seen = interaction_at(self.surrogate, state_array(s), self.vehicle, self.rho, self.interaction_mode)
-            n_s = float(seen.applied[0, 2])
+            n_s = self.yaw_moment(s)
             commanded = float(
                 behaviours.nuv_heading_offset(n_s, decision.u_d, self.vehicle.compensation_N_uv, self.gamma)
             )
@@ -243,12 +268,13 @@ class SimCore:
         self.vehicle = mission.vehicle_model
         self.rho = mission.environment.rho
         self.interaction_mode = mission.apps.sim.interaction
-        wanted = mission.environment.submarine and self.interaction_mode != "off"
+        wanted = sim_forces(mission)
         if wanted and surrogate is None:
             raise ValueError("the sim's interaction forces need the surrogate (a force model)")
         self.surrogate = surrogate if wanted else None
         if self.surrogate is not None:
-            prepare(self.interaction_mode)
+            interaction().prepare(self.interaction_mode)
+        self.max_steps = mission.max_steps
         self.settings = mission.apps.sim
         self.env = mission.environment.dynamics()
         self.submarine = mission.environment.submarine
@@ -259,9 +285,21 @@ class SimCore:
         psi = math.radians(start.psi_deg)
         self.x = np.array([start.speed, 0.0, 0.0, start.x, start.y, psi])
         self.inp: Input | None = None
+        self.seen: InteractionAt | None = None  # the forces at self.x, asked when x was reached
 
     def startup(self) -> list[tuple[str, Message]]:
-        return [("state", state_message(self.x, 0, 0.0, self.role))]
+        return [*self.forces_at(0, 0.0), ("state", state_message(self.x, 0, 0.0, self.role))]
+
+    def forces_at(self, step: int, t: float) -> list[tuple[str, Message]]:
+        """Ask the surrogate about x_step, once: the forces are published with the state they
+        belong to (labelled like it, for the helm's N_s) and applied when step `step` runs."""
+        if self.surrogate is None or step >= self.max_steps:
+            return []
+        self.seen = self.ask()
+        return [("forces", forces_message(self.seen, step, t, self.role))]
+
+    def ask(self) -> InteractionAt:
+        return interaction().interaction_at(self.surrogate, self.x, self.vehicle, self.rho, self.interaction_mode)
 
     def new_mail(self, mail: dict[str, Message]) -> None:
         self.inp = mail.get("input", self.inp)
@@ -269,16 +307,15 @@ class SimCore:
     def iterate(self, step: int, t: float) -> Iteration:
         result = Iteration()
         command = self.saturated_command(step, t, result)
-        interaction = None
+        forces = None
         if self.surrogate is not None:
-            if step == 0 and (outside := geometry_outside(self.vehicle)):
+            if step == 0 and (outside := interaction().geometry_outside(self.vehicle)):
                 result.events.append(event(self.role, step, t, "info", outside))
-            seen = interaction_at(self.surrogate, self.x, self.vehicle, self.rho, self.interaction_mode)
-            interaction = seen.interaction
-            result.outputs.append(("forces", forces_message(seen, step, t, self.role)))
-        self.x = dynamics.step(
-            self.x, command, self.vehicle, self.env, self.dt, self.settings.integrator, t, interaction
-        )
+            if self.seen is None:  # taken over from another instance: ask again, the same answer
+                self.seen = self.ask()
+            forces = self.seen.interaction
+        self.x = dynamics.step(self.x, command, self.vehicle, self.env, self.dt, self.settings.integrator, t, forces)
+        self.seen = None
         next_step = step + self.settings.period
         next_t = next_step * self.base_dt
         if not np.all(np.isfinite(self.x)) or abs(self.x[dynamics.U]) > self.settings.divergence_speed:
@@ -289,6 +326,7 @@ class SimCore:
             )
             result.events.append(event(self.role, step, t, "error", result.reason))
             return result
+        result.outputs.extend(self.forces_at(next_step, next_t))
         result.outputs.append(("state", state_message(self.x, next_step, next_t, self.role)))
         if self.submarine:
             self.check_proximity(next_step, next_t, result)
@@ -361,5 +399,7 @@ def run_mission(mission: Mission, surrogate: ForceModel | None = None) -> InProc
     """The whole mission in this process (the reference for the multi-process run). The surrogate
     is loaded from the mission's model file when the mission needs one and none is given."""
     if surrogate is None and mission.needs_surrogate:
+        from nearsub.common.surrogate.model import load_surrogate
+
         surrogate = load_surrogate(mission.surrogate.model or None)
     return run_inprocess(build_cores(mission, surrogate), Schedule(mission.periods()), mission.dt, mission.max_steps)

@@ -25,9 +25,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from nearsub.common.physics.hull import (
     L_SUB,
@@ -41,6 +41,9 @@ from nearsub.common.physics.hull import (
     uuv_body_outline,
     uuv_outline,
 )
+
+if TYPE_CHECKING:
+    from scipy.spatial import cKDTree
 
 STRAY_LIMIT = 1.0  # large stray: more than 1 m from the track-line (thesis section 5.11.2) [m]
 _HULL_SPACING = 0.01  # arc-length spacing of the hull polyline [m]
@@ -74,6 +77,8 @@ def _hull_curves() -> tuple[tuple[cKDTree, np.ndarray], tuple[cKDTree, np.ndarra
     The outline is symmetric in y, so the distance from (x, y) is the distance from (x, |y|) to
     the upper half. The parallel middle body is a straight line, handled exactly in closed form.
     """
+    from scipy.spatial import cKDTree  # here: the processes that never ask (the clock) skip scipy
+
     joint_bow, joint_aft, _ = SUBOFF_JOINTS_M
     bow, stern = _resample(0.0, joint_bow), _resample(joint_aft, L_SUB)
     return (cKDTree(bow), bow), (cKDTree(stern), stern)

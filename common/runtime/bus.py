@@ -195,12 +195,13 @@ class Stream:
         sample = self._handler.recv() if self._handler is not None else self._queue.get()
         return str(sample.key_expr), sample.payload.to_bytes()
 
-    def try_recv(self) -> tuple[str, bytes] | None:
+    def try_recv(self, timeout: float = 0.0) -> tuple[str, bytes] | None:
+        """The next sample, waiting up to `timeout` seconds for one (`inputs` streams only)."""
         if self._handler is not None:
             sample = self._handler.try_recv()
         else:
             try:
-                sample = self._queue.get_nowait()
+                sample = self._queue.get(timeout=timeout) if timeout > 0 else self._queue.get_nowait()
             except queue.Empty:
                 sample = None
         if sample is None:

@@ -257,6 +257,17 @@ class ClockCore:
             return Advance(replies=advance.replies, end=self.mission_end(completed + 1, "stalled", reason))
         return advance
 
+    def wake_in(self, now: float) -> float:
+        """Wall seconds until the clock must act with no mail arriving: the release of the next
+        paced step, the stall deadline, or the warp meter's next sample, whichever is first."""
+        wait = WARP_SAMPLE
+        policy = self.policy
+        if policy.warp > 0 and not self.paused and self.granted + 1 != self.pause_before:
+            wait = min(wait, policy.wall0 + (self.granted + 1) * self.dt / policy.warp - now)
+        if self.owed_since is not None:
+            wait = min(wait, self.owed_since + self.step_timeout - now)
+        return max(wait, 0.0)
+
     def grant(self, completed: int, now: float) -> Tick | None:
         """Extend the grant in chunks of half the window (fewer ticks), or up to a cap."""
         limit = self.policy.limit(completed, now, self.pause_before, self.progress.end)

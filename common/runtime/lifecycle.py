@@ -37,8 +37,9 @@ from nearsub.common.runtime.messages import (
 
 ORDER = ("helm", "pid", "sim")
 
-# Which role publishes each lock-stepped topic.
-PRODUCER = {"desired": "helm", "input": "pid", "state": "sim"}
+# Which role publishes each lock-stepped topic (the sim's forces at x_k go out with x_k, for the
+# helm's N_uv compensation).
+PRODUCER = {"desired": "helm", "input": "pid", "state": "sim", "forces": "sim"}
 
 # The output that tells the clock an app has finished a step: its acknowledgement. An app sends
 # an explicit Ack only when it asks to end the mission or did not publish this output (e.g. the
@@ -50,8 +51,8 @@ DONE_TOPIC = {"helm": "desired", "pid": "input", "sim": "state"}
 OPERATOR = "operator"
 OPERATOR_TOPICS = ("desired", "input")
 
-# Topics labelled with the step they lead to (the sim's x_{k+1} after step k).
-NEXT_STEP_TOPICS = frozenset({"state"})
+# Topics labelled with the step they lead to (the sim's x_{k+1} after step k, and its forces there).
+NEXT_STEP_TOPICS = frozenset({"state", "forces"})
 
 # Outcomes a core may request, from most to least severe; the clock keeps the most severe.
 OUTCOME_SEVERITY = ("diverged", "collision", "error", "completed", "time_limit")

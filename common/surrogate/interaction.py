@@ -38,7 +38,8 @@ from nearsub.common.physics.dynamics import PSI, Interaction, U, X, Y
 from nearsub.common.physics.hull import R_SUB
 from nearsub.common.physics.vehicles import Vehicle
 from nearsub.common.surrogate import domain
-from nearsub.common.surrogate import model as sg
+from nearsub.common.surrogate import query as sg
+from nearsub.common.surrogate.query import ServiceError
 
 # Width of the ramp inside each bound, as a fraction of the input's range (table 4.2): 0.08 deg of
 # the +/-2 deg heading range, 2.5 m of R_long, 0.06 kn of speed. nearsub's choice.
@@ -64,10 +65,6 @@ HEADING = 3  # psi_deg: the discrepancy weight of the LF-in-the-loop increment i
 LF_FULL = 9.0  # [m]
 LF_CUT = 14.0  # [m]
 LF_MAX_LENGTH = hydro_lf.R_FIELD_MAX - R_SUB - LF_CUT  # longest UUV whose strips stay in the table [m]
-
-
-class ServiceError(RuntimeError):
-    """A service the mission depends on (the surrogate server) is missing or failed."""
 
 
 class IncrementError(ServiceError):

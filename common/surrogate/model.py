@@ -5,7 +5,7 @@ coefficients X', Y', N' of the UUV (thesis section 5.2). This module is pure num
 says which inputs are valid (table 4.2, constraints (4.4)-(4.7) as corrected in docs/design.md,
 "Thesis errata"), converts a dimensional state to inputs and coefficients back to forces
 (mirroring the -y side, section 4.2.1), wraps a model file as a `Surrogate`, and defines the
-query/reply messages of the surrogate server (`apps/surrogate.py`).
+query/reply messages of the surrogate server (`apps/surrogate.py`; defined in `surrogate.query`).
 
 A `Surrogate` is one of three kinds (`Surrogate.kind`): "lf_in_loop", the exact low fidelity plus
 a residual GP (the shipped kind; `low_fidelity` and `discrepancy` give its two parts);
@@ -29,19 +29,15 @@ import math
 import os
 import sys
 import tempfile
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Any
 
 import numpy as np
-from pydantic import Field, model_validator
-from pydantic.types import FiniteFloat
 
 import nearsub
 from nearsub.common.learning.gp import MultiOutputGP
 from nearsub.common.physics.hull import D_SUB, L_SUB
-from nearsub.common.runtime import keys
-from nearsub.common.runtime.messages import FiniteMessage, decode, encode
+from nearsub.common.runtime.messages import decode, encode
 from nearsub.common.surrogate.domain import (
     BOUNDS,
     CONSTRAINTS,
@@ -69,41 +65,21 @@ from nearsub.common.surrogate.modelfile import (
     save_model,
 )
 
-# Largest batch one query may carry (a nearsub choice: bounds the server's memory per query,
-# about 1 MB of msgpack; a 10,000-point sweep is 10 queries).
-MAX_QUERY_POINTS = 100_000
-
-
-def surrogate_key(community: str) -> str:
-    """The server's queryable: nearsub/<community>/surrogate (a service key, docs/design.md, "Keys")."""
-    return f"{keys.community_root(community)}/surrogate"
+# The server's messages live in surrogate.query (light to import); they are part of this API too.
+from nearsub.common.surrogate.query import (  # noqa: F401
+    MAX_QUERY_POINTS,
+    Prediction,
+    SurrogateQuery,
+    SurrogateReply,
+    decode_reply,
+    encode_query,
+    surrogate_key,
+)
 
 
 def default_model_path() -> Path:
     """Where the shipped model lives inside the installed package (package data `data/*`)."""
     return Path(nearsub.__file__).resolve().parent / "data" / "surrogate.npz"
-
-
-# ------------------------------------------------------------------------------- prediction
-@dataclass(frozen=True)
-class Prediction:
-    """Answers for n points: mean and std (n, 3) (None if not asked), and the two flags (n,).
-
-    For points outside the bounds or constraints, mean and std are still the GP's posterior at
-    that very point (no clipping, no substitution): far from the data the RBF GP reverts to the
-    training mean and its std grows towards the prior std, so the numbers stay finite and honest,
-    and the flags say not to trust them. Non-finite inputs give NaN mean and std.
-    """
-
-    mean: np.ndarray
-    std: np.ndarray | None
-    in_domain: np.ndarray
-    constraints_ok: np.ndarray
-
-    @property
-    def valid(self) -> np.ndarray:
-        """(n,) inside the bounds and the constraints: the region the model was trained on."""
-        return self.in_domain & self.constraints_ok
 
 
 def _model_id(model: MultiOutputGP | MultiFidelitySurrogate | LFInLoopModel) -> str:
@@ -282,63 +258,6 @@ def load_surrogate(path: str | os.PathLike | None = None) -> Surrogate:
     return Surrogate(analytic_model(), source=f"analytic test fixture (no model at {shipped})")
 
 
-# -------------------------------------------------------------------------------- messages
-Point = Annotated[list[FiniteFloat], Field(min_length=len(INPUT_NAMES), max_length=len(INPUT_NAMES))]
-
-
-class SurrogateQuery(FiniteMessage):
-    """A batch of points to predict at: `points` is a list of rows [R_long, R_lat, u_kn, psi_deg,
-    d_ratio, ld_ratio] (INPUT_NAMES order, units of table 4.2), finite, 1..MAX_QUERY_POINTS rows.
-
-    Rows rather than a dict of columns: a row is one vehicle state, maps to a numpy (n, 6) array
-    without reordering, and a bad value is named by its position (field 'points.<row>.<column>').
-    The header (schema_version, step, t, source) is the sender's; the reply echoes step and t.
-    """
-
-    points: Annotated[list[Point], Field(min_length=1, max_length=MAX_QUERY_POINTS)]
-
-
-class SurrogateReply(FiniteMessage):
-    """Answers to a `SurrogateQuery`, row for row: mean and std (n, len(output_names)) of the
-    non-dimensional coefficients, and the flags (n,) (see `Prediction` for out-of-domain points).
-    model_id names the model (a content hash), source is the server instance."""
-
-    mean: list[list[FiniteFloat]]
-    std: list[list[FiniteFloat]]
-    in_domain: list[bool]
-    constraints_ok: list[bool]
-    output_names: list[str]
-    model_id: str
-
-    @model_validator(mode="after")
-    def _consistent_shapes(self) -> SurrogateReply:
-        n, m = len(self.mean), len(self.output_names)
-        if len(self.std) != n or len(self.in_domain) != n or len(self.constraints_ok) != n:
-            raise ValueError(
-                f"mean has {n} rows but std has {len(self.std)}, in_domain {len(self.in_domain)}, "
-                f"constraints_ok {len(self.constraints_ok)}"
-            )
-        bad = next((i for i, row in enumerate(self.mean + self.std) if len(row) != m), None)
-        if bad is not None:
-            raise ValueError(f"row {bad % n} of {'mean' if bad < n else 'std'} does not have {m} values")
-        return self
-
-    def prediction(self) -> Prediction:
-        """The reply as numpy arrays."""
-        return Prediction(
-            np.array(self.mean, dtype=float).reshape(-1, len(self.output_names)),
-            np.array(self.std, dtype=float).reshape(-1, len(self.output_names)),
-            np.array(self.in_domain, dtype=bool),
-            np.array(self.constraints_ok, dtype=bool),
-        )
-
-
-def encode_query(points: Any, step: int = 0, t: float = 0.0, source: str = "") -> bytes:
-    """msgpack bytes of a SurrogateQuery for points (n, 6) or (6,)."""
-    rows = _as_inputs(points).tolist()
-    return encode(SurrogateQuery(step=step, t=t, source=source, points=rows))
-
-
 def answer_query(surrogate: Surrogate, payload: bytes, source: str = "surrogate") -> bytes:
     """The server's work for one query: validate, predict the whole batch, encode the reply.
     Raises MessageError (naming the field and value) for a malformed query."""
@@ -356,8 +275,3 @@ def answer_query(surrogate: Surrogate, payload: bytes, source: str = "surrogate"
         model_id=surrogate.model_id,
     )
     return encode(reply)
-
-
-def decode_reply(payload: bytes) -> SurrogateReply:
-    """Validate a server reply (raises MessageError naming the field and value)."""
-    return decode(payload, SurrogateReply, "surrogate reply")
