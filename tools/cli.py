@@ -4,7 +4,8 @@ Subcommand X lives in the module named in TOOLS, which exports `add_parser(subpa
 its parser and sets `func`, which runs it. Only the module of the subcommand being run is imported,
 and a tool imports its heavy modules (numpy, scipy, zenoh, matplotlib) only when it runs, so that
 `nearsub --help` and a tool's `--help` answer at once. A LookupError a tool raises (no such
-mission, problem or behaviour) is printed as one line naming it, with exit code 2.
+mission, problem or behaviour; `errors.InputError` for any bad input) is printed as one line
+naming it, with exit code 2.
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ TOOLS = {
     "validate": ("validate", "physics validation cases (thesis 5.10) and scenario checks"),
     "bench": ("bench", "benchmarks that print measured figures"),
     "view": ("view", "live map of a running mission, or replay of a log, in the browser"),
+    "foxglove": ("foxglove", "serve a running mission to Foxglove over its WebSocket protocol"),
 }
 
 

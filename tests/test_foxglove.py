@@ -1,0 +1,88 @@
+"""Logs and live missions for Foxglove: `nearsub log export --format foxglove` writes an MCAP whose
+channels are all JSON with JSON schemas (nearsub's topics and Foxglove's scene schemas), on the
+epoch of the mission's start; `nearsub foxglove NAME` serves a running mission over Foxglove's
+WebSocket protocol."""
+
+import json
+import math
+
+import pytest
+from logsample import STARTED_UNIX, write_sample_log
+from mcap.reader import make_reader
+
+from conftest import nearsub
+
+FOXGLOVE_SCHEMAS = {"/tf": "foxglove.FrameTransform", "/scene/mission": "foxglove.SceneUpdate",
+                    "/scene/uuv": "foxglove.SceneUpdate", "/events": "foxglove.Log"}  # fmt: skip
+START_NS = round(STARTED_UNIX * 1e3) * 1_000_000
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("foxglove")
+    write_sample_log(folder / "alpha.mcap", shuffle=True)
+    target = folder / "alpha-foxglove.mcap"
+    out = nearsub("log", "export", str(folder / "alpha.mcap"), "--format", "foxglove", "-o", str(target))
+    assert out.returncode == 0, out.stderr
+    with open(target, "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        messages = [(ch.topic, m.log_time, json.loads(m.data)) for _, ch, m in reader.iter_messages()]
+        metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+    channels = {ch.topic: (ch, summary.schemas[ch.schema_id]) for ch in summary.channels.values()}
+    return channels, messages, metadata
+
+
+def by_topic(messages, topic):
+    return [(t, m) for name, t, m in messages if name == topic]
+
+
+def test_every_channel_is_json_with_a_json_schema(exported):
+    channels, _, _ = exported
+    for topic, (channel, schema) in channels.items():
+        assert channel.message_encoding == "json" and schema.encoding == "jsonschema", topic
+        assert json.loads(schema.data)["type"] == "object"
+    assert channels["nearsub/alpha/remus100/state"][1].name == "nearsub.State"
+    for topic, name in FOXGLOVE_SCHEMAS.items():
+        assert channels[topic][1].name == name
+    transform = json.loads(channels["/tf"][1].data)["properties"]
+    assert set(transform) == {"timestamp", "parent_frame_id", "child_frame_id", "translation", "rotation"}
+
+
+def test_uuv_poses_follow_the_state_topic_on_the_mission_epoch(exported):
+    _, messages, _ = exported
+    states = sorted(by_topic(messages, "nearsub/alpha/remus100/state"), key=lambda item: item[0])
+    transforms = by_topic(messages, "/tf")
+    assert len(transforms) == len(states) > 100
+    for (t_state, state), (t_tf, tf) in zip(states, transforms, strict=True):
+        assert t_tf == t_state == START_NS + round(state["t"] * 1e9)  # simulated time on the epoch
+        assert tf["timestamp"] == {"sec": t_tf // 10**9, "nsec": t_tf % 10**9}
+        assert (tf["parent_frame_id"], tf["child_frame_id"]) == ("world", "remus100")
+        assert (tf["translation"]["x"], tf["translation"]["y"]) == (state["x"], state["y"])
+        yaw = 2 * math.atan2(tf["rotation"]["z"], tf["rotation"]["w"])
+        assert math.remainder(yaw - state["psi"], 2 * math.pi) == pytest.approx(0.0, abs=1e-12)
+    (_, uuv), = by_topic(messages, "/scene/uuv")  # fmt: skip
+    entity = uuv["entities"][0]
+    assert entity["frame_id"] == "remus100" and entity["frame_locked"]  # carried by /tf
+    assert entity["cylinders"][0]["size"]["z"] == pytest.approx(1.33)  # the REMUS 100 to scale
+
+
+def test_scene_has_the_tracks_and_events_are_log_lines(exported):
+    _, messages, metadata = exported
+    (t, mission), = by_topic(messages, "/scene/mission")  # fmt: skip
+    assert t == START_NS
+    lines = mission["entities"][0]["lines"]
+    assert len(lines) == 2 and lines[0]["points"][0] == {"x": 0.0, "y": -20.0, "z": 0.0}  # alpha: no submarine
+    events = by_topic(messages, "nearsub/alpha/events/sim") + by_topic(messages, "nearsub/alpha/events/helm")
+    logs = by_topic(messages, "/events")
+    assert len(logs) == sum(len(by_topic(messages, k)) for k in {n for n, _, _ in messages if "/events/" in n})
+    assert events and all(log["message"].startswith("t=") and log["level"] in (2, 3, 4) for _, log in logs)
+    assert metadata["mission"]["name"] == "alpha"
+
+
+def test_export_refuses_to_overwrite_its_input_and_a_topic_selection(tmp_path):
+    write_sample_log(tmp_path / "alpha.mcap", seconds=1.0)
+    for extra, words in ((["-o", str(tmp_path / "alpha.mcap")], "is the log being exported"),
+                         (["--topic", "nearsub/**"], "keeps every topic")):  # fmt: skip
+        out = nearsub("log", "export", str(tmp_path / "alpha.mcap"), "--format", "foxglove", *extra)
+        assert out.returncode == 2 and words in out.stderr and len(out.stderr.strip().splitlines()) == 1
