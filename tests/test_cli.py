@@ -44,7 +44,7 @@ def test_tap_list_with_nothing_running_says_so_without_loading_zenoh(runtime_dir
     done = nearsub("tap", "list")
     assert done.returncode == 2
     assert done.stderr.strip() == (
-        "nearsub tap: no mission is running (start one with `nearsub launch`, or pass --connect)"
+        "nearsub tap list: no mission is running (start one with `nearsub launch`, or pass --connect)"
     )
 
 

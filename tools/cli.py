@@ -60,7 +60,9 @@ def main(argv=None) -> int:
     try:
         return args.func(args)
     except LookupError as exc:
-        print(f"nearsub {args.command}: {exc.args[0] if exc.args else exc}", file=sys.stderr)
+        action = getattr(args, f"{args.command.replace('-', '_')}_command", None)  # `log export`
+        name = f"{args.command} {action}" if isinstance(action, str) else args.command
+        print(f"nearsub {name}: {exc.args[0] if exc.args else exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return 130
