@@ -86,3 +86,59 @@ def test_export_refuses_to_overwrite_its_input_and_a_topic_selection(tmp_path):
                          (["--topic", "nearsub/**"], "keeps every topic")):  # fmt: skip
         out = nearsub("log", "export", str(tmp_path / "alpha.mcap"), "--format", "foxglove", *extra)
         assert out.returncode == 2 and words in out.stderr and len(out.stderr.strip().splitlines()) == 1
+
+
+def test_live_server_advertises_the_channels_and_streams_poses(launches, community):
+    """`nearsub foxglove NAME` as `nearsub launch --foxglove` starts it (from the run file): a
+    client sees the channels advertised and receives poses. foxglove-sdk's server speaks
+    Foxglove's WebSocket protocol under its current name, "foxglove.sdk.v1" (the messages of
+    "foxglove.websocket.v1", which it no longer accepts in the handshake)."""
+    import os
+    import signal
+    import struct
+    import time
+    from pathlib import Path
+
+    from websockets.sync.client import connect
+
+    from conftest import ALPHA
+    from helpers import wait_registered
+    from nearsub.common.mission.schema import load_mission
+    from nearsub.tools.view import start_server_process
+
+    mission = load_mission(ALPHA)
+    startup, step = mission.startup_timeout, mission.step_timeout
+    launches.start(ALPHA, "--set", f"name={community}", "--warp", "1", "--until", "300")
+    entry = wait_registered(community, timeout=2 * startup + step)
+    process, url = start_server_process("foxglove", Path(entry["log"]).parent / "run.json", 0, startup)
+    try:
+        assert url.startswith("ws://127.0.0.1:")
+        with connect(url, subprotocols=["foxglove.sdk.v1"], open_timeout=step) as socket:
+            assert socket.subprotocol == "foxglove.sdk.v1"
+            channels, pose, subscribed, deadline = {}, None, False, time.monotonic() + startup
+            while pose is None:
+                assert time.monotonic() < deadline, f"no pose within {startup:g} s; channels {sorted(channels)}"
+                frame = socket.recv(timeout=step)
+                if isinstance(frame, str):
+                    message = json.loads(frame)
+                    for channel in message.get("channels", []) if message["op"] == "advertise" else []:
+                        channels[channel["topic"]] = channel
+                    # A subscription sent right after the advertisement can reach the server before
+                    # it knows the channel ("Unknown channel ID" status): ask again after each message.
+                    if "/tf" in channels and not subscribed:
+                        socket.send(json.dumps({"op": "subscribe", "subscriptions": [
+                            {"id": 7, "channelId": channels["/tf"]["id"]}]}))  # fmt: skip
+                        subscribed = True
+                    if message["op"] == "status" and "Unknown channel" in message["message"]:
+                        subscribed = False
+                elif frame[0] == 1:  # message data: op, subscription id, log time, payload
+                    subscription, log_time = struct.unpack_from("<IQ", frame, 1)
+                    assert subscription == 7
+                    pose = json.loads(frame[13:])
+        assert channels["/tf"]["schemaName"] == "foxglove.FrameTransform" and channels["/tf"]["encoding"] == "json"
+        assert channels[f"nearsub/{community}/remus100/state"]["schemaName"] == "nearsub.State"
+        assert pose["child_frame_id"] == "remus100" and pose["parent_frame_id"] == "world"
+        assert abs(log_time / 1e9 - time.time()) < 3600  # on the wall-clock epoch
+    finally:
+        os.killpg(process.pid, signal.SIGTERM)
+        process.wait(timeout=step)

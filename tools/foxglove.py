@@ -1,7 +1,7 @@
 """`nearsub foxglove NAME` and `nearsub log export --format foxglove`: a mission for Foxglove.
 
-Both go through foxglove-sdk: an MCAP file it writes, or its WebSocket server (protocol
-"foxglove.websocket.v1") on 127.0.0.1, following a running mission. The channels are those of
+Both go through foxglove-sdk: an MCAP file it writes, or its WebSocket server on 127.0.0.1
+(Foxglove's WebSocket protocol, subprotocol "foxglove.sdk.v1"), following a running mission. The channels are those of
 `nearsub.common.viewer.foxglove`: every nearsub topic as JSON with its schema, plus the scene in
 Foxglove's schemas (`/tf`, `/scene/mission`, `/scene/uuv`, `/events`). Log times are on the
 epoch: the mission's start wall time (recorded in the log when the logger starts) plus simulated
@@ -105,7 +105,7 @@ def serve_mission(bus, community: str, mission, port: int, ready, stop=None) -> 
         channels = _Channels(context)
         scene: FoxgloveScene | None = None
         sim_time, last_static = 0.0, 0.0
-        ready(f"ws://127.0.0.1:{server.port()}")
+        ready(f"ws://127.0.0.1:{server.port}")
         while stop is None or not stop():
             item = stream.try_recv()
             if item is None:
