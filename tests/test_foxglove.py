@@ -142,3 +142,50 @@ def test_live_server_advertises_the_channels_and_streams_poses(launches, communi
     finally:
         os.killpg(process.pid, signal.SIGTERM)
         process.wait(timeout=step)
+
+
+def test_launch_view_and_foxglove_serve_while_the_mission_runs_and_stop_with_it(launches, community):
+    import queue
+    import socket as sockets
+    import threading
+    import time
+    import urllib.request
+
+    from websockets.sync.client import connect
+
+    from conftest import ALPHA
+    from nearsub.common.mission.schema import load_mission
+
+    mission = load_mission(ALPHA)
+    startup, step = mission.startup_timeout, mission.step_timeout
+    process = launches.start(
+        ALPHA,
+        "--set",
+        f"name={community}",
+        "--warp",
+        "2",
+        "--until",
+        "20",
+        "--view",
+        "--foxglove",
+        "--foxglove-port",
+        "0",
+    )
+    lines: queue.Queue[str] = queue.Queue()
+    threading.Thread(target=lambda: [lines.put(line) for line in process.stderr], daemon=True).start()
+    urls, deadline = {}, time.monotonic() + 3 * startup
+    while len(urls) < 2:
+        line = lines.get(timeout=max(0.1, deadline - time.monotonic()))
+        if line.startswith("nearsub launch: ") and " at " in line:
+            tool, url = line.removeprefix("nearsub launch: ").strip().split(" at ")
+            urls[tool] = url
+    with urllib.request.urlopen(urls["view"], timeout=step) as page:
+        assert b"viewer.js" in page.read()
+    with connect(urls["foxglove"], subprotocols=["foxglove.sdk.v1"], open_timeout=step) as socket:
+        assert json.loads(socket.recv(timeout=step))["op"] == "serverInfo"
+    process.wait(timeout=20 / 2 + 3 * startup)
+    assert process.returncode == 0
+    for url in urls.values():  # stopped with the mission
+        host, port = url.split("//")[1].split("/")[0].split(":")
+        with pytest.raises(ConnectionRefusedError):
+            sockets.create_connection((host, int(port)), timeout=step).close()
