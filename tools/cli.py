@@ -35,17 +35,21 @@ TOOLS = {
     "bench": ("bench", "benchmarks that print measured figures"),
     "view": ("view", "live map of a running mission, or replay of a log, in the browser"),
     "foxglove": ("foxglove", "serve a running mission to Foxglove over its WebSocket protocol"),
+    "completion": ("completion", "print a shell completion script: bash, zsh or tcsh"),
 }
 
 
-def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+def build_parser(command: str | None = None, every: bool = False) -> argparse.ArgumentParser:
     """The parser of `nearsub`, with the full parser of `command` (importing its module) and the
-    other subcommands listed by name and help line only."""
+    other subcommands listed by name and help line only; with `every`, all of them in full (for
+    shell completion)."""
     parser = argparse.ArgumentParser(prog="nearsub", description="UUV simulation near a moving submarine")
     parser.add_argument("--version", action="version", version=f"nearsub {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    add = sub.add_parser  # each tool's parser gets its help line, which completion lists it by
+    sub.add_parser = lambda name, **kw: add(name, **({"help": TOOLS[name][1]} if name in TOOLS else {}) | kw)
     for name, (module, help_line) in TOOLS.items():
-        if name == command:
+        if every or name == command:
             importlib.import_module(f"{__package__}.{module}").add_parser(sub)
         else:
             sub.add_parser(name, help=help_line, add_help=False)

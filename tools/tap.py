@@ -150,7 +150,10 @@ def tap_hz(args) -> int:
             if time.monotonic() >= next_report or time.monotonic() >= deadline:
                 next_report = time.monotonic() + 1.0
                 _print_rates(times, args.json or not sys.stdout.isatty())
-    return 0 if times else 1
+    if not times:
+        print(f"nearsub tap hz: no message on {args.key} within {args.duration:g} s", file=sys.stderr)
+        return 1
+    return 0
 
 
 def _print_rates(times, as_json: bool) -> None:
