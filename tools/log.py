@@ -139,15 +139,26 @@ def log_summary(path: Path) -> dict:
 
 
 def print_summary(summary: dict) -> None:
+    """The summary as a rich table: plain text when piped, wrapped to the terminal's width."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from nearsub.common.runtime.messages import model_for_key
+
     outcome = summary["outcome"]
     recovered = "  (recovered: the file was not finished)" if summary["recovered"] else ""
-    print(f"log      {summary['file']}{recovered}")
-    print(f"messages {summary['messages']}, simulated {summary['sim_start']:.2f} .. {summary['sim_end']:.2f} s")
+    caption = f"{summary['messages']} messages, simulated {summary['sim_start']:.2f} .. {summary['sim_end']:.2f} s"
     if outcome:
-        print(f"outcome  {outcome.get('outcome')} after {outcome.get('steps')} steps: {outcome.get('reason', '')}")
-    print(f"{'topic':<50} {'count':>8} {'Hz (sim)':>9}")
+        caption += f"; {outcome.get('outcome')} after {outcome.get('steps')} steps: {outcome.get('reason', '')}"
+    table = Table(title=f"{summary['file']}{recovered}", caption=caption, title_justify="left", caption_justify="left")
+    for name in ("topic", "message"):
+        table.add_column(name)
+    for name in ("count", "Hz (simulated)"):
+        table.add_column(name, justify="right")
     for topic, item in summary["topics"].items():
-        print(f"{topic:<50} {item['count']:>8} {item['hz']:>9.2f}")
+        model = model_for_key(topic)
+        table.add_row(topic, model.__name__ if model else "", str(item["count"]), f"{item['hz']:.2f}")
+    Console().print(table)
 
 
 def export_command(args) -> int:
