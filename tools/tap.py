@@ -71,10 +71,11 @@ def _decode_any(key: str, payload: bytes) -> tuple[dict | None, str | None]:
 
 def tap_list(args) -> int:
     from nearsub.common.runtime import keys
+
+    bus, community = open_bus(args)  # first: with nothing running it says so before Zenoh loads
     from nearsub.common.runtime.bus import Mailbox
     from nearsub.common.runtime.messages import model_for_key
 
-    bus, community = open_bus(args)
     times: dict[str, list[float]] = defaultdict(list)
     with bus:
         prefix = keys.community_root(community) if community else "nearsub"
