@@ -140,10 +140,11 @@ def log_summary(path: Path) -> dict:
 
 def print_summary(summary: dict) -> None:
     """The summary as a rich table: plain text when piped, wrapped to the terminal's width."""
-    from rich.console import Console
     from rich.table import Table
 
     from nearsub.common.runtime.messages import model_for_key
+
+    from . import tables
 
     outcome = summary["outcome"]
     recovered = "  (recovered: the file was not finished)" if summary["recovered"] else ""
@@ -158,7 +159,7 @@ def print_summary(summary: dict) -> None:
     for topic, item in summary["topics"].items():
         model = model_for_key(topic)
         table.add_row(topic, model.__name__ if model else "", str(item["count"]), f"{item['hz']:.2f}")
-    Console().print(table)
+    tables.console().print(table)
 
 
 def export_command(args) -> int:

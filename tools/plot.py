@@ -23,11 +23,11 @@ from nearsub.common.physics.hull import submarine_outline  # noqa: E402
 from nearsub.common.runtime.logfile import read_log  # noqa: E402
 from nearsub.common.viewer.scene import frame_description  # noqa: E402
 
-EVENT_STYLE = {
-    "collision": ("X", "red"),
-    "close_call": ("o", "orange"),
-    "large_stray": ("^", "purple"),
-    "waypoint": ("*", "green"),
+EVENT_STYLE = {  # marker, colour, z-order: a waypoint reached on top of the stray its new leg starts with
+    "collision": ("X", "red", 5),
+    "close_call": ("o", "orange", 4),
+    "large_stray": ("^", "purple", 3),
+    "waypoint": ("*", "green", 4),
 }
 
 
@@ -78,7 +78,9 @@ def draw_plan(ax, mission, state: dict[str, np.ndarray], events: list[dict]) -> 
         if style and "x" in event.get("data", {}):
             label = None if kind in marked else kind.replace("_", " ")  # each kind once in the legend
             marked.add(kind)
-            ax.plot(event["data"]["x"], event["data"]["y"], style[0], color=style[1], ms=9, label=label)
+            ax.plot(
+                event["data"]["x"], event["data"]["y"], style[0], color=style[1], ms=9, label=label, zorder=style[2]
+            )
     ax.set_xlabel(f"x [m]; {frame_description(mission)}")
     ax.set_ylabel("y [m]")
 

@@ -99,10 +99,11 @@ def tap_list(args) -> int:
     if args.json or not sys.stdout.isatty():
         print(json.dumps({"apps": apps, "topics": rows, "publishers": publishers, "subscribers": subscribers}))
         return 0
-    from rich.console import Console
     from rich.table import Table
 
-    console = Console()
+    from . import tables
+
+    console = tables.console()
     table = Table("app", "instance", title="apps alive", title_justify="left")
     for key in apps:
         role, _, instance = key.split("/alive/", 1)[-1].partition("/")
