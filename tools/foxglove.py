@@ -10,7 +10,6 @@ time; each message keeps its simulated time.
 
 from __future__ import annotations
 
-import sys
 import time
 from pathlib import Path
 
@@ -88,9 +87,10 @@ def export_foxglove(path: str | Path, output: str | Path) -> int:
     return count
 
 
-def serve_mission(bus, community: str, mission, port: int, ready, stop=None) -> None:
+def serve_mission(bus, community: str, mission, port: int, ready) -> None:
     """Follow a running mission on `bus` and publish its channels on a foxglove-sdk WebSocket
-    server on 127.0.0.1:`port`; `ready(url)` once it listens; until `stop()` is true or Ctrl-C.
+    server on 127.0.0.1:`port`; `ready(url)` once it listens; until Ctrl-C or SIGTERM
+    (it goes on after the mission's end, so a client keeps the last picture).
     The subscription is lossy: a slow Foxglove client never slows the mission down."""
     import foxglove
 
@@ -98,15 +98,20 @@ def serve_mission(bus, community: str, mission, port: int, ready, stop=None) -> 
     from nearsub.common.viewer.foxglove import FoxgloveScene
     from nearsub.logs import decode_payload
 
+    from .errors import InputError
+
     context = foxglove.Context()
-    server = foxglove.start_server(name=f"nearsub {community}", host="127.0.0.1", port=port, context=context)
+    try:
+        server = foxglove.start_server(name=f"nearsub {community}", host="127.0.0.1", port=port, context=context)
+    except RuntimeError as exc:  # foxglove-sdk's error: the port cannot be bound
+        raise InputError(f"--port {port}: cannot serve on 127.0.0.1 ({exc})") from None
     try:
         stream = bus.stream(keys.everything(community), lossy=True)
         channels = _Channels(context)
         scene: FoxgloveScene | None = None
         sim_time, last_static = 0.0, 0.0
         ready(f"ws://127.0.0.1:{server.port}")
-        while stop is None or not stop():
+        while True:
             item = stream.try_recv()
             if item is None:
                 time.sleep(0.02)
@@ -144,7 +149,6 @@ def foxglove_command(args) -> int:
     try:
         with Bus(Endpoints("client", endpoints)) as bus:
             serve_mission(bus, args.community, mission, args.port, ready)
-    except RuntimeError as exc:  # foxglove-sdk: the port cannot be bound
-        print(f"nearsub foxglove: cannot serve on 127.0.0.1:{args.port} ({exc})", file=sys.stderr)
-        return 2
+    except KeyboardInterrupt:  # the way to stop it
+        pass
     return 0
