@@ -50,12 +50,15 @@ def start_server_process(tool: str, run_file: str | Path, port: int, timeout: fl
     argv = [sys.executable, "-m", "nearsub", tool, community, "--run", str(run_file), "--port", str(port)]
     process = subprocess.Popen(argv, stdout=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL, process_group=0)
     lines: queue.Queue = queue.Queue()
-    threading.Thread(target=lambda: [lines.put(line) for line in process.stdout], daemon=True).start()
+    # Every line, then None when its output closes (it exited: its stderr has said why).
+    threading.Thread(target=lambda: [*map(lines.put, process.stdout), lines.put(None)], daemon=True).start()
     try:
         line = lines.get(timeout=timeout)
     except queue.Empty:
         process.kill()
         raise RuntimeError(f"nearsub {tool} did not start within {timeout:g} s") from None
+    if line is None:
+        raise RuntimeError(f"nearsub {tool} exited with code {process.wait()} before serving")
     prefix = f"nearsub {tool}: "
     if not (line.startswith(prefix + "http") or line.startswith(prefix + "ws")):
         process.kill()
