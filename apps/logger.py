@@ -1,6 +1,7 @@
 """The logger app (pLogger): records every message of the community into one MCAP file.
 
-It stores the bytes exactly as received, timestamped by simulated time. A payload that fails
+It stores the bytes exactly as received, timestamped by simulated time (control requests and
+operator overrides, sent with t = 0, at the simulated time they arrived: `Recorder.log_time`). A payload that fails
 validation is kept on a `<key>#invalid` channel and an error event is recorded, so nothing is
 lost and the typed channels stay clean. It finishes the file on every way out: the mission end,
 SIGINT/SIGTERM, or the launcher disappearing.
@@ -17,8 +18,17 @@ from nearsub import __version__
 from nearsub.common.mission.schema import RunConfig
 from nearsub.common.runtime import keys
 from nearsub.common.runtime.bus import Bus, BusError, Endpoints, signal_self
+from nearsub.common.runtime.lifecycle import OPERATOR
 from nearsub.common.runtime.logfile import LogWriter
-from nearsub.common.runtime.messages import Event, MessageError, MissionEnd, decode, encode, model_for_key
+from nearsub.common.runtime.messages import (
+    Control,
+    Event,
+    MessageError,
+    MissionEnd,
+    decode,
+    encode,
+    model_for_key,
+)
 from nearsub.common.runtime.processes import prepare_process
 
 DRAIN_SECONDS = 0.3  # after the mission end, keep what is still in flight (status, app_left)
@@ -30,6 +40,15 @@ class Recorder:
         self.community = community
         self.sim_time = 0.0
         self.end: MissionEnd | None = None
+
+    def log_time(self, message) -> float:
+        """The simulated time a message is logged at: its own t, except for requests from outside
+        the lock-step (control requests: pause, resume, warp, handover; an operator's override),
+        which carry t = 0 whenever they are sent: they are logged at the simulated time the mission
+        had reached when they arrived (the newest t seen), so a log shows them where they happened."""
+        if isinstance(message, Control) or message.source == OPERATOR:
+            return max(message.t, self.sim_time)
+        return message.t
 
     def record(self, key: str, payload: bytes) -> None:
         model = model_for_key(key)
@@ -50,7 +69,7 @@ class Recorder:
             self.writer.write(keys.events(self.community, "logger"), encode(error), self.sim_time)
             return
         self.sim_time = max(self.sim_time, message.t)
-        self.writer.write(key, payload, message.t)
+        self.writer.write(key, payload, self.log_time(message))
         if isinstance(message, MissionEnd) and self.end is None:
             self.end = message
 

@@ -45,7 +45,15 @@ if TYPE_CHECKING:
     import pandas
     from mcap.records import Schema
 
-__all__ = ["DecoderFactory", "decode_payload", "flatten", "read_frames", "read_messages", "read_metadata"]
+__all__ = [
+    "DecoderFactory",
+    "decode_payload",
+    "flatten",
+    "read_frames",
+    "read_messages",
+    "read_metadata",
+    "topic_filter",
+]
 
 PANDAS_MISSING = "nearsub.logs.read_frames needs pandas, an optional extra: pip install 'nearsub[pandas]'"
 
@@ -80,17 +88,27 @@ def flatten(value: dict, prefix: str = "") -> dict:
     return out
 
 
-def _topic_filter(topics: str | list[str] | None) -> Callable[[str], bool]:
+def topic_filter(topics: str | list[str] | None, name: str = "topics") -> Callable[[str], bool]:
+    """A test of topics against Zenoh key expressions (None: every topic), by Zenoh's own rules
+    (`zenoh.KeyExpr.includes`); a topic `<key>#invalid` is tested by its key. A pattern that is not
+    a key expression raises ValueError naming `name` and the pattern."""
     if topics is None:
         return lambda topic: True
     import zenoh
 
     patterns = [topics] if isinstance(topics, str) else list(topics)
-    try:
-        exprs = [zenoh.KeyExpr(p) for p in patterns]
-    except zenoh.ZError as exc:
-        raise ValueError(f"topics: not a key expression ({str(exc).split(' at ')[0]})") from None
-    return lambda topic: any(e.includes(zenoh.KeyExpr(topic)) for e in exprs)
+    exprs = []
+    for pattern in patterns:
+        try:
+            exprs.append(zenoh.KeyExpr(pattern))
+        except zenoh.ZError as exc:
+            raise ValueError(f"{name} {pattern!r}: not a key expression ({str(exc).split(' at ')[0]})") from None
+
+    def wanted(topic: str) -> bool:
+        key = zenoh.KeyExpr(topic.removesuffix(INVALID_SUFFIX))
+        return any(e.includes(key) for e in exprs)
+
+    return wanted
 
 
 def read_messages(
@@ -100,13 +118,13 @@ def read_messages(
     same time in file order). `topics`: a Zenoh key expression or a list of them (wildcards `*`
     and `**`). With `invalid`, payloads the logger could not decode come too, as raw bytes on
     their `<topic>#invalid` topic."""
-    wanted = _topic_filter(topics)
+    wanted = topic_filter(topics)
     records = sorted(read_log(path).records, key=lambda r: r.log_time)  # sorted() is stable
     for r in records:
         bad = r.topic.endswith(INVALID_SUFFIX)
         if bad and not invalid:
             continue
-        if wanted(r.topic.removesuffix(INVALID_SUFFIX)):
+        if wanted(r.topic):
             yield r.topic, r.sim_time, (bytes(r.data) if bad else decode_payload(r.data))
 
 

@@ -11,7 +11,19 @@ from nearsub.tools.cli import TOOLS, build_parser
 
 HEAVY = ("numpy", "scipy", "zenoh", "matplotlib")
 # Tools whose parser and whose answer without a running mission need none of HEAVY.
-LIGHT_TOOLS = ("launch", "tap", "log", "swap", "clock", "router", "al-bench", "maps", "envelope", "validate")
+LIGHT_TOOLS = (
+    "launch",
+    "tap",
+    "log",
+    "swap",
+    "clock",
+    "router",
+    "al-bench",
+    "maps",
+    "envelope",
+    "validate",
+    "foxglove",
+)
 
 
 def loaded_after(code: str) -> list[str]:
@@ -44,7 +56,7 @@ def test_tap_list_with_nothing_running_says_so_without_loading_zenoh(runtime_dir
     done = nearsub("tap", "list")
     assert done.returncode == 2
     assert done.stderr.strip() == (
-        "nearsub tap: no mission is running (start one with `nearsub launch`, or pass --connect)"
+        "nearsub tap list: no mission is running (start one with `nearsub launch`, or pass --connect)"
     )
 
 
@@ -95,3 +107,24 @@ def test_version_prints_the_package_version():
 
     result = subprocess.run([sys.executable, "-m", "nearsub", "--version"], capture_output=True, text=True, timeout=60)
     assert result.returncode == 0 and result.stdout.strip() == f"nearsub {__version__}"
+
+
+def test_bash_completion_completes_subcommands_and_choices():
+    """`nearsub completion bash` as bash runs it: the subcommands, and an option's choices."""
+    script = nearsub("completion", "bash")
+    assert script.returncode == 0, script.stderr
+
+    def complete(*words: str) -> list[str]:
+        line = " ".join(words)
+        probe = (
+            f"{script.stdout}\nCOMP_WORDS=({' '.join(repr(w) for w in words)}); COMP_CWORD={len(words) - 1}; "
+            f'COMP_LINE={line!r}; COMP_POINT=${{#COMP_LINE}}; _shtab_nearsub; echo "${{COMPREPLY[@]}}"'
+        )
+        done = subprocess.run(["bash", "-c", probe], capture_output=True, text=True, timeout=60)
+        assert done.returncode == 0, done.stderr
+        return done.stdout.split()
+
+    assert complete("nearsub", "lo") == ["log"]
+    assert set(TOOLS) <= set(complete("nearsub", ""))
+    assert complete("nearsub", "log", "export", "a.mcap", "--format", "") == ["csv", "json", "alog", "foxglove"]
+    assert complete("nearsub", "log", "") == ["info", "export", "play", "plot"]

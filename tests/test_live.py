@@ -41,6 +41,9 @@ def test_tap_echo_and_hz_on_a_running_mission(launches, community):
     apps = json.loads(listed.stdout)["apps"]
     for role in ("helm", "pid", "sim", "clock", "logger"):
         assert any(f"/alive/{role}/" in key for key in apps), (role, apps)
+    topics = {row["key"].split("/", 2)[2]: row for row in json.loads(listed.stdout)["topics"]}
+    assert topics["remus100/state"]["type"] == "State"
+    assert topics["remus100/state"]["hz"] == pytest.approx(20.0, rel=0.01)  # over the default 1 s sample
     code, summary, err = finish(process)
     assert code == 0 and summary["outcome"] == "time_limit", err
 

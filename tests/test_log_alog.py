@@ -9,6 +9,7 @@ import pytest
 from logsample import STARTED_UNIX, write_sample_log
 
 from conftest import nearsub
+from nearsub.common.physics.vehicles import get_vehicle
 from nearsub.common.runtime.alog import compass_deg
 
 
@@ -92,7 +93,9 @@ def test_node_report_and_desired_values(exported):
     rudder = [float(v) for _, _, v in postings(body, "DESIRED_RUDDER")]
     assert rudder == pytest.approx([math.degrees(m.delta_r) for m in inputs], abs=1e-6)
     thrust = [float(v) for _, _, v in postings(body, "DESIRED_THRUST")]
-    assert thrust == pytest.approx([m.X_prop for m in inputs], abs=1e-6)
+    limit = get_vehicle("remus100").max_thrust  # pMarinePID posts the percent of the thrust limit
+    assert thrust == pytest.approx([100 * m.X_prop / limit for m in inputs], abs=1e-6)
+    assert max(abs(v) for v in thrust) <= 100.0
     assert {source for _, source, _ in postings(body, "DESIRED_RUDDER")} == {"pid"}
 
 

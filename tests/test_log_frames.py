@@ -51,7 +51,7 @@ def test_topics_take_key_expressions(log):
         "nearsub/alpha/remus100/desired",
         "nearsub/alpha/control/clock",
     }
-    with pytest.raises(ValueError, match="topics: not a key expression"):
+    with pytest.raises(ValueError, match="topics 'nearsub//state': not a key expression"):
         read_frames(path, topics="nearsub//state")
 
 

@@ -193,8 +193,8 @@ def test_view_rejects_bad_targets_and_options_with_one_line(runtime_dir, tmp_pat
     LogWriter(tmp_path / "empty.mcap").finish()
     cases = [
         ([str(tmp_path / "empty.mcap")], "has no state messages"),
-        ([str(tmp_path / "gone.mcap")], "does not exist"),
-        ([str(tmp_path / "text.mcap")], "is not an MCAP file"),
+        ([str(tmp_path / "gone.mcap")], "no such file"),
+        ([str(tmp_path / "text.mcap")], "not an MCAP log"),
         (["nosuchmission"], "no running mission named"),
         (["alpha", "--port", "70000"], "is not a TCP port"),
         (["alpha", "--run", str(tmp_path / "run.json")], "not a readable run file"),

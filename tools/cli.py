@@ -4,7 +4,8 @@ Subcommand X lives in the module named in TOOLS, which exports `add_parser(subpa
 its parser and sets `func`, which runs it. Only the module of the subcommand being run is imported,
 and a tool imports its heavy modules (numpy, scipy, zenoh, matplotlib) only when it runs, so that
 `nearsub --help` and a tool's `--help` answer at once. A LookupError a tool raises (no such
-mission, problem or behaviour) is printed as one line naming it, with exit code 2.
+mission, problem or behaviour; `errors.InputError` for any bad input) is printed as one line
+naming it, with exit code 2.
 """
 
 from __future__ import annotations
@@ -33,17 +34,22 @@ TOOLS = {
     "validate": ("validate", "physics validation cases (thesis 5.10) and scenario checks"),
     "bench": ("bench", "benchmarks that print measured figures"),
     "view": ("view", "live map of a running mission, or replay of a log, in the browser"),
+    "foxglove": ("foxglove", "serve a running mission to Foxglove over its WebSocket protocol"),
+    "completion": ("completion", "print a shell completion script: bash, zsh or tcsh"),
 }
 
 
-def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+def build_parser(command: str | None = None, every: bool = False) -> argparse.ArgumentParser:
     """The parser of `nearsub`, with the full parser of `command` (importing its module) and the
-    other subcommands listed by name and help line only."""
+    other subcommands listed by name and help line only; with `every`, all of them in full (for
+    shell completion)."""
     parser = argparse.ArgumentParser(prog="nearsub", description="UUV simulation near a moving submarine")
     parser.add_argument("--version", action="version", version=f"nearsub {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    add = sub.add_parser  # each tool's parser gets its help line, which completion lists it by
+    sub.add_parser = lambda name, **kw: add(name, **({"help": TOOLS[name][1]} if name in TOOLS else {}) | kw)
     for name, (module, help_line) in TOOLS.items():
-        if name == command:
+        if every or name == command:
             importlib.import_module(f"{__package__}.{module}").add_parser(sub)
         else:
             sub.add_parser(name, help=help_line, add_help=False)
@@ -58,7 +64,9 @@ def main(argv=None) -> int:
     try:
         return args.func(args)
     except LookupError as exc:
-        print(f"nearsub {args.command}: {exc.args[0] if exc.args else exc}", file=sys.stderr)
+        action = getattr(args, f"{args.command.replace('-', '_')}_command", None)  # `log export`
+        name = f"{args.command} {action}" if isinstance(action, str) else args.command
+        print(f"nearsub {name}: {exc.args[0] if exc.args else exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return 130

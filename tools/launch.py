@@ -17,7 +17,38 @@ def add_parser(subparsers) -> None:
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a mission setting")
     p.add_argument("--log", default="logs", metavar="DIR", help="folder for logs (default: logs)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.add_argument("--view", action="store_true", help="also serve the live map in the browser (nearsub view)")
+    p.add_argument("--view-port", type=int, default=0, metavar="N", help="its port on 127.0.0.1 (default: a free one)")
+    p.add_argument("--foxglove", action="store_true", help="also serve the mission to Foxglove (nearsub foxglove)")
+    p.add_argument("--foxglove-port", type=int, default=8765, metavar="N", help="its port on 127.0.0.1 (default 8765)")
     p.set_defaults(func=launch_command)
+
+
+def companions(args) -> list:
+    """The servers `--view` and `--foxglove` ask for: each starts from the launcher's run file
+    once the apps are up, and prints where it listens."""
+    from .view import check_port
+
+    wanted = [(tool, port) for tool, on, port in (("view", args.view, args.view_port),
+              ("foxglove", args.foxglove, args.foxglove_port)) if on]  # fmt: skip
+    for _, port in wanted:
+        check_port(port)
+
+    def starter(tool: str, port: int):
+        def start(run_file):
+            from .launcher import LaunchError
+            from .view import start_server_process
+
+            try:
+                process, url = start_server_process(tool, run_file, port)
+            except RuntimeError as exc:
+                raise LaunchError(str(exc), app=tool) from None
+            print(f"nearsub launch: {tool} at {url}", file=sys.stderr, flush=True)
+            return process
+
+        return start
+
+    return [starter(tool, port) for tool, port in wanted]
 
 
 def endpoint_problem(endpoint: str) -> str | None:
@@ -42,6 +73,7 @@ def launch_command(args) -> int:
 
     from .launcher import Launcher, exit_code
 
+    extra = companions(args)
     overrides = list(args.set)
     if args.warp is not None:
         overrides.append(f"warp={args.warp}")
@@ -59,7 +91,7 @@ def launch_command(args) -> int:
     # The claim is held until this process exits; a second launch of the name refuses at once.
     try:
         with registry.claim(mission.name):
-            summary = Launcher(mission, args.mission, args.log, quiet=args.json).run()
+            summary = Launcher(mission, args.mission, args.log, quiet=args.json, companions=extra).run()
     except registry.NameTaken as exc:
         print(f"nearsub launch: {exc}", file=sys.stderr)
         return 2

@@ -179,8 +179,12 @@ def spawn_router(folder: Path, timeout: float, interrupted=lambda: False) -> tup
 
 
 class Launcher:
-    def __init__(self, mission: Mission, mission_path: str | None, log_root: str, quiet: bool = False):
+    def __init__(self, mission: Mission, mission_path: str | None, log_root: str, quiet: bool = False, companions=()):
         self.mission = mission
+        # Started with the run file once the apps are up (`launch --view`, `--foxglove`); each
+        # returns its process, which is stopped first.
+        self.companions = list(companions)
+        self.companion_processes: list[subprocess.Popen] = []
         self.mission_path = mission_path
         self.community = mission.name
         self.quiet = quiet
@@ -253,6 +257,7 @@ class Launcher:
         """Let apps leave on their own (the lock-stepped ones exit on the mission end), then
         escalate; the surrogate server serves until told; the logger closes its file last."""
         grace = 0.0 if self.router_lost() else 3.0  # without the router the apps never hear the end
+        stop(self.companion_processes, grace=0.0)
         stop([c.process for c in self.children.values() if c.role == "surrogate"], grace=0.0)
         stop([c.process for c in self.children.values() if c.role not in ("logger", "surrogate")], grace=grace)
         stop([c.process for c in self.children.values() if c.role == "logger"], grace=5.0 if grace else 0.0)
@@ -294,6 +299,7 @@ class Launcher:
                         f"in {self.summary.startup_time:.2f} s"
                     )
                     registry.register(self.community, connect, str(log_path))  # tools can find it now
+                    self.companion_processes += [start(self.run_file) for start in self.companions]
                     if self.status_line:
                         self.latest_state = bus.stream(
                             keys.vehicle_topic(c, self.mission.vehicle_name, "state"), 1, True

@@ -10,6 +10,8 @@ from collections import Counter, defaultdict
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from .errors import InputError
+
 if TYPE_CHECKING:
     from nearsub.common.runtime.logfile import LogContents
 
@@ -21,11 +23,13 @@ def add_parser(subparsers) -> None:
     t.add_argument("log", nargs="+", help="MCAP files (a quoted glob is expanded too)")
     t.add_argument("--json", action="store_true")
     t.set_defaults(func=info_command)
-    t = lg.add_parser("export", help="export as csv, json lines or a MOOS alog (alogview, aloggrep, alogsort)")
+    t = lg.add_parser(
+        "export", help="export as csv, json lines, a MOOS alog (alogview, aloggrep) or an MCAP for Foxglove"
+    )
     t.add_argument("log")
-    t.add_argument("--format", choices=("csv", "json", "alog"), default="json")
+    t.add_argument("--format", choices=("csv", "json", "alog", "foxglove"), default="json")
     t.add_argument("--topic", help="key expression to select (wildcards allowed)")
-    t.add_argument("-o", "--output", help="output file (json, alog) or folder (csv)")
+    t.add_argument("-o", "--output", help="output file (json, alog, foxglove) or folder (csv)")
     t.set_defaults(func=export_command)
     t = lg.add_parser("play", help="republish a log onto the bus (uPlayBack, ros2 bag play)")
     from .logplay import add_arguments, play_command
@@ -42,7 +46,7 @@ def add_parser(subparsers) -> None:
 MCAP_MAGIC = b"\x89MCAP0\r\n"  # the first 8 bytes of every MCAP file (MCAP specification, "Magic")
 
 
-class LogInputError(ValueError):
+class LogInputError(InputError):
     """A path that is not a readable MCAP log; the one-line text names it."""
 
 
@@ -78,33 +82,24 @@ def check_log(path: Path) -> None:
 
 
 def _select(contents: LogContents, topic: str | None):
+    wanted = topic_filter(topic)
     for record in contents.records:
-        if topic is None or _matches(topic, record.topic):
+        if wanted(record.topic):
             yield record
 
 
-def _matches(pattern: str, topic: str) -> bool:
-    """Key-expression match with * (one chunk) and ** (any chunks)."""
-    p, t = pattern.split("/"), topic.split("/")
+def topic_filter(pattern: str | None):
+    """`nearsub.logs.topic_filter` for a `--topic` option: a bad pattern is bad input."""
+    from nearsub.logs import topic_filter as logs_topic_filter
 
-    def walk(i: int, j: int) -> bool:
-        if i == len(p):
-            return j == len(t)
-        if p[i] == "**":
-            return any(walk(i + 1, k) for k in range(j, len(t) + 1))
-        if j < len(t) and (p[i] == "*" or p[i] == t[j]):
-            return walk(i + 1, j + 1)
-        return False
-
-    return walk(0, 0)
+    try:
+        return logs_topic_filter(pattern, "--topic")
+    except ValueError as exc:
+        raise InputError(str(exc)) from None
 
 
 def info_command(args) -> int:
-    try:
-        paths = log_paths(args.log)
-    except LogInputError as exc:
-        print(f"nearsub log info: {exc}", file=sys.stderr)
-        return 2
+    paths = log_paths(args.log)
     for i, path in enumerate(paths):
         summary = log_summary(path)
         if args.json:
@@ -144,25 +139,35 @@ def log_summary(path: Path) -> dict:
 
 
 def print_summary(summary: dict) -> None:
+    """The summary as a rich table: plain text when piped, wrapped to the terminal's width."""
+    from rich.table import Table
+
+    from nearsub.common.runtime.messages import model_for_key
+
+    from . import tables
+
     outcome = summary["outcome"]
     recovered = "  (recovered: the file was not finished)" if summary["recovered"] else ""
-    print(f"log      {summary['file']}{recovered}")
-    print(f"messages {summary['messages']}, simulated {summary['sim_start']:.2f} .. {summary['sim_end']:.2f} s")
+    caption = f"{summary['messages']} messages, simulated {summary['sim_start']:.2f} .. {summary['sim_end']:.2f} s"
     if outcome:
-        print(f"outcome  {outcome.get('outcome')} after {outcome.get('steps')} steps: {outcome.get('reason', '')}")
-    print(f"{'topic':<50} {'count':>8} {'Hz (sim)':>9}")
+        caption += f"; {outcome.get('outcome')} after {outcome.get('steps')} steps: {outcome.get('reason', '')}"
+    table = Table(title=f"{summary['file']}{recovered}", caption=caption, title_justify="left", caption_justify="left")
+    for name in ("topic", "message"):
+        table.add_column(name)
+    for name in ("count", "Hz (simulated)"):
+        table.add_column(name, justify="right")
     for topic, item in summary["topics"].items():
-        print(f"{topic:<50} {item['count']:>8} {item['hz']:>9.2f}")
+        model = model_for_key(topic)
+        table.add_row(topic, model.__name__ if model else "", str(item["count"]), f"{item['hz']:.2f}")
+    tables.console().print(table)
 
 
 def export_command(args) -> int:
     from nearsub.common.runtime.logfile import read_log
 
-    try:
-        check_log(Path(args.log))
-    except LogInputError as exc:
-        print(f"nearsub log export: {exc}", file=sys.stderr)
-        return 2
+    check_log(Path(args.log))
+    if args.format == "foxglove":
+        return _export_foxglove(args)
     contents = read_log(args.log)
     records = list(_select(contents, args.topic))
     out = open(args.output, "w", newline="") if args.output and args.format != "csv" else sys.stdout
@@ -179,6 +184,20 @@ def export_command(args) -> int:
     finally:
         if out is not sys.stdout:
             out.close()
+    return 0
+
+
+def _export_foxglove(args) -> int:
+    """An MCAP that Foxglove opens as is (tools/foxglove.py); by default beside cwd, never over the log."""
+    from .foxglove import export_foxglove
+
+    if args.topic:
+        raise InputError("--topic: the Foxglove export keeps every topic (the scene needs the states and events)")
+    output = Path(args.output or f"{Path(args.log).stem}-foxglove.mcap")
+    if output.resolve() == Path(args.log).resolve():
+        raise InputError(f"-o {output}: is the log being exported")
+    count = export_foxglove(args.log, output)
+    print(f"{output}: {count} messages", file=sys.stderr)
     return 0
 
 
@@ -217,11 +236,7 @@ def _write_csv(records, output: str | None) -> int:
 def plot_command(args) -> int:
     from .plot import plot_log
 
-    try:
-        check_log(Path(args.log))
-    except LogInputError as exc:
-        print(f"nearsub log plot: {exc}", file=sys.stderr)
-        return 2
+    check_log(Path(args.log))
     try:
         out = plot_log(args.log, args.output, args.title)
     except (OSError, ValueError) as exc:

@@ -24,11 +24,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from . import registry
+from .errors import InputError
 
 COMMUNITY_CHARS = "letters, digits, '_' and '-'"
 
 
-class PlayInputError(ValueError):
+class PlayInputError(InputError):
     """Bad command-line input; the one-line text names the option and its value."""
 
 
@@ -61,7 +62,7 @@ def select(args) -> Selection:
     from nearsub.common.mission.schema import COMMUNITY_PATTERN
     from nearsub.common.runtime.logfile import INVALID_SUFFIX, read_log
 
-    from .log import _matches
+    from .log import topic_filter
 
     for name, value in (("--warp", args.warp), ("--wait", args.wait), ("--linger", args.linger)):
         if not (value >= 0 and value < float("inf")):
@@ -70,6 +71,7 @@ def select(args) -> Selection:
         raise PlayInputError(f"--to {args.end:g}: before --from {args.start:g}")
     if args.community is not None and not COMMUNITY_PATTERN.match(args.community):
         raise PlayInputError(f"--community {args.community!r}: use {COMMUNITY_CHARS}")
+    wanted = topic_filter(args.topic)
     contents = read_log(args.log)
     logged = contents.metadata.get("mission", {}).get("name") or next(
         (r.topic.split("/")[1] for r in contents.records if r.topic.count("/") >= 2), "nearsub"
@@ -86,7 +88,7 @@ def select(args) -> Selection:
     items = []
     for r in sorted(contents.records, key=lambda r: r.log_time):  # stable: equal times keep file order
         key = r.topic.removesuffix(INVALID_SUFFIX)  # undecodable payloads replay on their own key
-        if args.topic and not _matches(args.topic, key):
+        if not wanted(key):
             continue
         if (start_ns is not None and r.log_time < start_ns) or (end_ns is not None and r.log_time > end_ns):
             continue
@@ -100,14 +102,10 @@ def select(args) -> Selection:
 
 
 def play_command(args) -> int:
-    from .log import LogInputError, check_log
+    from .log import check_log
 
-    try:
-        check_log(Path(args.log))
-        selection = select(args)
-    except (LogInputError, PlayInputError) as exc:
-        print(f"nearsub log play: {exc}", file=sys.stderr)
-        return 2
+    check_log(Path(args.log))
+    selection = select(args)
     try:
         claim = registry.claim(selection.community)
     except registry.NameTaken:

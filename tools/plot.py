@@ -1,4 +1,4 @@
-"""`nearsub log plot LOG`: the trajectory in the submarine frame and the time series of a mission.
+"""`nearsub log plot LOG`: the trajectory in the mission's frame and the time series of a mission.
 
 The left panel shows the submarine outline (when the mission has one), the waypoints and
 track-lines from the mission in the log, the UUV path and where events happened. The right
@@ -21,12 +21,13 @@ import numpy as np  # noqa: E402
 from nearsub.common.mission.schema import mission_from_dict  # noqa: E402
 from nearsub.common.physics.hull import submarine_outline  # noqa: E402
 from nearsub.common.runtime.logfile import read_log  # noqa: E402
+from nearsub.common.viewer.scene import frame_description  # noqa: E402
 
-EVENT_STYLE = {
-    "collision": ("X", "red"),
-    "close_call": ("o", "orange"),
-    "large_stray": ("^", "purple"),
-    "waypoint": ("*", "green"),
+EVENT_STYLE = {  # marker, colour, z-order: a waypoint reached on top of the stray its new leg starts with
+    "collision": ("X", "red", 5),
+    "close_call": ("o", "orange", 4),
+    "large_stray": ("^", "purple", 3),
+    "waypoint": ("*", "green", 4),
 }
 
 
@@ -67,14 +68,20 @@ def draw_plan(ax, mission, state: dict[str, np.ndarray], events: list[dict]) -> 
             points = np.array(leg.points)
             track = np.vstack([previous, points])
             ax.plot(track[:, 0], track[:, 1], "b--", lw=1, label=None if number else "track-lines")
-            ax.plot(points[:, 0], points[:, 1], "bs", ms=5)
+            ax.plot(points[:, 0], points[:, 1], "bs", ms=5, label=None if number else "waypoints")
             previous = tuple(points[-1])
     ax.plot(state["x"], state["y"], "r-", lw=1.5, label="UUV")
+    marked = set()
     for event in events:
-        style = EVENT_STYLE.get(event.get("kind"))
+        kind = event.get("kind")
+        style = EVENT_STYLE.get(kind)
         if style and "x" in event.get("data", {}):
-            ax.plot(event["data"]["x"], event["data"]["y"], style[0], color=style[1], ms=9)
-    ax.set_xlabel("x [m] (submarine frame, bow towards +x)")
+            label = None if kind in marked else kind.replace("_", " ")  # each kind once in the legend
+            marked.add(kind)
+            ax.plot(
+                event["data"]["x"], event["data"]["y"], style[0], color=style[1], ms=9, label=label, zorder=style[2]
+            )
+    ax.set_xlabel(f"x [m]; {frame_description(mission)}")
     ax.set_ylabel("y [m]")
 
 

@@ -180,22 +180,31 @@ def info_command(args) -> int:
             f"N_FRUSTA {lf['n_frusta']} (hash {lf['hash']})"
         )
     print(f"training    {info['training_points']} points, {len(info['inputs'])} inputs, {len(outputs)} outputs")
-    print(
-        f"{'input':<10} {'unit':<5} {'lower':>8} {'upper':>8} {'warping':<14}  length scales in (warped) input "
-        f"units ({', '.join(outputs)})"
-    )
+    from rich.table import Table
+
+    from . import tables
+
+    console = tables.console()
+    print(f"inputs, with the GP's length scales in (warped) input units ({', '.join(outputs)})")
+    table = Table("input", "unit")
+    for name in ("lower", "upper"):
+        table.add_column(name, justify="right")
+    table.add_column("warping", no_wrap=True)
+    for name in outputs:
+        table.add_column(name, justify="right")
     for item in info["inputs"]:
-        scales = " ".join(f"{v:9.3g}" for v in item["length_scales"].values())
-        print(
-            f"{item['name']:<10} {item['unit']:<5} {item['bounds'][0]:>8g} {item['bounds'][1]:>8g} "
-            f"{item['warping']:<14}  {scales}"
-        )
-    print(f"{'output':<10} {'mean':>10} {'signal std':>11} {'noise std':>10} {'log ML':>9} {'starts':>6}   unit")
+        lower, upper = (f"{v:g}" for v in item["bounds"])
+        scales = [f"{v:.3g}" for v in item["length_scales"].values()]
+        table.add_row(item["name"], item["unit"], lower, upper, item["warping"], *scales)
+    console.print(table)
+    table = Table("output")
+    for name in ("mean", "signal std", "noise std", "log ML", "starts"):
+        table.add_column(name, justify="right")
+    table.add_column("unit", no_wrap=True)
     for o in info["outputs"]:
-        print(
-            f"{o['name']:<10} {o['mean']:>10.3g} {o['signal_std']:>11.3g} {o['noise_std']:>10.3g} "
-            f"{o['log_marginal_likelihood']:>9.1f} {o['restarts']:>6}   {o['unit']}"
-        )
+        table.add_row(o["name"], f"{o['mean']:.3g}", f"{o['signal_std']:.3g}", f"{o['noise_std']:.3g}",
+                      f"{o['log_marginal_likelihood']:.1f}", str(o["restarts"]), o["unit"])  # fmt: skip
+    console.print(table)
     print("constraints")
     for name, text in info["constraints"].items():
         print(f"  {name}: {text}")

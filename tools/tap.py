@@ -13,8 +13,9 @@ from .connect import add_connect_arguments, open_bus
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("tap")
     tap = p.add_subparsers(dest="tap_command", required=True)
-    t = tap.add_parser("list", help="apps and topics alive now")
+    t = tap.add_parser("list", help="apps alive now, and topics with their message types and rates")
     add_connect_arguments(t)
+    t.add_argument("--sample", type=float, default=1.0, metavar="S", help="wall seconds to measure the rates over")
     t.add_argument("--json", action="store_true")
     t.set_defaults(func=tap_list)
     t = tap.add_parser("echo", help="print messages of a key expression (wildcards * and **)")
@@ -71,25 +72,59 @@ def _decode_any(key: str, payload: bytes) -> tuple[dict | None, str | None]:
 def tap_list(args) -> int:
     from nearsub.common.runtime import keys
 
-    bus, community = open_bus(args)
+    bus, community = open_bus(args)  # first: with nothing running it says so before Zenoh loads
+    from nearsub.common.runtime.bus import Mailbox
+    from nearsub.common.runtime.messages import model_for_key
+
+    times: dict[str, list[float]] = defaultdict(list)
     with bus:
         prefix = keys.community_root(community) if community else "nearsub"
+        mailbox = Mailbox()
+        bus.subscribe(f"{prefix}/**", mailbox)
         apps = bus.alive(f"{prefix}/alive/**" if community else "nearsub/*/alive/**")
         publishers = [k for k in bus.admin_keys("publisher") if k.startswith(prefix)]
         subscribers = [k for k in bus.admin_keys("subscriber") if k.startswith(prefix)]
+        deadline = time.monotonic() + args.sample
+        while (remaining := deadline - time.monotonic()) > 0:
+            mail = mailbox.get(timeout=remaining)
+            if mail is not None:
+                value, error = _decode_any(mail.key, mail.payload)
+                if not error and isinstance(value, dict) and "t" in value:
+                    times[mail.key].append(float(value["t"]))
+    topics = sorted(set(publishers) | set(times))
+    rows = [
+        {"key": key, "type": getattr(model_for_key(key), "__name__", ""), "hz": rate(times.get(key, []))}
+        for key in topics
+    ]
     if args.json or not sys.stdout.isatty():
-        print(json.dumps({"apps": apps, "publishers": publishers, "subscribers": subscribers}))
+        print(json.dumps({"apps": apps, "topics": rows, "publishers": publishers, "subscribers": subscribers}))
         return 0
-    print("apps:")
+    from rich.table import Table
+
+    from . import tables
+
+    console = tables.console()
+    table = Table("app", "instance", title="apps alive", title_justify="left")
     for key in apps:
-        print(f"  {key.split('/alive/', 1)[-1]}")
-    print("topics (published):")
-    for key in publishers:
-        print(f"  {key}")
-    print("subscriptions:")
+        role, _, instance = key.split("/alive/", 1)[-1].partition("/")
+        table.add_row(role, instance)
+    console.print(table)
+    table = Table("topic", "message", title=f"topics (rates over {args.sample:g} s)", title_justify="left")
+    table.add_column("Hz (simulated)", justify="right")
+    for row in rows:
+        table.add_row(row["key"], row["type"], f"{row['hz']:.2f}" if row["hz"] else "-")
+    console.print(table)
+    table = Table("subscription", title="subscriptions", title_justify="left")
     for key in subscribers:
-        print(f"  {key}")
+        table.add_row(key)
+    console.print(table)
     return 0
+
+
+def rate(stamps) -> float:
+    """Messages per simulated second over the simulated times `stamps` (oldest first)."""
+    span = stamps[-1] - stamps[0] if len(stamps) > 1 else 0.0
+    return (len(stamps) - 1) / span if span > 0 else 0.0
 
 
 def tap_echo(args) -> int:
@@ -150,17 +185,20 @@ def tap_hz(args) -> int:
             if time.monotonic() >= next_report or time.monotonic() >= deadline:
                 next_report = time.monotonic() + 1.0
                 _print_rates(times, args.json or not sys.stdout.isatty())
-    return 0 if times else 1
+    if not times:
+        print(f"nearsub tap hz: no message on {args.key} within {args.duration:g} s", file=sys.stderr)
+        return 1
+    return 0
 
 
 def _print_rates(times, as_json: bool) -> None:
     for key, stamps in sorted(times.items()):
         span = stamps[-1] - stamps[0] if len(stamps) > 1 else 0.0
-        rate = (len(stamps) - 1) / span if span > 0 else 0.0
+        hz = rate(stamps)
         if as_json:
-            print(json.dumps({"key": key, "hz": rate, "samples": len(stamps), "sim_span": span}), flush=True)
+            print(json.dumps({"key": key, "hz": hz, "samples": len(stamps), "sim_span": span}), flush=True)
         else:
-            print(f"{key}: {rate:.2f} Hz (simulated time) over {len(stamps)} samples", flush=True)
+            print(f"{key}: {hz:.2f} Hz (simulated time) over {len(stamps)} samples", flush=True)
 
 
 def tap_pub(args) -> int:

@@ -12,7 +12,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-MCAP_MAGIC = b"\x89MCAP0\r\n"
+from .errors import InputError
 
 
 def add_parser(subparsers) -> None:
@@ -32,26 +32,43 @@ def start_viewer(run_file: str | Path, port: int = 0, timeout: float = 30.0):
     """Start `nearsub view` for the mission of a launcher's run file in its own process; returns
     (process, URL). For `nearsub launch --view`: call it once the apps are up, stop the process
     with the other children."""
+    return start_server_process("view", run_file, port, timeout)
+
+
+def start_server_process(tool: str, run_file: str | Path, port: int, timeout: float | None = None):
+    """Start `nearsub TOOL MISSION --run RUN_FILE --port PORT` (view, foxglove) in its own process
+    group; returns (process, URL) once it prints `nearsub TOOL: URL` (within `timeout`, by
+    default the mission's start-up timeout)."""
     import queue
     import subprocess
     import threading
 
     from nearsub.common.mission.schema import RunConfig
 
-    community = RunConfig.load(run_file).mission.name
-    argv = [sys.executable, "-m", "nearsub", "view", community, "--run", str(run_file), "--port", str(port)]
+    mission = RunConfig.load(run_file).mission
+    community, timeout = mission.name, mission.startup_timeout if timeout is None else timeout
+    argv = [sys.executable, "-m", "nearsub", tool, community, "--run", str(run_file), "--port", str(port)]
     process = subprocess.Popen(argv, stdout=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL, process_group=0)
     lines: queue.Queue = queue.Queue()
-    threading.Thread(target=lambda: [lines.put(line) for line in process.stdout], daemon=True).start()
+    # Every line, then None when its output closes (it exited: its stderr has said why).
+    threading.Thread(target=lambda: [*map(lines.put, process.stdout), lines.put(None)], daemon=True).start()
     try:
         line = lines.get(timeout=timeout)
     except queue.Empty:
         process.kill()
-        raise RuntimeError(f"nearsub view did not start within {timeout:g} s") from None
-    if not line.startswith("nearsub view: http"):
+        raise RuntimeError(f"nearsub {tool} did not start within {timeout:g} s") from None
+    if line is None:
+        raise RuntimeError(f"nearsub {tool} exited with code {process.wait()} before serving")
+    prefix = f"nearsub {tool}: "
+    if not (line.startswith(prefix + "http") or line.startswith(prefix + "ws")):
         process.kill()
-        raise RuntimeError(f"nearsub view: {line.strip()}")
+        raise RuntimeError(line.strip())
     return process, line.split(": ", 1)[1].strip()
+
+
+def check_port(port: int) -> None:
+    if not 0 <= port <= 65535:
+        raise InputError(f"--port {port} is not a TCP port (0-65535)")
 
 
 def is_log(target: str) -> bool:
@@ -81,18 +98,12 @@ def mission_of_run(entry: dict):
 
 
 def view_command(args) -> int:
-    if not 0 <= args.port <= 65535:
-        print(f"nearsub view: --port {args.port} is not a TCP port (0-65535)", file=sys.stderr)
-        return 2
+    check_port(args.port)
     if is_log(args.target):
+        from .log import check_log
+
         path = Path(args.target)
-        if not path.is_file():
-            print(f"nearsub view: log {args.target!r} does not exist", file=sys.stderr)
-            return 2
-        with open(path, "rb") as f:
-            if f.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
-                print(f"nearsub view: log {args.target!r} is not an MCAP file", file=sys.stderr)
-                return 2
+        check_log(path)
         return _replay(path, args.port)
     return _live(args.target, args.connect, args.run, args.port)
 
@@ -135,11 +146,10 @@ def _replay(path: Path, port: int) -> int:
     return _serve(serve_viewer(source, port, _ready), port)
 
 
-def _live(community: str, connect: list[str] | None, run_file: str | None, port: int) -> int:
-    from nearsub.common.runtime.bus import Bus, Endpoints
-
+def mission_endpoints(community: str, connect: list[str] | None, run_file: str | None):
+    """(endpoints, mission or None, log path or None) of a running mission: from the launcher's
+    run file, from --connect, or from the registry (LookupError when it is not running)."""
     from . import registry
-    from .view_server import LiveSource, serve_viewer
 
     if run_file:
         from nearsub.common.mission.schema import RunConfig
@@ -147,21 +157,21 @@ def _live(community: str, connect: list[str] | None, run_file: str | None, port:
         try:
             run = RunConfig.load(run_file)
         except (OSError, ValueError) as exc:
-            print(
-                f"nearsub view: --run {run_file}: not a readable run file ({exc.__class__.__name__})", file=sys.stderr
-            )
-            return 2
+            raise InputError(f"--run {run_file}: not a readable run file ({exc.__class__.__name__})") from None
         log = Path(run.log_dir) / f"{run.mission.name}.mcap"  # where the launcher's logger writes
-        endpoints, mission = tuple(connect or run.connect), run.mission
-    elif connect:
-        endpoints, mission, log = tuple(connect), None, None
-    else:
-        try:
-            entry = registry.lookup(community)
-        except LookupError as exc:
-            print(f"nearsub view: {exc}", file=sys.stderr)
-            return 2
-        endpoints, mission, log = tuple(entry["connect"]), mission_of_run(entry), entry.get("log")
+        return tuple(connect or run.connect), run.mission, log
+    if connect:
+        return tuple(connect), None, None
+    entry = registry.lookup(community)
+    return tuple(entry["connect"]), mission_of_run(entry), entry.get("log")
+
+
+def _live(community: str, connect: list[str] | None, run_file: str | None, port: int) -> int:
+    from nearsub.common.runtime.bus import Bus, Endpoints
+
+    from .view_server import LiveSource, serve_viewer
+
+    endpoints, mission, log = mission_endpoints(community, connect, run_file)
 
     async def main() -> None:
         with Bus(Endpoints("client", endpoints)) as bus:

@@ -14,8 +14,8 @@ What each topic becomes (MOOS units: compass degrees, 0 = north = +y, clockwise,
   (`NAME=..,X=..,Y=..,SPD=..,HDG=..,DEP=0,TYPE=UUV,TIME=<epoch>,LENGTH=..`, as pNodeReporter);
 - desired -> DESIRED_HEADING [compass deg], DESIRED_SPEED [m/s];
 - input   -> DESIRED_RUDDER = delta_r [deg] (positive turns to starboard, as MOOS's rudder: it
-  raises the compass heading), DESIRED_THRUST = X_prop [N] (nearsub's thrust is a force, not
-  MOOS's percent);
+  raises the compass heading), DESIRED_THRUST = 100 X_prop / max_thrust, the percent of the
+  vehicle's thrust limit pMarinePID posts (left out for a vehicle the log does not describe);
 - helm    -> WPT_INDEX, IVPHELM_BHV_ACTIVE (the behaviour);
 - forces  -> INTERACTION_X, INTERACTION_Y [N], INTERACTION_N [N m], what the dynamics applied;
 - events  -> EVENT_<KIND> (EVENT_WAYPOINT, EVENT_COLLISION, ...), the event's text;
@@ -91,23 +91,26 @@ def _community(contents: LogContents) -> str:
     return "nearsub"
 
 
-def _vehicle_length(vehicle: str, contents: LogContents) -> float | None:
+def _vehicle_figures(vehicle: str, contents: LogContents) -> dict[str, float]:
+    """The vehicle's length [m] and thrust limit [N], from the log's mission (a vehicle given
+    by name or in full) or the vehicle library; an empty dict when neither knows it."""
     from nearsub.common.physics.vehicles import get_vehicle
 
     resolved = contents.metadata.get("mission", {}).get("resolved")
     if resolved:
         try:
             spec = json.loads(resolved).get("vehicle")
-            if isinstance(spec, dict) and spec.get("length"):
-                return float(spec["length"])
+            if isinstance(spec, dict) and spec.get("length") and spec.get("max_thrust"):
+                return {"length": float(spec["length"]), "max_thrust": float(spec["max_thrust"])}
             if isinstance(spec, str):
                 vehicle = spec
         except (ValueError, TypeError):
             pass
     try:
-        return get_vehicle(vehicle).length
+        model = get_vehicle(vehicle)
     except KeyError:
-        return None
+        return {}
+    return {"length": model.length, "max_thrust": model.max_thrust}
 
 
 class _Lines:
@@ -126,7 +129,13 @@ def alog_lines(contents: LogContents, records: Iterable[LogRecord] | None = None
     start = log_start(contents)
     community = _community(contents)
     lines = _Lines()
-    lengths: dict[str, float | None] = {}
+    known: dict[str, dict[str, float]] = {}
+
+    def figures(vehicle: str) -> dict[str, float]:
+        if vehicle not in known:
+            known[vehicle] = _vehicle_figures(vehicle, contents)
+        return known[vehicle]
+
     vehicles = {r.topic.split("/")[2] for r in records if r.topic.endswith("/state") and r.topic.count("/") == 3}
     if records:
         first = min(r.log_time for r in records) // 1_000_000_000
@@ -134,7 +143,7 @@ def alog_lines(contents: LogContents, records: Iterable[LogRecord] | None = None
         for s in range(first, last + 1):
             lines.post(s * 1_000_000_000, "DB_TIME", f"MOOSDB_{community}", number(start + s))
     for r in records:
-        _translate(r, lines, start, community, vehicles, lengths, contents)
+        _translate(r, lines, start, community, vehicles, figures, contents)
     lines.entries.sort(key=lambda e: (e[0], e[1]))
     out = [
         BANNER_RULE,
@@ -143,7 +152,7 @@ def alog_lines(contents: LogContents, records: Iterable[LogRecord] | None = None
         f"%% LOGSTART        {start:>20.12g}",
         BANNER_RULE,
         "%% Exported by nearsub log export --format alog. NAV_HEADING and DESIRED_HEADING are compass",
-        "%% degrees (90 - psi), DESIRED_RUDDER degrees, DESIRED_THRUST newtons (X_prop), NAV_SPEED the",
+        "%% degrees (90 - psi), DESIRED_RUDDER degrees, DESIRED_THRUST percent of the thrust limit, NAV_SPEED the",
         "%% surge u through the water; positions are in the mission's frame (the submarine frame).",
     ]
     for log_time, _, variable, source, value in lines.entries:
@@ -159,7 +168,7 @@ def write_alog(contents: LogContents, out: TextIO, records: Iterable[LogRecord] 
     return sum(1 for line in lines if not line.startswith("%"))
 
 
-def _translate(r: LogRecord, lines: _Lines, start: float, community: str, vehicles, lengths, contents) -> None:
+def _translate(r: LogRecord, lines: _Lines, start: float, community: str, vehicles, figures, contents) -> None:
     t = r.log_time
     parts = r.topic.split("/")
     if r.topic.endswith(INVALID_SUFFIX):
@@ -188,13 +197,15 @@ def _translate(r: LogRecord, lines: _Lines, start: float, community: str, vehicl
     elif len(rest) == 2:
         vehicle, leaf = rest
         if leaf == "state":
-            _state(t, value, source, vehicle, lines, start, community, vehicles, lengths, contents)
+            _state(t, value, source, vehicle, lines, start, community, vehicles, figures, contents)
         elif leaf == "desired":
             lines.post(t, "DESIRED_HEADING", source, number(compass_deg(value["psi_d"])))
             lines.post(t, "DESIRED_SPEED", source, number(value["u_d"]))
         elif leaf == "input":
             lines.post(t, "DESIRED_RUDDER", source, number(math.degrees(value["delta_r"])))
-            lines.post(t, "DESIRED_THRUST", source, number(value["X_prop"]))
+            limit = figures(vehicle).get("max_thrust")
+            if limit:  # pMarinePID posts the percent of the thrust limit
+                lines.post(t, "DESIRED_THRUST", source, number(100.0 * value["X_prop"] / limit))
         elif leaf == "helm":
             lines.post(t, "WPT_INDEX", source, str(value.get("waypoint_index", 0)))
             lines.post(t, "IVPHELM_BHV_ACTIVE", source, str(value.get("behaviour", "")))
@@ -203,7 +214,7 @@ def _translate(r: LogRecord, lines: _Lines, start: float, community: str, vehicl
                 lines.post(t, f"INTERACTION_{axis}", source, number(value.get(f"applied_{axis}", 0.0)))
 
 
-def _state(t, value, source, vehicle, lines: _Lines, start, community, vehicles, lengths, contents) -> None:
+def _state(t, value, source, vehicle, lines: _Lines, start, community, vehicles, figures, contents) -> None:
     heading = compass_deg(value["psi"])
     x, y, speed = value["x"], value["y"], value["u"]
     lines.post(t, "NAV_X", source, number(x))
@@ -211,14 +222,12 @@ def _state(t, value, source, vehicle, lines: _Lines, start, community, vehicles,
     lines.post(t, "NAV_HEADING", source, number(heading))
     lines.post(t, "NAV_SPEED", source, number(speed))
     lines.post(t, "NAV_YAW", source, number(-math.radians(angle180(heading))))
-    if vehicle not in lengths:
-        lengths[vehicle] = _vehicle_length(vehicle, contents)
     name = community if len(vehicles) <= 1 else f"{community}_{vehicle}"
     report = (
         f"NAME={name},X={number(x)},Y={number(y)},SPD={number(speed)},HDG={number(heading)},DEP=0,"
         f"TYPE=UUV,TIME={start + t / 1e9:.3f}"
     )
-    if lengths[vehicle]:
-        report += f",LENGTH={number(lengths[vehicle])}"
+    if "length" in figures(vehicle):
+        report += f",LENGTH={number(figures(vehicle)['length'])}"
     lines.post(t, "NODE_REPORT_LOCAL", source, report)
     lines.post(t, "NODE_REPORT", source, report)

@@ -2,7 +2,8 @@
 "Transport").
 
 One channel per key expression, `message_encoding = "msgpack"`, schema = the pydantic model's
-JSON schema; `log_time` is simulated time in ns, `publish_time` the wall-clock receive time. The
+JSON schema; `log_time` is simulated time in ns (for a control request, the simulated time the
+mission had reached when it arrived), `publish_time` the wall-clock receive time. The
 mission (resolved, as JSON) is stored as metadata and the mission file as an attachment.
 
 Chunks are small, so a log cut short by a crash loses at most its last chunk: `read_log` falls

@@ -93,6 +93,14 @@ def force_reference(mission) -> float:
     return ARROW_COEFFICIENT * 0.5 * mission.environment.rho * speed**2 * vehicle.length**2
 
 
+def frame_description(mission) -> str:
+    """What the map's x and y are (docs/design.md, "Frames, units and signs"): the submarine's
+    moving frame, or with no moving submarine simply the earth-fixed frame of the mission file."""
+    if mission is not None and mission.environment.u_sub > 0:
+        return "submarine frame (moving with it): x towards the bow, y to port"
+    return "earth-fixed frame: x and y as in the mission file"
+
+
 def static_scene(mission, source: str = "") -> dict:
     """The parts of the picture fixed for a run. `mission` may be None (a log without one)."""
     submarine = mission is None or mission.environment.submarine
@@ -112,15 +120,12 @@ def static_scene(mission, source: str = "") -> dict:
         size = {"name": vehicle.name, "length": vehicle.length, "diameter": vehicle.diameter}
     else:
         size = {"name": "uuv", "length": 2.0, "diameter": 0.3}
-    moving = mission is not None and mission.environment.u_sub > 0
     return {
         "type": "scene",
         "source": source,
         "community": mission.name if mission is not None else "",
         "description": mission.description if mission is not None else "",
-        "frame": "submarine frame (moving with it): x towards the bow, y to port"
-        if moving
-        else "earth-fixed frame: x and y as in the mission file",
+        "frame": frame_description(mission),
         "hull": hull,
         "legs": legs,
         "start": None if mission is None else [mission.start.x, mission.start.y],

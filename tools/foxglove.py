@@ -1,0 +1,154 @@
+"""`nearsub foxglove NAME` and `nearsub log export --format foxglove`: a mission for Foxglove.
+
+Both go through foxglove-sdk: an MCAP file it writes, or its WebSocket server on 127.0.0.1
+(Foxglove's WebSocket protocol, subprotocol "foxglove.sdk.v1"), following a running mission. The channels are those of
+`nearsub.common.viewer.foxglove`: every nearsub topic as JSON with its schema, plus the scene in
+Foxglove's schemas (`/tf`, `/scene/mission`, `/scene/uuv`, `/events`). Log times are on the
+epoch: the mission's start wall time (recorded in the log when the logger starts) plus simulated
+time; each message keeps its simulated time.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+REPUBLISH = 2.0  # wall seconds between repeats of the fixed scene, for clients that join late
+
+
+def add_parser(subparsers) -> None:
+    p = subparsers.add_parser("foxglove", help="serve a running mission to Foxglove (WebSocket, 127.0.0.1)")
+    p.add_argument("community", metavar="MISSION_NAME", help="a running mission's name")
+    p.add_argument(
+        "--port", type=int, default=8765, help="TCP port on 127.0.0.1 (default 8765, Foxglove's; 0: a free one)"
+    )
+    p.add_argument("--connect", action="append", metavar="ENDPOINT", help="router endpoint instead of the registry")
+    p.add_argument("--run", metavar="RUN.json", help="the launcher's run file instead of the registry")
+    p.set_defaults(func=foxglove_command)
+
+
+class _Channels:
+    """One foxglove-sdk channel per topic, made on first use, each with its JSON schema."""
+
+    def __init__(self, context):
+        self.context = context
+        self.channels: dict = {}
+
+    def log(self, topic: str, message: dict, log_time: int) -> None:
+        import foxglove
+
+        from nearsub.common.viewer.foxglove import schema_for, to_json
+
+        channel = self.channels.get(topic)
+        if channel is None:
+            name, schema = schema_for(topic)
+            channel = foxglove.Channel(
+                topic,
+                schema=foxglove.Schema(name=name, encoding="jsonschema", data=to_json(schema)),
+                message_encoding="json",
+                context=self.context,
+            )
+            self.channels[topic] = channel
+        channel.log(to_json(message), log_time=log_time)
+
+
+def export_foxglove(path: str | Path, output: str | Path) -> int:
+    """Write the log at `path` as a Foxglove MCAP at `output`; returns the number of messages."""
+    import foxglove
+
+    from nearsub.common.runtime.alog import log_start
+    from nearsub.common.runtime.logfile import INVALID_SUFFIX, read_log
+    from nearsub.common.viewer.foxglove import FoxgloveScene
+    from nearsub.logs import decode_payload
+
+    from .view import mission_of_log
+
+    contents = read_log(path)
+    start_ms = round(log_start(contents) * 1e3)  # the logger records its start to the millisecond
+    scene = FoxgloveScene(mission_of_log(Path(path)), start_ms * 1_000_000)
+    context = foxglove.Context()
+    channels = _Channels(context)
+    count = 0
+    with foxglove.open_mcap(output, allow_overwrite=True, context=context) as writer:
+        for name, values in contents.metadata.items():
+            writer.write_metadata(name, values)
+        for topic, message, ns in scene.static_updates(0.0):
+            channels.log(topic, message, ns)
+            count += 1
+        for record in sorted(contents.records, key=lambda r: r.log_time):
+            if record.topic.endswith(INVALID_SUFFIX):
+                continue
+            fields = decode_payload(record.data)
+            if not isinstance(fields, dict):
+                continue
+            for topic, message, ns in scene.translate(record.topic, fields, record.sim_time):
+                channels.log(topic, message, ns)
+                count += 1
+    return count
+
+
+def serve_mission(bus, community: str, mission, port: int, ready) -> None:
+    """Follow a running mission on `bus` and publish its channels on a foxglove-sdk WebSocket
+    server on 127.0.0.1:`port`; `ready(url)` once it listens; until Ctrl-C or SIGTERM
+    (it goes on after the mission's end, so a client keeps the last picture).
+    The subscription is lossy: a slow Foxglove client never slows the mission down."""
+    import foxglove
+
+    from nearsub.common.runtime import keys
+    from nearsub.common.viewer.foxglove import FoxgloveScene
+    from nearsub.logs import decode_payload
+
+    from .errors import InputError
+
+    context = foxglove.Context()
+    try:
+        server = foxglove.start_server(name=f"nearsub {community}", host="127.0.0.1", port=port, context=context)
+    except RuntimeError as exc:  # foxglove-sdk's error: the port cannot be bound
+        raise InputError(f"--port {port}: cannot serve on 127.0.0.1 ({exc})") from None
+    try:
+        stream = bus.stream(keys.everything(community), lossy=True)
+        channels = _Channels(context)
+        scene: FoxgloveScene | None = None
+        sim_time, last_static = 0.0, 0.0
+        ready(f"ws://127.0.0.1:{server.port}")
+        while True:
+            item = stream.try_recv()
+            if item is None:
+                time.sleep(0.02)
+            else:
+                key, payload = item
+                try:
+                    fields = decode_payload(payload)
+                except ValueError:
+                    continue
+                if not isinstance(fields, dict):
+                    continue
+                sim_time = max(sim_time, float(fields.get("t", 0.0) or 0.0))
+                if scene is None:  # simulated time 0 on the epoch: now, less what has run
+                    scene = FoxgloveScene(mission, time.time_ns() - round(sim_time * 1e9))
+                for topic, message, ns in scene.translate(key, fields, sim_time):
+                    channels.log(topic, message, ns)
+            if scene is not None and time.monotonic() - last_static >= REPUBLISH:
+                last_static = time.monotonic()
+                for topic, message, ns in scene.static_updates(sim_time):
+                    channels.log(topic, message, ns)
+    finally:
+        server.stop()
+
+
+def foxglove_command(args) -> int:
+    from .view import check_port, mission_endpoints
+
+    check_port(args.port)
+    endpoints, mission, _ = mission_endpoints(args.community, args.connect, args.run)
+    from nearsub.common.runtime.bus import Bus, Endpoints
+
+    def ready(url: str) -> None:
+        print(f"nearsub foxglove: {url}", flush=True)
+
+    try:
+        with Bus(Endpoints("client", endpoints)) as bus:
+            serve_mission(bus, args.community, mission, args.port, ready)
+    except KeyboardInterrupt:  # the way to stop it
+        pass
+    return 0
