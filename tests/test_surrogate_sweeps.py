@@ -38,6 +38,9 @@ def test_stored_hf_is_the_earlier_sweeps_and_refuses_other_inputs():
         sweeps.stored_hf([{k: v for k, v in r.items() if k != "hf_Y_p"} for r in rows], station, kind, inputs)
 
 
+# The LF's field table and the model file: about 5 s on a quiet machine, over a minute at a load
+# average of 20; the test does no HF runs.
+@pytest.mark.timeout(600)
 def test_sweep_with_hf_from_writes_those_hf_values_and_the_applied_increment(tmp_path, capsys):
     assert main(["surrogate", "sweep", "--hf-from", str(SHIPPED), "-o", str(tmp_path)]) == 0
     written, shipped = read(tmp_path / "sweeps.csv"), read(SHIPPED)
