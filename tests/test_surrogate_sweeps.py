@@ -50,6 +50,7 @@ def test_sweep_with_hf_from_writes_those_hf_values_and_the_applied_increment(tmp
     applied = sweeps.applied_increments(load_surrogate(), inputs, SDV)
     lateral = [r for r in written if r["sweep"] == "lateral"][: len(inputs)]
     np.testing.assert_array_equal([float(r["applied_N_p"]) for r in lateral], applied[:, 2])
+    capsys.readouterr()
     assert main(["surrogate", "sweep", "--hf-from", str(tmp_path / "missing.csv"), "-o", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--hf-from" in err[0] and "missing.csv" in err[0]
