@@ -169,6 +169,19 @@ def test_submarine_field_table_matches_ring_panels():
         assert np.max(np.abs(field.ur.ev(x, np.full_like(x, r)) - ur)) < 2e-4
 
 
+def test_submarine_field_table_matches_ring_panels_far_out():
+    """Out to the increment's cut-off (interaction.LF_CUT, 260 m) the log-spaced table keeps the
+    far field to 1 % of itself, beside the hull and beyond both tips."""
+    field = hydro_lf.submarine_field()
+    panels = hydro_lf.solve_ring_panels(hull.suboff_profile(hydro_lf.N_FRUSTA + 1))
+    for r in (30.0, 100.0, 250.0):
+        x = np.linspace(-47.9 - r, 41.0 + r, 41)
+        ux, ur = panels.velocity(x, np.full_like(x, r))
+        scale = np.hypot(ux, ur).max()
+        assert np.max(np.abs(field.ux.ev(x, np.full_like(x, r)) - ux)) < 0.01 * scale
+        assert np.max(np.abs(field.ur.ev(x, np.full_like(x, r)) - ur)) < 0.01 * scale
+
+
 def test_slender_munk_moment():
     """The strip model's free-stream UUV carries the slender Munk moment rho Vol U^2 sin psi cos psi
     (k2 = 1, k1 = 0, slender-body theory) to 1e-3, and no side force."""

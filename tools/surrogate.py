@@ -524,10 +524,24 @@ def sweep_command(args) -> int:
             file=sys.stderr,
         )
         return 2
+    hf_rows = None
+    if args.hf_from:
+        try:
+            with open(args.hf_from, newline="") as handle:
+                hf_rows = list(csv.DictReader(handle))
+        except (OSError, UnicodeDecodeError) as exc:
+            print(f"nearsub surrogate sweep: --hf-from {args.hf_from}: {exc}", file=sys.stderr)
+            return 2
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     started = time.perf_counter()
-    rows = sweeps.sweep_table(surrogate, get_vehicle("sdv"), COARSE if args.panels == "coarse" else MEDIUM)
+    try:
+        rows = sweeps.sweep_table(
+            surrogate, get_vehicle("sdv"), COARSE if args.panels == "coarse" else MEDIUM, hf_rows=hf_rows
+        )
+    except ValueError as exc:
+        print(f"nearsub surrogate sweep: --hf-from {args.hf_from}: {exc}", file=sys.stderr)
+        return 2
     with open(out / "sweeps.csv", "w", newline="") as handle:
         writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
         writer.writeheader()
@@ -587,6 +601,11 @@ def add_parser(subparsers) -> None:
     t.add_argument("model", nargs="?", help="model file (default: the shipped model)")
     t.add_argument("--panels", choices=("coarse", "medium"), default="medium", help="HF panels (default medium)")
     t.add_argument("-o", "--out", default="sweeps", help="folder for sweeps.csv and the PNGs (default: ./sweeps)")
+    t.add_argument(
+        "--hf-from",
+        metavar="CSV",
+        help="take the HF increments from an earlier sweeps.csv at the same panels instead of running the HF",
+    )
     t.set_defaults(func=sweep_command)
 
 

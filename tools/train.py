@@ -8,8 +8,9 @@ plus a residual GP on HF - LF at the HF samples (the two-way panel model,
 HF runs go in parallel on a local Dask cluster (`--workers N`, on 127.0.0.1) or a running one
 (`--scheduler tcp://HOST:8786`), and are appended to the `--state` CSV as they finish, so a killed
 run continues where it stopped (the designs replay the stored runs; `--restart` discards them).
-At the end the model is written with its provenance, and its HF samples as CSV beside it
-(<stem>-hf-samples.csv).
+At the end the model is written with its provenance, its HF samples as CSV beside it
+(<stem>-hf-samples.csv) and the HF's free-stream table for the increment mode
+(<stem>-free-stream.npz, `common/hydro/free_stream.py`).
 
 `nearsub train --data FILE.csv --out MODEL.npz` instead fits a single-fidelity GP to a user's own
 table (columns as the samples CSV), after checking every value: a missing column, a value that is
@@ -28,6 +29,7 @@ from pathlib import Path
 import numpy as np
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
+from nearsub.common.hydro import free_stream as fs
 from nearsub.common.learning.gp import FINAL_FIT_RESTARTS, MultiOutputGP
 from nearsub.common.surrogate import domain
 from nearsub.common.surrogate import model as sg
@@ -94,6 +96,13 @@ def train_command(args) -> int:
     )
     sg.save_surrogate(out, model, provenance)
     tr.write_samples(out.with_name(out.stem + "-hf-samples.csv"), X, Y)
+    # The increment mode takes delta's free-stream part out with the HF's free stream (interaction.py).
+    table = fs.build_table(
+        surrogate_model_id=sg.load_surrogate(out).model_id,
+        surrogate_model=out.name,
+        command=command_line("nearsub train"),
+    )
+    fs.save_table(fs.table_path_for(out), table)
     elapsed = time.perf_counter() - started
     lml = ", ".join(f"{v:.1f}" for v in model.log_marginal_likelihoods)
     print(

@@ -45,7 +45,7 @@ from nearsub.common.physics.hull import (
 
 # Version of this model's physics: bump it with any change that alters lf_coefficients' values.
 # Surrogate model files store it (with N_STRIPS, N_FRUSTA) and refuse a different LF.
-LF_VERSION = 1
+LF_VERSION = 2
 # Kinematic viscosity of sea water at about 15 C [m^2/s] (ITTC 2011, procedure 7.5-02-01-03: 1.1892e-6 at
 # 15 C and 35 g/kg salinity).
 NU = 1.19e-6
@@ -164,29 +164,39 @@ def solve_ring_panels(profile: Profile) -> RingPanels:
 # --- the tabulated submarine field ---------------------------------------------------------------
 
 R_FIELD_MIN = R_SUB + 0.01  # the table starts 1 cm outside the widest section [m]
-R_FIELD_MAX = 25.0  # R_lat up to about 0.27 [m]
+# Outer edge of the table, from the axis and beyond either tip [m]: the interaction increment's
+# cut-off (`interaction.LF_CUT`) plus R_sub plus the longest UUV's length, so every strip of a UUV
+# within the cut-off lies in the table (docs/design.md, "Hydrodynamic fidelities").
+R_FIELD_MAX = 272.0
 _X_FINE = (SUB_STERN_X - 15.0, SUB_BOW_X + 15.0)  # 0.15 m spacing here [m]
-_X_MAX = 1.5 * L_SUB  # coarse (1 m) beyond _X_FINE, out to |R_long| = 1.5 [m]
+_X_RANGE = (SUB_STERN_X - R_FIELD_MAX, SUB_BOW_X + R_FIELD_MAX)
+
+
+def _growing(start: float, first: float, growth: float, end: float) -> np.ndarray:
+    """Nodes from start towards end (either side), the first step `first`, each next `growth`
+    times longer, the last one at or beyond end."""
+    steps = first * growth ** np.arange(400)
+    nodes = start + np.sign(end - start) * np.concatenate([[0.0], np.cumsum(steps)])
+    return nodes[: np.searchsorted(np.abs(nodes - start), abs(end - start)) + 1]
 
 
 def _field_grid() -> tuple[np.ndarray, np.ndarray]:
-    """(x, R) table nodes: 0.15 m in x beside and near the hull, 1 m farther out; in R, 2 mm at the
-    hull growing by 12 % a node, because the field varies on the scale of the distance from it.
-    The splines then reproduce the ring-panel field to about 1.5e-4 U, below the ring solution's
-    own discretisation error (240 against 960 frusta: at most 1.8e-3 U, 5 cm off the hull at the
-    afterbody joint; median 6e-5 U)."""
+    """(x, R) table nodes: 0.15 m in x beside and near the hull, then 1 m growing by 6 % a node
+    beyond the tips; in R, 2 mm at the hull growing by 12 % a node (log-spaced far out), because
+    the field varies on the scale of the distance from the hull. The splines then reproduce the
+    ring-panel field to about 1.5e-4 U, below the ring solution's own discretisation error (240
+    against 960 frusta: at most 1.8e-3 U, 5 cm off the hull at the afterbody joint; median
+    6e-5 U), and far out to a small fraction of the field itself."""
     x = np.unique(
         np.concatenate(
             [
-                np.arange(-_X_MAX, _X_FINE[0], 1.0),
+                _growing(_X_FINE[0], 1.0, 1.06, _X_RANGE[0]),
                 np.arange(_X_FINE[0], _X_FINE[1], 0.15),
-                np.arange(_X_FINE[1], _X_MAX + 1.0, 1.0),
+                _growing(_X_FINE[1], 1.0, 1.06, _X_RANGE[1]),
             ]
         )
     )
-    steps = 0.002 * 1.12 ** np.arange(200)
-    r = R_FIELD_MIN + np.concatenate([[0.0], np.cumsum(steps)])
-    return x, r[: np.searchsorted(r, R_FIELD_MAX) + 1]
+    return x, _growing(R_FIELD_MIN, 0.002, 1.12, R_FIELD_MAX)
 
 
 # Points per pass of `FieldTable.values`: its (8, n) working arrays then stay in a core's cache.

@@ -8,14 +8,15 @@ falls smoothly to 0 across a band inside its boundary, heading included, so the 
 (5.20) to (5.10) without a force jump (`dynamics.Interaction`).
 
 Increment mode with the LF in the loop (a model of kind "lf_in_loop", the default): the increment
-added to (5.11) is [LF(x) - LF_free(x)] + w(x) delta(x_c) (`lf_in_loop_increment`). The exact low
-fidelity (`hydro.low_fidelity`) carries the heading and distance dependence at the true pose x, at
-any heading; the residual GP delta corrects it at x_c, x clamped into table 4.2's box, with a
-weight w of position, speed and the constraints that never depends on the heading. The LF runs
-here, in the process that needs the force (the sim, the helm, the batch engine): it costs well
-under a millisecond, and computing it where it is used keeps one code path for in-process,
-multi-process and batch runs, so they agree bit for bit; the surrogate server answers only
-delta (`discrepancy`).
+added to (5.11) is [LF(x) - LF_free(x)] + w(x) [delta(x_c) - (HF_free(x_c) - LF_free(x_c))]
+(`lf_in_loop_increment`). The exact low fidelity (`hydro.low_fidelity`) carries the heading and
+distance dependence at the true pose x, at any heading; the residual GP delta corrects it at x_c,
+x clamped into where it was trained, less its free-stream part (the two models' difference for
+the UUV alone, no interaction), with a weight w of position, speed and the constraints that never
+depends on the heading. The LF runs here, in the process that needs the force (the sim, the helm,
+the batch engine): it costs well under a millisecond, and computing it where it is used keeps one
+code path for in-process, multi-process and batch runs, so they agree bit for bit; the surrogate
+server answers only delta (`discrepancy`).
 
 A force model is anything with `predict(inputs) -> surrogate.Prediction` (and, for the LF in the
 loop, `kind` and `discrepancy`): the in-process `surrogate.Surrogate`, or
@@ -52,18 +53,26 @@ BLEND_FRACTION = 0.02
 CONSTRAINT_BAND = np.array([0.005, 0.005, 0.1, 0.1])
 GEOMETRY = slice(4, 6)  # D_sub/D_uuv and L/D_uuv: fixed for a vehicle
 HEADING = 3  # psi_deg: the discrepancy weight of the LF-in-the-loop increment ignores it
+LATERAL = 1  # constraint (4.5), the outer lateral edge of the trained window
+# The discrepancy weight of the LF-in-the-loop increment across (4.5): 1 up to the edge, falling
+# (smoothstep) to 0 one UUV diameter of clearance beyond it, with delta held at its value on the
+# edge meanwhile. A ramp inside the 0.26-0.7 m window (CONSTRAINT_BAND, about 5 cm) would take
+# the correction away where it was trained and change the applied increment steeply where HF and
+# LF disagree (Y' at the shoulders, docs/hydro/sweeps). nearsub's choice.
+DELTA_TAPER = 1.0  # [D_uuv]
 # Reach of the LF increment, in clearance of the UUV's CB from the submarine's outline
 # (`proximity.hull_signed_distance`): in full up to LF_FULL, then cut off smoothly (smoothstep) to
-# zero at LF_CUT. nearsub's choice, set by the LF's tabulated field, which ends 25 m from the
-# submarine's axis (`low_fidelity.R_FIELD_MAX`): LF_CUT plus R_sub plus a UUV's length
-# (`LF_MAX_LENGTH`, 5.8 m, above every library vehicle) stays inside it. Measured with
-# `lf_increment_terms` at psi = 0, R_long -0.65 to 0.65: at 14 m the increment is still up to 7 %
-# (REMUS 100) and 17 % (SDV) of the vehicle's own free-stream drag in X', and about 60 % of its
-# own Munk moment at 2 deg in N' (it decays about as 1 / clearance there). So this cut-off is
-# where the table ends, not where the increment has become a small fraction of the vehicle's own
-# forces; a wider field table (a new LF version) would move it out.
-LF_FULL = 9.0  # [m]
-LF_CUT = 14.0  # [m]
+# zero at LF_CUT. nearsub's choice: LF_FULL is where the increment has fallen below LF_FRACTION of
+# the vehicle's own forces for all three library vehicles at 2 and 5 kn (table 4.2's speeds),
+# psi = 0, anywhere round the hull: |X'|, |Y'| below 1 % of its drag X_u|u| u^2 and |N'| below 1 %
+# of its Munk moment N_uv u^2 sin(2 deg) cos(2 deg) (the heading bound of table 4.2). N' sets the
+# distance (the NPS AUV II, whose N_uv is small, reaches 1 % at about 200 m; X' and Y' by 40 m);
+# docs/design.md, "Hydrodynamic fidelities", has the figures and `tests/test_lf_in_loop.py` checks
+# it. The LF's field table (`low_fidelity.R_FIELD_MAX`) reaches LF_CUT plus R_sub plus a UUV's
+# length (`LF_MAX_LENGTH`, above every library vehicle).
+LF_FRACTION = 0.01
+LF_FULL = 210.0  # [m]
+LF_CUT = 260.0  # [m]
 LF_MAX_LENGTH = hydro_lf.R_FIELD_MAX - R_SUB - LF_CUT  # longest UUV whose strips stay in the table [m]
 
 
@@ -85,22 +94,50 @@ def smoothstep(x: np.ndarray) -> np.ndarray:
     return x * x * (3.0 - 2.0 * x)
 
 
-def blend_weight(inputs: np.ndarray, bounds: np.ndarray = domain.BOUNDS, heading: bool = True) -> np.ndarray:
-    """(n,) weight of the surrogate's forces at inputs (n, 6). The ramp runs inside the bounds of
-    the state inputs (position, speed and, with `heading`, the heading) and the constraints; the
-    hull ratios are constants of a vehicle, so they switch the surrogate on or off for a whole
-    mission (see `interaction_at`). Without `heading` the weight is that of the discrepancy in the
-    LF-in-the-loop increment: (4.4)-(4.7) hold no heading term either (docs/design.md, "Thesis
-    errata": (4.4) has 0.27 sin(2 deg) as a constant), so it does not depend on psi at all."""
+def _margins(inputs: np.ndarray, bounds: np.ndarray, heading: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Ramp coordinates (1 and above: in full, 0 and below: off) of inputs (n, 6): (n, 6) for the
+    bounds, (n, 4) for the constraints (4.4)-(4.7)."""
     inputs = np.atleast_2d(inputs)
     span = bounds[:, 1] - bounds[:, 0]
     inside = np.minimum(inputs - bounds[:, 0], bounds[:, 1] - inputs) / (BLEND_FRACTION * span)
     inside[:, GEOMETRY] = np.where(inside[:, GEOMETRY] >= 0, np.inf, -np.inf)
     if not heading:
         inside[:, HEADING] = np.inf
-    feasible = domain.constraint_values(inputs) / CONSTRAINT_BAND
+    return inside, domain.constraint_values(inputs) / CONSTRAINT_BAND
+
+
+def _weight(inside: np.ndarray, feasible: np.ndarray) -> np.ndarray:
     margin = np.minimum(inside.min(axis=1), feasible.min(axis=1))
     return smoothstep(np.where(np.isfinite(margin), margin, 0.0))
+
+
+def blend_weight(inputs: np.ndarray, bounds: np.ndarray = domain.BOUNDS, heading: bool = True) -> np.ndarray:
+    """(n,) weight of the surrogate's forces at inputs (n, 6). The ramp runs inside the bounds of
+    the state inputs (position, speed and, with `heading`, the heading) and the constraints; the
+    hull ratios are constants of a vehicle, so they switch the surrogate on or off for a whole
+    mission (see `interaction_at`). (4.4)-(4.7) hold no heading term (docs/design.md, "Thesis
+    errata": (4.4) has 0.27 sin(2 deg) as a constant), so without `heading` it does not depend on
+    psi at all."""
+    return _weight(*_margins(inputs, bounds, heading))
+
+
+def discrepancy_weight(inputs: np.ndarray) -> np.ndarray:
+    """(n,) weight w of delta in the LF-in-the-loop increment: `blend_weight` without its heading
+    ramp, and across (4.5) the outward ramp of DELTA_TAPER instead of the inward one."""
+    inside, feasible = _margins(inputs, domain.BOUNDS, heading=False)
+    # (4.5) is in units of D_sub (8.575 R_lat = y_dist / D_sub), so one D_uuv is 1 / (D_sub/D_uuv).
+    taper = DELTA_TAPER / np.atleast_2d(inputs)[:, 4]
+    feasible[:, LATERAL] = 1.0 + feasible[:, LATERAL] * CONSTRAINT_BAND[LATERAL] / taper
+    return _weight(inside, feasible)
+
+
+def discrepancy_inputs(inputs: np.ndarray) -> np.ndarray:
+    """x_c: inputs (n, 6) clamped into table 4.2's box and then, beyond (4.5), R_lat onto its edge
+    (where `discrepancy_weight` tapers delta off), so delta is asked only where it was trained."""
+    clamped = np.clip(inputs, domain.BOUNDS[:, 0], domain.BOUNDS[:, 1])
+    beyond = np.minimum(domain.constraint_values(clamped)[:, LATERAL], 0.0)
+    clamped[:, 1] += beyond / 8.575  # (4.5) falls by 8.575 (= L_sub / D_sub) per unit of R_lat
+    return clamped
 
 
 def prepare(mode: str) -> None:
@@ -131,7 +168,9 @@ class InteractionAt:
     "replace"/"thesis" the (5.10) terms it stands for enter with 1 - weight). `model` and `std` are
     the model's raw answer and its std: the discrepancy delta(x_c) in the LF-in-the-loop
     increment, the prediction otherwise; `lf` the LF increment LF(x) - LF_free(x) (NaN when the
-    mode does not use it); `delta_weight` the weight of delta (NaN likewise). All in N and N m,
+    mode does not use it); `delta_free` the free-stream part of delta, HF_free(x_c) - LF_free(x_c),
+    which the increment leaves out (NaN likewise); `delta_weight` the weight of delta (NaN
+    likewise), so forces = lf + delta_weight (model - delta_free). All in N and N m,
     frame convention. `outside_mask` (n, 10) says which inputs (table 4.2) and constraints
     (4.4)-(4.7) the state is outside of (`outside`), `lf_held` where the LF held its field at the
     table's inner edge (the UUV within 1 cm of the submarine's widest radius, `low_fidelity`)."""
@@ -142,6 +181,7 @@ class InteractionAt:
     model: np.ndarray
     std: np.ndarray
     lf: np.ndarray
+    delta_free: np.ndarray
     delta_weight: np.ndarray
     in_domain: np.ndarray
     constraints_ok: np.ndarray
@@ -258,10 +298,10 @@ def interaction_at(
     others get zero forces: the dynamics multiply them by that zero weight, so the motion is the
     same (to the sign of a zero), and a sweep where most UUVs are outside the domain is cheap.
 
-    "increment" with a model of kind "lf_in_loop": `lf_in_loop_increment`. "increment" with another
-    model: the prediction minus the free-stream value (`free_stream`, or the table made for the
-    model, `increment_table`) at the same clipped inputs, with the blend weight; "replace" and
-    "thesis": the prediction with the blend weight."""
+    "increment" with a model of kind "lf_in_loop": `lf_in_loop_increment`, with the HF free stream
+    from `free_stream` or the table made for the model (`increment_table`). "increment" with another
+    model: the prediction minus that free-stream value at the same clipped inputs, with the blend
+    weight; "replace" and "thesis": the prediction with the blend weight."""
     single = np.ndim(state) == 1
     state = np.atleast_2d(state)
     u, x, y, psi = state[:, U], state[:, X], state[:, Y], state[:, PSI]
@@ -269,14 +309,14 @@ def interaction_at(
     inputs = raw.copy()
     inputs[:, GEOMETRY] = np.clip(raw[:, GEOMETRY], domain.BOUNDS[GEOMETRY, 0], domain.BOUNDS[GEOMETRY, 1])
     n = len(inputs)
+    table = None
+    if mode == "increment":
+        table = free_stream if free_stream is not None else increment_table(model)
     if mode == "increment" and getattr(model, "kind", None) == "lf_in_loop":
-        coefficients, weight, model_mean, spread, lf, delta_weight, held = lf_in_loop_increment(
-            model, inputs, x, y, vehicle, with_std, weighted_only
+        coefficients, weight, model_mean, spread, lf, delta_free, delta_weight, held = lf_in_loop_increment(
+            model, inputs, x, y, vehicle, table, with_std, weighted_only
         )
     else:
-        table = None
-        if mode == "increment":
-            table = free_stream if free_stream is not None else increment_table(model)
         weight = blend_weight(inputs)
         asked = weight > 0.0 if weighted_only else np.ones(n, dtype=bool)
         model_mean, spread = np.zeros((n, 3)), np.full((n, 3), np.nan)
@@ -289,11 +329,12 @@ def interaction_at(
             if with_std:
                 spread[asked] = prediction.std
         coefficients = model_mean - free
-        lf, delta_weight, held = np.full((n, 3), np.nan), np.full(n, np.nan), np.zeros(n, dtype=bool)
-    # One conversion for the four (n, 3) arrays (element-wise, so each gets its own bits).
-    parts = np.vstack([coefficients, model_mean, spread, lf])
-    forces, model_forces, spread_forces, lf_forces = np.split(
-        domain.to_forces(parts, np.tile(mirror, 4), np.tile(u, 4), vehicle.length, rho), 4
+        lf, delta_free = np.full((n, 3), np.nan), np.full((n, 3), np.nan)
+        delta_weight, held = np.full(n, np.nan), np.zeros(n, dtype=bool)
+    # One conversion for the five (n, 3) arrays (element-wise, so each gets its own bits).
+    parts = np.vstack([coefficients, model_mean, spread, lf, delta_free])
+    forces, model_forces, spread_forces, lf_forces, free_forces = np.split(
+        domain.to_forces(parts, np.tile(mirror, 5), np.tile(u, 5), vehicle.length, rho), 5
     )
     safe = np.where(np.isfinite(forces), forces, 0.0)  # weight is 0 wherever they are not finite
     interaction = Interaction(safe[0], weight[0], mode) if single else Interaction(safe, weight, mode)
@@ -305,6 +346,7 @@ def interaction_at(
         model=model_forces,
         std=np.abs(spread_forces),
         lf=lf_forces,
+        delta_free=free_forces,
         delta_weight=delta_weight,
         in_domain=~flags[:, : len(domain.INPUT_NAMES)].any(axis=1),
         constraints_ok=~flags[:, len(domain.INPUT_NAMES) :].any(axis=1),
@@ -319,17 +361,22 @@ def lf_in_loop_increment(
     x: np.ndarray,
     y: np.ndarray,
     vehicle: Vehicle,
+    free_stream: fs.FreeStreamTable,
     with_std: bool = True,
     weighted_only: bool = False,
 ):
-    """The increment [LF(x) - LF_free(x)] + w(x) delta(x_c) in coefficients (n, 3) at inputs (n, 6)
-    (hull ratios clipped) of UUVs at CB positions x, y, with the dynamics' weight (the LF's reach,
-    `lf_reach_weight`), and the parts: delta's mean and std (n, 3) at x_c, the LF increment (n, 3),
-    w (n,) and where the LF held its field (n,) (`low_fidelity.lf_increment_terms`).
+    """The increment [LF(x) - LF_free(x)] + w(x) [delta(x_c) - (HF_free(x_c) - LF_free(x_c))] in
+    coefficients (n, 3) at inputs (n, 6) (hull ratios clipped) of UUVs at CB positions x, y, with
+    the dynamics' weight (the LF's reach, `lf_reach_weight`), and the parts: delta's mean and std
+    (n, 3) at x_c, the LF increment (n, 3), delta's free-stream part (n, 3), w (n,) and where the
+    LF held its field (n,) (`low_fidelity.lf_increment_terms`).
 
-    x_c is x clamped into table 4.2's box; w = `blend_weight` without its heading ramp, so the
-    LF alone carries the heading dependence beyond +/-2 deg, continuously. LF_free is the same
-    model's lone UUV at the same hull, speed and heading, so the increment tends to zero away
+    delta is the GP of HF - LF of the total coefficients, so it holds HF_free - LF_free, the two
+    models' difference for the UUV alone, which is no interaction: it is taken out with the HF's
+    free stream `free_stream` (the model's free-stream table, `hydro.free_stream`) and the LF's own
+    (`low_fidelity.lf_free_stream`) at x_c. x_c and w: `discrepancy_inputs`, `discrepancy_weight`;
+    w ignores the heading, so the LF alone carries it beyond +/-2 deg, continuously. LF_free is the
+    same model's lone UUV at the same hull, speed and heading, so the increment tends to zero away
     from the submarine. Without `weighted_only` delta is asked about every state (the sim
     publishes it); with it only where both weights are above zero (a sweep)."""
     if vehicle.length > LF_MAX_LENGTH:
@@ -339,7 +386,7 @@ def lf_in_loop_increment(
         )
     n = len(inputs)
     reach = lf_reach_weight(x, y)
-    delta_weight = blend_weight(inputs, heading=False)
+    delta_weight = discrepancy_weight(inputs)
     lf = np.zeros((n, 3))
     held = np.zeros(n, dtype=bool)
     near = reach > 0.0
@@ -347,11 +394,12 @@ def lf_in_loop_increment(
         with_sub, alone, held[near] = hydro_lf.lf_increment_terms(inputs[near])
         lf[near] = with_sub - alone
     asked = near & (delta_weight > 0.0) if weighted_only else np.ones(n, dtype=bool)
-    mean, spread = np.zeros((n, 3)), np.full((n, 3), np.nan)
+    mean, spread, free = np.zeros((n, 3)), np.full((n, 3), np.nan), np.zeros((n, 3))
     if asked.any():
-        clamped = np.clip(inputs[asked], domain.BOUNDS[:, 0], domain.BOUNDS[:, 1])
+        clamped = discrepancy_inputs(inputs[asked])
         mean[asked], std = model.discrepancy(clamped, return_std=with_std)
+        free[asked] = free_stream.coefficients(clamped) - hydro_lf.lf_free_stream(clamped)
         if with_std:
             spread[asked] = std
-    correction = np.where(delta_weight[:, None] > 0.0, delta_weight[:, None] * mean, 0.0)
-    return lf + correction, reach, mean, spread, lf, delta_weight, held
+    correction = np.where(delta_weight[:, None] > 0.0, delta_weight[:, None] * (mean - free), 0.0)
+    return lf + correction, reach, mean, spread, lf, free, delta_weight, held

@@ -86,21 +86,42 @@ def physics_increments(inputs: np.ndarray, panels=high_fidelity.MEDIUM) -> dict[
 
 
 def applied_increments(model, inputs: np.ndarray, vehicle) -> np.ndarray:
-    """The increment the sim applies in increment mode, [LF(x) - LF_free(x)] + w delta(x_c), in
-    coefficients (n, 3) (`interaction.lf_in_loop_increment`; the hull ratios are the vehicle's)."""
-    from nearsub.common.surrogate.interaction import lf_in_loop_increment
+    """The increment the sim applies in increment mode, [LF(x) - LF_free(x)] + w [delta(x_c) -
+    (HF_free(x_c) - LF_free(x_c))], in coefficients (n, 3) (`interaction.lf_in_loop_increment`; the
+    hull ratios are the vehicle's)."""
+    from nearsub.common.surrogate.interaction import increment_table, lf_in_loop_increment
 
     x, y = inputs[:, 0] * L_SUB, inputs[:, 1] * L_SUB
-    increment, *_ = lf_in_loop_increment(model, inputs, x, y, vehicle, with_std=False)
+    increment, *_ = lf_in_loop_increment(model, inputs, x, y, vehicle, increment_table(model), with_std=False)
     return increment
 
 
-def sweep_table(model, vehicle, panels=high_fidelity.MEDIUM) -> list[dict]:
-    """One row per sweep point: station, sweep, inputs, and the HF, LF and applied increments."""
+def stored_hf(rows: list[dict], station: str, kind: str, inputs: np.ndarray) -> np.ndarray:
+    """The HF increments (n, 3) of one sweep from the rows of an earlier sweeps.csv, whose inputs
+    must be these, bit for bit (the HF does not change when a surrogate is retrained, so a new
+    model's sweep need not run it again); ValueError naming the sweep otherwise."""
+    names = ("R_long", "R_lat", "u_kn", "psi_deg", "d_ratio", "ld_ratio")
+    try:
+        mine = [r for r in rows if r["station"] == station and r["sweep"] == kind]
+        stored = np.array([[float(r[n]) for n in names] for r in mine]).reshape(-1, 6)
+        if not np.array_equal(stored, inputs):
+            raise ValueError(f"its {station} {kind} sweep has other inputs ({len(mine)} rows)")
+        return np.array([[float(r[f"hf_{c}"]) for c in ("X_p", "Y_p", "N_p")] for r in mine])
+    except KeyError as exc:
+        raise ValueError(f"no column {exc}") from None
+
+
+def sweep_table(model, vehicle, panels=high_fidelity.MEDIUM, hf_rows: list[dict] | None = None) -> list[dict]:
+    """One row per sweep point: station, sweep, inputs, and the HF, LF and applied increments; the
+    HF's taken from `hf_rows` (an earlier sweeps.csv at the same panels, `stored_hf`) when given."""
     names = ("R_long", "R_lat", "u_kn", "psi_deg", "d_ratio", "ld_ratio")
     rows = []
     for station, kind, inputs in sweep_inputs():
-        values = physics_increments(inputs, panels)
+        if hf_rows is None:
+            values = physics_increments(inputs, panels)
+        else:
+            lf = low_fidelity.lf_coefficients(inputs) - low_fidelity.lf_free_stream(inputs)
+            values = {"hf": stored_hf(hf_rows, station, kind, inputs), "lf": lf}
         values["applied"] = applied_increments(model, inputs, vehicle)
         for i, point in enumerate(inputs):
             row = {"station": station, "sweep": kind, **dict(zip(names, point.tolist(), strict=True))}
