@@ -205,7 +205,7 @@ def test_the_wait_for_a_paced_step_is_not_a_stall():
 
 
 @pytest.mark.parametrize(
-    ("first", "second", "expected"), [("completed", "collision", "collision"), ("error", "time_limit", "error")]
+    ("first", "second", "expected"), [("completed", "collision", "collision"), ("time_limit", "collision", "collision")]
 )
 def test_the_most_severe_end_request_of_a_step_wins(first, second, expected):
     core = clock()
@@ -216,6 +216,15 @@ def test_the_most_severe_end_request_of_a_step_wins(first, second, expected):
     core.progress.record_ack(Ack(step=3, t=3 * DT, source="sim", end=second, reason=second))
     end = core.advance(0.2).end
     assert (end.outcome, end.reason, end.step) == (expected, expected, 4)
+
+
+def test_an_error_ends_the_mission_at_once_though_its_step_never_completes():
+    core = clock()
+    granted(core, 0.0)
+    finish_up_to(core, 2)
+    core.progress.record_ack(Ack(step=3, t=3 * DT, source="sim", end="error", reason="server gone"))
+    end = core.advance(0.1).end  # the helm and pid may wait for the sim's step 3 forever
+    assert (end.outcome, end.reason, end.step) == ("error", "server gone", 4)
 
 
 def test_claims_of_steps_not_granted_are_ignored_and_hold_no_memory():

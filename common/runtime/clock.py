@@ -241,7 +241,9 @@ class ClockCore:
         self.meter.record(now, completed)
         if end is None and completed >= self.max_steps - 1:
             end = time_limit_end(self.max_steps, self.dt)
-        if end is not None and completed >= end.step:
+        # An error ends the mission at once: the step it broke may never complete (an app that
+        # failed at start-up leaves its consumers waiting on step 0).
+        if end is not None and (completed >= end.step or end.outcome == "error"):
             return Advance(end=self.mission_end(end.step + 1, end.outcome, end.reason))
         advance = Advance()
         if self.pause_before is not None and completed == self.pause_before - 1:

@@ -201,7 +201,7 @@ class Stepper:
     latest output. The start-up outputs go out with the first granted step. An end request goes
     out on `ACK` before the outputs of its step, so every app hears of it before it could run
     the next one; so does an explicit Ack when the core did not publish its done topic.
-    Exceptions of the `recoverable` types from `iterate` (a service that stopped answering) end
+    Exceptions of the `recoverable` types from `startup` or `iterate` (a service that stopped answering) end
     the mission with "error" and an error event instead of crashing the app.
     """
 
@@ -268,8 +268,13 @@ class Stepper:
         published: list[tuple[str, Message]] = []
         while self.step <= min(self.granted, self.stop_after):
             if not self.started:
-                published.extend(self.core.startup())
                 self.started = True
+                try:
+                    published.extend(self.core.startup())
+                except self.recoverable as exc:  # e.g. the sim's first interaction query
+                    published.extend(self._outputs(self.step, self._failure(self.step, exc)))
+                    self.step += 1
+                    break
             if self.schedule.runs(self.core.role, self.step):
                 if self.inbox.waiting_for(self.step):
                     break
@@ -278,14 +283,22 @@ class Stepper:
         return published
 
     def _iterate(self, step: int) -> list[tuple[str, Message]]:
-        role = self.core.role
         t = step * self.dt
         self.core.new_mail(self.inbox.take(step) | self._overridden(step))
         try:
             result = self.core.iterate(step, t)
         except self.recoverable as exc:
-            error = Event(step=step, t=t, source=role, kind="error", detail=str(exc))
-            result = Iteration(events=[error], end="error", reason=str(exc))
+            result = self._failure(step, exc)
+        return self._outputs(step, result)
+
+    def _failure(self, step: int, exc: Exception) -> Iteration:
+        """A recoverable exception ends the mission with "error" and an error event."""
+        error = Event(step=step, t=step * self.dt, source=self.core.role, kind="error", detail=str(exc))
+        return Iteration(events=[error], end="error", reason=str(exc))
+
+    def _outputs(self, step: int, result: Iteration) -> list[tuple[str, Message]]:
+        role = self.core.role
+        t = step * self.dt
         published: list[tuple[str, Message]] = []
         if result.end is not None or all(leaf != DONE_TOPIC[role] for leaf, _ in result.outputs):
             published.append((ACK, Ack(step=step, t=t, source=role, end=result.end, reason=result.reason)))

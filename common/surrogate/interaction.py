@@ -261,12 +261,12 @@ def increment_table(model: ForceModel) -> fs.FreeStreamTable:
     except fs.FreeStreamFileError as exc:
         raise IncrementError(f'apps.sim.interaction = "increment": {exc}') from None
     if table is None:
-        source = getattr(model, "source", None) or path or "the surrogate server's model (surrogate.model)"
+        source = getattr(model, "source", None) or path or "of the surrogate server (surrogate.model)"
         raise IncrementError(
             f'apps.sim.interaction = "increment" needs the free-stream value of the hydrodynamic model that '
-            f"the surrogate {source} (model id {model_id}) was trained on, and no free-stream table matches "
+            f"the model {source} (model id {model_id}) was trained on, and no free-stream table matches "
             f"that model (looked at {', '.join(str(p) for p in searched)}). Use the shipped model "
-            "(surrogate.model empty), build the table of a model trained on common/hydro_hf.py with "
+            "(surrogate.model empty), build the table of a model trained on common/hydro/high_fidelity.py with "
             '"python -m nearsub.tools.free_stream MODEL", or set apps.sim.interaction = "replace".'
         )
     try:
