@@ -131,13 +131,16 @@ def strip_forces(
                 axis_x = x_c[n] + xi * c
                 axis_y = y_c[n] + xi * s
                 for k in range(3):
+                    # In the plane z = 0 the distance from the axis is |y| (hypot's value there).
                     if k == 0:
                         px, py, pz = axis_x - r * s, axis_y + r * c, 0.0
+                        radial = abs(py)
                     elif k == 1:
                         px, py, pz = axis_x + r * s, axis_y - r * c, 0.0
+                        radial = abs(py)
                     else:
                         px, py, pz = axis_x, axis_y, r
-                    radial = math.hypot(py, pz)
+                        radial = math.hypot(py, pz)
                     if radial < r_lo:
                         near = True
                     lookup = max(radial, r_lo) if hold else radial
@@ -158,10 +161,13 @@ def strip_forces(
                     safe_radial = radial if radial > 0.0 else 1.0
                     vx = -1.0 + ux
                     vy = ur * py / safe_radial
-                    vz = ur * pz / safe_radial
                     v_xi[k] = vx * c + vy * s
                     v_eta[k] = -vx * s + vy * c
-                    cp[k] = -(vx * vx + vy * vy + vz * vz)
+                    speed2 = vx * vx + vy * vy
+                    if k == 2:  # v_z = 0 at the +/-eta points
+                        vz = ur * pz / safe_radial
+                        speed2 += vz * vz
+                    cp[k] = -speed2
                 cp_mean = w0 * cp[0] + w1 * cp[1] + w2 * cp[2]
                 v_eta_mean = w0 * v_eta[0] + w1 * v_eta[1] + w2 * v_eta[2]
                 u_axial = w0 * -v_xi[0] + w1 * -v_xi[1] + w2 * -v_xi[2]
