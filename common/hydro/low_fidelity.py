@@ -261,6 +261,18 @@ class SubmarineField:
 
     def __post_init__(self):
         object.__setattr__(self, "table", FieldTable(self.ux, self.ur))
+        _load_kernels(self.table)
+
+
+def _load_kernels(table: FieldTable) -> None:
+    """Load the compiled kernels (compile them, the first run after an install or an edit) with
+    the field, once per process: an app's first step then costs no more than the next. numba
+    compiles per argument types, which an empty call fixes as the real ones do."""
+    empty, strips = np.empty(0), np.empty((1, 1))
+    table.values(empty, empty)
+    no_rows = (empty,) * 7 + (np.empty(0, dtype=np.int64), strips, strips, strips)
+    outputs = (np.empty((0, 3)), np.empty((0, 3)), np.empty(0, dtype=bool))
+    _kernel().strip_forces(*no_rows, *table.arrays(), np.zeros(4), True, True, *outputs)
 
 
 def submarine_field(n_frusta: int = N_FRUSTA) -> SubmarineField:
