@@ -146,10 +146,11 @@ def _print_report(result: dict[str, Any], summary: dict[str, Any], paths: dict[s
 def al_bench_command(args) -> int:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
 
-    from nearsub.common.learning.albench import run_benchmark, summarise
-    from nearsub.common.learning.testproblems import get_problem
+    from nearsub.common.learning.albench import check_request, run_benchmark, summarise
 
-    get_problem(args.problem)  # an unknown name is reported before the progress bar starts
+    methods = tuple(args.methods.split(",")) if args.methods else None
+    # Bad input is reported in one line before the progress bar starts.
+    check_request(args.problem, args.hf_samples, args.n_lf0, args.n_hf0, methods, tuple(args.reference))
     settings = {"n_lookahead": args.lookahead, "n_restarts": args.restarts, "n_polish": args.polish}
     if args.learn_rho:
         settings["rho"] = None
@@ -164,7 +165,7 @@ def al_bench_command(args) -> int:
             args.seed,
             n_lf0=args.n_lf0,
             n_hf0=args.n_hf0,
-            methods=tuple(args.methods.split(",")) if args.methods else None,
+            methods=methods,
             test_points=args.test_points,
             reference_counts=tuple(args.reference),
             on_task_done=lambda done, total: bar.update(job, completed=done, total=total),

@@ -155,24 +155,9 @@ def run_benchmark(
     on_task_done(done, total) is called as each campaign finishes.
     """
     problem = get_problem(problem_name)
-    multi = problem.lf is None
-    methods = methods or (MULTI_OUTPUT_METHODS if multi else SINGLE_OUTPUT_METHODS)
-    known = MULTI_OUTPUT_METHODS if multi else SINGLE_OUTPUT_METHODS + tuple(VARIANTS)
-    if methods == ("fair",):
-        methods = FAIR_METHODS
-    if unknown := set(methods) - set(known):
-        raise LookupError(f"unknown method(s) {sorted(unknown)} for {problem_name}; use {known}")
-    lf0, hf0 = default_design(problem.d)
-    n_lf0, n_hf0 = n_lf0 or lf0, n_hf0 or hf0
-    config = dict(settings, hf_budget=hf_samples, n_lf0=max(n_lf0, n_hf0), n_hf0=n_hf0)
+    methods, n_lf0, n_hf0 = check_request(problem_name, hf_samples, n_lf0, n_hf0, methods, reference_counts)
+    config = dict(settings, hf_budget=hf_samples, n_lf0=n_lf0, n_hf0=n_hf0)
     counts = list(range(n_hf0, hf_samples + 1))
-    if bad := [n for n in reference_counts if n not in counts]:
-        raise LookupError(f"reference count(s) {bad} outside the HF counts {n_hf0}..{hf_samples}")
-    if reference_counts:
-        from nearsub.common.learning.reference_gp import missing
-
-        if reason := missing():
-            raise LookupError(f"the reference GP cannot run: {reason}")
     single_blas_thread()  # inherited by the spawned workers
     start = time.perf_counter()
     ctx = multiprocessing.get_context("spawn")
@@ -213,6 +198,36 @@ def run_benchmark(
         "wall_seconds": time.perf_counter() - start,
         "task_seconds_per_method": task_seconds,
     }
+
+
+def check_request(
+    problem_name: str,
+    hf_samples: int,
+    n_lf0: int | None = None,
+    n_hf0: int | None = None,
+    methods: tuple[str, ...] | None = None,
+    reference_counts: tuple[int, ...] = (),
+) -> tuple[tuple[str, ...], int, int]:
+    """The methods ("fair" expanded) and initial design sizes of a request; LookupError naming
+    an unknown problem or method, a reference count outside the run, or a missing extra."""
+    problem = get_problem(problem_name)
+    multi = problem.lf is None
+    methods = methods or (MULTI_OUTPUT_METHODS if multi else SINGLE_OUTPUT_METHODS)
+    known = MULTI_OUTPUT_METHODS if multi else SINGLE_OUTPUT_METHODS + tuple(VARIANTS)
+    if methods == ("fair",):
+        methods = FAIR_METHODS
+    if unknown := set(methods) - set(known):
+        raise LookupError(f"unknown method(s) {sorted(unknown)} for {problem_name}; use {known}")
+    lf0, hf0 = default_design(problem.d)
+    n_lf0, n_hf0 = n_lf0 or lf0, n_hf0 or hf0
+    if bad := [n for n in reference_counts if not n_hf0 <= n <= hf_samples]:
+        raise LookupError(f"--reference: count(s) {bad} outside the HF counts {n_hf0}..{hf_samples}")
+    if reference_counts:
+        from nearsub.common.learning.reference_gp import missing
+
+        if reason := missing():
+            raise LookupError(f"--reference: the reference GP cannot run: {reason}")
+    return tuple(methods), max(n_lf0, n_hf0), n_hf0
 
 
 def _run_all(pool, tasks, on_task_done):
