@@ -7,6 +7,7 @@ from nearsub.common.learning.active import (
     Campaign,
     CampaignSettings,
     candidate_set,
+    initial_design,
     run_campaign,
     select_point,
 )
@@ -122,6 +123,8 @@ def test_tell_rejects_other_points_and_bad_values():
 
 RESUME_CASES = [
     ("park", dict(method="nmmf", n_lookahead=3)),
+    ("park", dict(method="nmmf", n_lookahead=3, keep_lookahead=True)),
+    ("park", dict(method="nmmf", exact_lf=True)),
     ("park", dict(method="myopic")),
     ("park", dict(method="hf-us")),
     ("multi-output", dict(method="hf-us", selection="round-robin")),
@@ -182,3 +185,79 @@ def test_mf_beats_hf_only_on_park_at_30():
     # paired design: every method starts from the same initial design (identical at n0)
     first = {m: result["mape"][m][:, 0, 0] for m in ("nmmf", "myopic")}
     np.testing.assert_array_equal(first["nmmf"], first["myopic"])
+
+
+def _pattern(settings, problem=PARK):
+    c = Campaign(problem, settings)
+    pattern = []
+    while (req := c.ask()) is not None:
+        pattern.append((req.fidelity, len(req.X)))
+        c.tell(req.X, _evaluate(problem, req))
+    return c, pattern
+
+
+def test_fair_variants_keep_as_many_lf_runs_as_nmmf_makes():
+    """NMMF keeping its look-ahead and the matched myopic baseline both keep n + 1 LF runs per
+    HF sample, the LF that NMMF runs (and drops) per HF sample."""
+    base = dict(hf_budget=7, n_lf0=12, n_hf0=5, n_lookahead=3, **FAST)
+    keep, pattern = _pattern(CampaignSettings(method="nmmf", keep_lookahead=True, **base))
+    assert pattern == [("lf", 12), ("hf", 5)] + [("lf", 3), ("hf", 1), ("lf", 1)] * 2
+    X_lf, _ = keep.data("lf")
+    assert len(X_lf) == 12 + 2 * 4
+    np.testing.assert_array_equal(X_lf[12:15], keep.state()["lookahead"][0]["X"])
+    matched, pattern = _pattern(CampaignSettings(method="myopic", myopic_lf_picks=3, **base))
+    assert pattern == [("lf", 12), ("hf", 5)] + [("hf", 1), ("lf", 4)] * 2
+    assert len(matched.data("lf")[0]) == len(X_lf)
+    from nearsub.common.learning.albench import method_settings
+
+    assert method_settings("myopic-matched", {"n_lookahead": 3})["myopic_lf_picks"] == 3
+
+
+@pytest.mark.parametrize("method", ["nmmf", "myopic"])
+def test_exact_lf_variants_run_hf_only_and_predict_lf_plus_delta(method):
+    s = CampaignSettings(method=method, exact_lf=True, hf_budget=8, n_lf0=12, n_hf0=5, **FAST)
+    c, pattern = _pattern(s)
+    assert pattern == [("hf", 5)] + [("hf", 1)] * 3  # no LF requests: the LF is in the loop
+    X_hf, Y_hf = c.data("hf")
+    np.testing.assert_array_equal(X_hf[:5], initial_design(PARK, 12, [s.seed, 0])[:5])  # paired design
+    X = np.random.default_rng(1).uniform(0.0, 1.0, (20, 4))
+    np.testing.assert_allclose(c.predict(X), PARK.lf(X).reshape(-1, 1) + c.model.delta.predict(X), rtol=1e-12)
+    np.testing.assert_allclose(c.predict(X_hf), Y_hf, rtol=1e-4)  # delta interpolates HF - LF
+
+
+def test_variant_settings_are_checked():
+    with pytest.raises(ValueError, match="keep_lookahead"):
+        CampaignSettings(method="myopic", keep_lookahead=True)
+    with pytest.raises(ValueError, match="exact_lf"):
+        CampaignSettings(method="hf-us", exact_lf=True)
+
+
+def test_fair_benchmark_runs_every_variant_on_paired_designs():
+    result = run_benchmark("park", repeats=1, hf_samples=7, methods=("fair",), test_points=200, n_lookahead=2, **FAST)
+    assert result["methods"][0] == "nmmf" and len(result["methods"]) == 7
+    first = [result["mape"][m][0, 0, 0] for m in ("nmmf", "myopic", "myopic-matched", "nmmf-keep")]
+    assert len(set(first)) == 1  # the same initial design and fit for every LF-GP method
+    assert all(np.all(np.isfinite(a)) for a in result["mape"].values())
+
+
+def test_reference_gp_refits_the_same_training_sets():
+    """emukit's linear MF model refits each kind of training set (LF data, exact LF, HF only) at
+    the asked HF counts; on Park its MF fits beat its HF-only fit, as nearsub's do."""
+    from nearsub.common.learning.reference_gp import missing
+
+    if reason := missing():
+        pytest.skip(f"reference GP: {reason}")
+    result = run_benchmark(
+        "park",
+        repeats=1,
+        hf_samples=12,
+        methods=("nmmf", "myopic-exact-lf", "hf-us"),
+        test_points=200,
+        reference_counts=(12,),
+        **FAST,
+    )
+    ref = {m: a[0, -1, 0] for m, a in result["reference"]["mape"].items()}
+    assert result["reference"]["counts"] == [12] and all(np.isfinite(v) for v in ref.values())
+    assert ref["nmmf"] < ref["hf-us"] and ref["myopic-exact-lf"] < ref["hf-us"], ref
+    with pytest.raises(LookupError, match="outside the HF counts"):
+        run_benchmark("park", repeats=1, hf_samples=12, reference_counts=(40,))

@@ -81,6 +81,11 @@ def test_an_unknown_subcommand_is_named():
         (["launch", "missing.toml"], "nearsub launch: "),
         (["envelope", "--behaviour", "drift"], "nearsub envelope: --behaviour 'drift' is not one of waypoints"),
         (["al-bench", "sudoku"], "nearsub al-bench: unknown problem 'sudoku'"),
+        (
+            ["al-bench", "park", "--hf-samples", "10", "--reference", "40"],
+            "nearsub al-bench: --reference: count(s) [40]",
+        ),
+        (["al-bench", "park", "--methods", "nmmf,greedy"], "nearsub al-bench: unknown method(s) ['greedy']"),
     ],
 )
 def test_bad_input_gets_one_line_and_exit_2(runtime_dir, argv, message):

@@ -4,7 +4,9 @@ The runner and its statistics are `nearsub.common.learning.albench`; this module
 Outputs in --out: PROBLEM.csv (MAPE (2.18) in percent per method, repeat, HF count and output),
 PROBLEM.png (median and interquartile band against the number of HF samples), PROBLEM.json
 (median, quartiles, mean +/- 95 % CI, the paired win rate of the reference method over each
-baseline, the crossover HF counts and the wall time). Everything follows from --seed.
+baseline, the crossover HF counts and the wall time). With --reference, PROBLEM-reference.csv
+holds the reference GP's MAPE on every method's training sets at those HF counts (same columns).
+Everything follows from --seed.
 """
 
 from __future__ import annotations
@@ -18,6 +20,10 @@ _LABELS = {
     "nmmf": "NMMF",
     "myopic": "myopic MF",
     "myopic-lf0": "myopic MF, LF only at HF points",
+    "myopic-matched": "myopic MF, LF matched to NMMF",
+    "nmmf-keep": "NMMF keeping its look-ahead LF",
+    "nmmf-exact-lf": "NMMF, exact LF",
+    "myopic-exact-lf": "myopic MF, exact LF",
     "hf-us": "HF-only US",
     "max-variance": "maximum variance (2.31)",
     "round-robin": "round robin (2.30)",
@@ -45,26 +51,23 @@ def write_outputs(result: dict[str, Any], summary: dict[str, Any], out: Path) ->
         "json": stem.with_suffix(".json"),
         "png": stem.with_suffix(".png"),
     }
-    with open(paths["csv"], "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(["problem", "method", "repeat", "seed", "n_hf", "output", "mape_percent"])
-        for m in result["methods"]:
-            a = result["mape"][m]
-            for r in range(a.shape[0]):
-                for i, n_hf in enumerate(result["n_hf"]):
-                    for j, name in enumerate(result["outputs"]):
-                        w.writerow(
-                            [
-                                result["problem"],
-                                m,
-                                r,
-                                repeat_seed(result["seed"], r),
-                                n_hf,
-                                name,
-                                repr(float(a[r, i, j])),
-                            ]
-                        )
-    meta = {k: v for k, v in result.items() if k != "mape"}
+    tables = [(paths["csv"], result["mape"], result["n_hf"])]
+    if result.get("reference"):
+        paths["reference"] = out / f"{result['problem']}-reference.csv"
+        tables.append((paths["reference"], result["reference"]["mape"], result["reference"]["counts"]))
+    for path, mapes, counts in tables:
+        with open(path, "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(["problem", "method", "repeat", "seed", "n_hf", "output", "mape_percent"])
+            for m in result["methods"]:
+                a = mapes[m]
+                for r in range(a.shape[0]):
+                    for i, n_hf in enumerate(counts):
+                        for j, name in enumerate(result["outputs"]):
+                            seed = repeat_seed(result["seed"], r)
+                            w.writerow([result["problem"], m, r, seed, n_hf, name, repr(float(a[r, i, j]))])
+    meta = {k: v for k, v in result.items() if k not in ("mape", "reference")}
+    meta["reference_counts"] = result["reference"]["counts"] if result.get("reference") else []
     meta["thesis_claim"] = THESIS_CLAIMS.get(result["problem"], "")
     with open(paths["json"], "w") as fh:
         json.dump({**meta, "summary": summary}, fh, indent=1)
@@ -126,6 +129,14 @@ def _print_report(result: dict[str, Any], summary: dict[str, Any], paths: dict[s
         for b, n in out["crossover"].items():
             when = f"from {n} HF samples on" if n is not None else "not by the end"
             console.print(f"  {ref} median below {b}: {when}")
+        if gp := out.get("reference_gp"):
+            table = Table(title=f"{result['problem']} / {name}: the same training sets, reference GP: MAPE [%] median")
+            table.add_column("HF")
+            for m in result["methods"]:
+                table.add_column(_LABELS.get(m, m))
+            for i, n_hf in enumerate(gp["counts"]):
+                table.add_row(str(n_hf), *(f"{gp['stats'][m]['median'][i]:.3g}" for m in result["methods"]))
+            console.print(table)
     console.print(f"thesis: {THESIS_CLAIMS.get(result['problem'], '')}")
     console.print(f"wall time {result['wall_seconds']:.1f} s with {result['jobs']} job(s); files:")
     for p in paths.values():
@@ -135,10 +146,11 @@ def _print_report(result: dict[str, Any], summary: dict[str, Any], paths: dict[s
 def al_bench_command(args) -> int:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
 
-    from nearsub.common.learning.albench import run_benchmark, summarise
-    from nearsub.common.learning.testproblems import get_problem
+    from nearsub.common.learning.albench import check_request, run_benchmark, summarise
 
-    get_problem(args.problem)  # an unknown name is reported before the progress bar starts
+    methods = tuple(args.methods.split(",")) if args.methods else None
+    # Bad input is reported in one line before the progress bar starts.
+    check_request(args.problem, args.hf_samples, args.n_lf0, args.n_hf0, methods, tuple(args.reference))
     settings = {"n_lookahead": args.lookahead, "n_restarts": args.restarts, "n_polish": args.polish}
     if args.learn_rho:
         settings["rho"] = None
@@ -153,8 +165,9 @@ def al_bench_command(args) -> int:
             args.seed,
             n_lf0=args.n_lf0,
             n_hf0=args.n_hf0,
-            methods=tuple(args.methods.split(",")) if args.methods else None,
+            methods=methods,
             test_points=args.test_points,
+            reference_counts=tuple(args.reference),
             on_task_done=lambda done, total: bar.update(job, completed=done, total=total),
             **settings,
         )
@@ -163,10 +176,19 @@ def al_bench_command(args) -> int:
     if args.learn_rho:
         out = out / "learned-rho"
     if args.methods:
-        out = out / args.methods.replace(",", "_")
+        out = out / args.methods.replace(",", "_")  # "fair" names its own folder
     paths = write_outputs(result, summary, out)
     _print_report(result, summary, paths)
     return 0
+
+
+def _counts(text: str) -> list[int]:
+    import argparse
+
+    try:
+        return [int(n) for n in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--reference: {text!r} is not a comma list of HF counts") from None
 
 
 def add_parser(subparsers) -> None:
@@ -188,8 +210,17 @@ def add_parser(subparsers) -> None:
     p.add_argument(
         "--methods",
         help="comma list, reference first (default nmmf,myopic,hf-us; multi-output: "
-        "max-variance,round-robin,weighted); extra baseline: myopic-lf0",
+        "max-variance,round-robin,weighted); variants: myopic-lf0, myopic-matched, nmmf-keep, "
+        "nmmf-exact-lf, myopic-exact-lf; 'fair': all single-output methods and variants",
+    )
+    p.add_argument(
+        "--reference",
+        type=_counts,
+        default=[],
+        metavar="N,N,...",
+        help="HF counts at which an independent MF GP (emukit on GPy; extra 'bench') refits every "
+        "method's training sets",
     )
     p.add_argument("--learn-rho", action="store_true", help="ablation: learn rho instead of 1")
-    p.add_argument("--out", default="al-bench", help="output folder (default: al-bench)")
+    p.add_argument("-o", "--out", default="al-bench", help="output folder (default: al-bench)")
     p.set_defaults(func=al_bench_command)

@@ -22,7 +22,14 @@ Methods (the `method` setting of `CampaignSettings`):
   (2.15)) and at `myopic_lf_picks` (default 1) greedy LF uncertainty-sampling points
   argmax sigma_LF^2 (conditioned on x_HF); keep all LF runs; refit. One-step-ahead picks at
   both fidelities, no look-ahead, no q_AD. With myopic_lf_picks = 0 it keeps exactly one LF run
-  per HF sample, like NMMF, and differs from it only in how x_HF is chosen.
+  per HF sample, like NMMF, and differs from it only in how x_HF is chosen; with
+  myopic_lf_picks = n_lookahead it runs as many LF points per HF sample as NMMF (n + 1) and
+  keeps them all.
+* Two variants, for fair comparisons: `keep_lookahead` makes NMMF keep its temporary LF runs in
+  D_LF (n + 1 LF runs kept per HF sample); `exact_lf` replaces the LF GP by the problem's own
+  LF function (cheap LFs: the LF "in the loop", as the shipped surrogate does), so no LF runs
+  are requested, NMMF's look-ahead is the LF itself (q_AD with y_MF = LF + y_delta) and the
+  myopic baseline makes no LF picks.
 * "hf-us", single-fidelity uncertainty sampling on the HF-only GP (also the multi-output method).
 
 `Campaign` runs one method as an ask/tell state machine for an external evaluator: `ask()`
@@ -197,6 +204,8 @@ class CampaignSettings:
     the top n_polish, LF picks the top one).
     rho: the AR(1) scale, 1.0 (thesis); None learns it (ablation).
     myopic_lf_picks: LF uncertainty-sampling points the myopic baseline adds per HF sample.
+    keep_lookahead: NMMF keeps its temporary LF runs in D_LF (variant; Algorithm 1 drops them).
+    exact_lf: the model uses the problem's LF function instead of an LF GP (MF methods only).
     """
 
     method: str = "nmmf"
@@ -211,6 +220,8 @@ class CampaignSettings:
     n_polish: int = 3
     rho: float | None = 1.0
     myopic_lf_picks: int = 1
+    keep_lookahead: bool = False
+    exact_lf: bool = False
 
     def __post_init__(self):
         if self.method not in METHODS:
@@ -221,10 +232,19 @@ class CampaignSettings:
             raise ValueError("need 1 <= n_hf0 <= n_lf0 (the HF design is nested in the LF one)")
         if min(self.n_lookahead, self.n_polish, self.myopic_lf_picks) < 0 or self.n_restarts < 1:
             raise ValueError("n_lookahead, n_polish, myopic_lf_picks must be >= 0, n_restarts >= 1")
+        if self.keep_lookahead and self.method != "nmmf":
+            raise ValueError("keep_lookahead is an NMMF variant")
+        if self.exact_lf and not self.multi_fidelity:
+            raise ValueError("exact_lf needs a multi-fidelity method")
 
     @property
     def multi_fidelity(self) -> bool:
         return self.method != "hf-us"
+
+    @property
+    def lf_runs(self) -> bool:
+        """True when the campaign requests LF evaluations (an MF method without the exact LF)."""
+        return self.multi_fidelity and not self.exact_lf
 
 
 @dataclass
@@ -265,13 +285,9 @@ class Campaign:
         self._counters = _Counters()
         self._fitted = (0, 0)  # (n_lf, n_hf) prefix of the data the model is fitted on
         self._model: MultiFidelityGP | MultiOutputGP | None = None
-        design = initial_design(
-            problem,
-            settings.n_lf0 if settings.multi_fidelity else settings.n_hf0,
-            [settings.seed, 0],
-        )
+        design = initial_design(problem, settings.n_lf0 if settings.lf_runs else settings.n_hf0, [settings.seed, 0])
         self._design = design
-        if settings.multi_fidelity:
+        if settings.lf_runs:
             self._phase, self._pending = "init-lf", self._request("lf", design)
         else:
             self._phase, self._pending = "init-hf", self._request("hf", design[: settings.n_hf0])
@@ -297,7 +313,7 @@ class Campaign:
         if req.fidelity == "lf":
             if self._phase == "lookahead":
                 self._lookahead.append({"X": X.tolist(), "Y": Y.tolist()})
-            else:
+            if self._phase != "lookahead" or self.settings.keep_lookahead:
                 self._lf.add(X, Y)
         else:
             self._hf.add(X, Y)
@@ -341,14 +357,14 @@ class Campaign:
             self._refit(warm_start=False)
         elif phase == "lookahead":  # Algorithm 1: LF GP on D_LF + temporaries, then q_AD
             self._pick_hf_by_gap(self._model.condition_lf(X, Y))
-        elif phase == "hf" and s.method == "hf-us":
+        elif phase == "hf" and not s.lf_runs:
             self._refit(warm_start=True)
         elif phase == "hf":  # LF run at the HF point for (2.15); myopic adds its LF US picks
             batch = X
             if s.method == "myopic":
                 batch = np.vstack([X, self._greedy_lf(X, s.myopic_lf_picks)])
             self._phase, self._pending = "lf-at-hf", self._request("lf", batch)
-        elif phase == "lf-at-hf":  # Algorithm 1: temporaries are already out of D_LF
+        elif phase == "lf-at-hf":  # Algorithm 1: temporaries are out of D_LF (unless kept)
             self._refit(warm_start=True)
         else:
             raise AssertionError(f"unexpected phase {phase!r}")
@@ -362,7 +378,10 @@ class Campaign:
         n_lf, n_hf = len(self._lf.X), len(self._hf.X)
         if self._model is None:
             if s.multi_fidelity:
-                self._model = MultiFidelityGP(self.problem.bounds, n_restarts=s.n_restarts, seed=s.seed, rho=s.rho)
+                lf = self.problem.lf if s.exact_lf else None
+                self._model = MultiFidelityGP(
+                    self.problem.bounds, n_restarts=s.n_restarts, seed=s.seed, rho=s.rho, lf=lf
+                )
             else:
                 self._model = MultiOutputGP(self.problem.bounds, n_restarts=s.n_restarts, seed=s.seed)
         if s.multi_fidelity:
@@ -376,12 +395,11 @@ class Campaign:
         s = self.settings
         if self._fitted[1] >= s.hf_budget:
             self._phase, self._pending = "done", None
-        elif s.method == "nmmf":
+        elif s.method == "nmmf" and s.n_lookahead and not s.exact_lf:
             temps = self._greedy_lf(np.empty((0, self.problem.d)), s.n_lookahead)
-            if len(temps):
-                self._phase, self._pending = "lookahead", self._request("lf", temps)
-            else:  # n = 0: q_AD on the model as it is
-                self._pick_hf_by_gap(self._model)
+            self._phase, self._pending = "lookahead", self._request("lf", temps)
+        elif s.method == "nmmf":  # n = 0, or the exact LF is its own look-ahead: q_AD as it is
+            self._pick_hf_by_gap(self._model)
         else:
             model = self._model.delta if s.method == "myopic" else self._model
             scale = _output_std(self._model.hf if s.method == "myopic" else self._model)

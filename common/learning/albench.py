@@ -7,6 +7,11 @@ design, and all repeats share one fixed test set. Repeats run in parallel proces
 one BLAS thread: multi-threaded BLAS on these small matrices is several times slower).
 `summarise` gives the median, quartiles, mean +/- 95 % CI, the paired win rate of the reference
 method over each baseline and the crossover HF counts. Everything follows from the seed.
+
+Variants make the comparison fair in LF data (`VARIANTS`): a myopic baseline that keeps as many
+LF runs per HF sample as NMMF runs (n + 1), NMMF keeping its look-ahead runs, and both methods
+with the exact LF in the loop. With `reference_counts`, every method's training sets at those HF
+counts are also refitted by an independent multi-fidelity GP (`reference_gp`, emukit on GPy).
 """
 
 from __future__ import annotations
@@ -26,8 +31,20 @@ from nearsub.common.runtime.processes import single_blas_thread
 
 SINGLE_OUTPUT_METHODS = ("nmmf", "myopic", "hf-us")
 MULTI_OUTPUT_METHODS = ("max-variance", "round-robin", "weighted")  # reference first
-# Extra baselines by name: CampaignSettings fields.
-VARIANTS = {"myopic-lf0": {"method": "myopic", "myopic_lf_picks": 0}}
+# Extra methods by name: their CampaignSettings fields, given the run's other settings.
+VARIANTS: dict[str, Callable[[dict[str, Any]], dict[str, Any]]] = {
+    "myopic-lf0": lambda s: {"method": "myopic", "myopic_lf_picks": 0},
+    # As many LF runs per HF sample as NMMF makes (n look-ahead + 1), all kept.
+    "myopic-matched": lambda s: {
+        "method": "myopic",
+        "myopic_lf_picks": s.get("n_lookahead", CampaignSettings.n_lookahead),
+    },
+    "nmmf-keep": lambda s: {"method": "nmmf", "keep_lookahead": True},
+    "nmmf-exact-lf": lambda s: {"method": "nmmf", "exact_lf": True},
+    "myopic-exact-lf": lambda s: {"method": "myopic", "exact_lf": True},
+}
+# Every single-output method, the fair comparison (`--methods fair`); the reference first.
+FAIR_METHODS = ("nmmf", "myopic", "myopic-matched", "nmmf-keep", "nmmf-exact-lf", "myopic-exact-lf", "hf-us")
 
 
 def mape(Y_pred: np.ndarray, Y_true: np.ndarray) -> np.ndarray:
@@ -57,24 +74,43 @@ class _Task:
     settings: dict[str, Any]
     X_test: np.ndarray
     Y_test: np.ndarray
+    reference_counts: tuple[int, ...] = ()
 
 
-def _run_task(task: _Task) -> tuple[str, int, list[tuple[int, np.ndarray]], float]:
-    """One campaign of one method and repeat; returns the test MAPE at every HF count."""
+def method_settings(method: str, settings: dict[str, Any]) -> dict[str, Any]:
+    """The CampaignSettings fields of a method name (a base method, a variant or a rule)."""
+    if method in MULTI_OUTPUT_METHODS:
+        return {"method": "hf-us", "selection": method}
+    return VARIANTS[method](settings) if method in VARIANTS else {"method": method}
+
+
+def _run_task(task: _Task) -> tuple[str, int, list[tuple[int, np.ndarray]], list[tuple[int, np.ndarray]], float]:
+    """One campaign of one method and repeat; returns the test MAPE at every HF count, and the
+    reference model's at `reference_counts`."""
     start = time.perf_counter()
     problem = get_problem(task.problem)
-    if task.method in MULTI_OUTPUT_METHODS:
-        spec = {"method": "hf-us", "selection": task.method}
-    else:
-        spec = VARIANTS.get(task.method, {"method": task.method})
-    settings = CampaignSettings(seed=task.seed, **spec, **task.settings)
+    settings = CampaignSettings(seed=task.seed, **method_settings(task.method, task.settings), **task.settings)
     rows: list[tuple[int, np.ndarray]] = []
+    reference_rows: list[tuple[int, np.ndarray]] = []
 
     def record(campaign):
         rows.append((campaign.n_hf, mape(campaign.predict(task.X_test), task.Y_test)))
+        if campaign.n_hf in task.reference_counts:
+            from nearsub.common.learning.reference_gp import predict_hf
+
+            Y = predict_hf(
+                problem.bounds,
+                *campaign.data("hf"),
+                task.X_test,
+                lf_data=campaign.data("lf") if settings.lf_runs else None,
+                lf=problem.lf if settings.exact_lf else None,
+                restarts=settings.n_restarts,
+                seed=task.seed,
+            )
+            reference_rows.append((campaign.n_hf, mape(Y, task.Y_test)))
 
     run_campaign(Campaign(problem, settings), problem, record)
-    return task.method, task.repeat, rows, time.perf_counter() - start
+    return task.method, task.repeat, rows, reference_rows, time.perf_counter() - start
 
 
 def _evaluate_hf(problem_name: str, X: np.ndarray) -> np.ndarray:
@@ -106,42 +142,46 @@ def run_benchmark(
     n_hf0: int | None = None,
     methods: tuple[str, ...] | None = None,
     test_points: int = 2000,
+    reference_counts: tuple[int, ...] = (),
     on_task_done: Callable[[int, int], None] | None = None,
     **settings: Any,
 ) -> dict[str, Any]:
     """Run the paired comparison and return raw results: per method, an array (repeats, n_hf
     counts, outputs) of MAPE [%], the HF counts, and the run's configuration and wall time.
 
+    reference_counts: HF counts at which the reference GP (`reference_gp`) refits each
+    campaign's data; its MAPE is under "reference" (arrays (repeats, counts, outputs)).
     settings: further `CampaignSettings` fields (n_lookahead, n_restarts, n_polish, rho, ...).
     on_task_done(done, total) is called as each campaign finishes.
     """
     problem = get_problem(problem_name)
-    multi = problem.lf is None
-    methods = methods or (MULTI_OUTPUT_METHODS if multi else SINGLE_OUTPUT_METHODS)
-    known = MULTI_OUTPUT_METHODS if multi else SINGLE_OUTPUT_METHODS + tuple(VARIANTS)
-    if unknown := set(methods) - set(known):
-        raise LookupError(f"unknown method(s) {sorted(unknown)} for {problem_name}; use {known}")
-    lf0, hf0 = default_design(problem.d)
-    n_lf0, n_hf0 = n_lf0 or lf0, n_hf0 or hf0
-    config = dict(settings, hf_budget=hf_samples, n_lf0=max(n_lf0, n_hf0), n_hf0=n_hf0)
+    methods, n_lf0, n_hf0 = check_request(problem_name, hf_samples, n_lf0, n_hf0, methods, reference_counts)
+    config = dict(settings, hf_budget=hf_samples, n_lf0=n_lf0, n_hf0=n_hf0)
+    counts = list(range(n_hf0, hf_samples + 1))
     single_blas_thread()  # inherited by the spawned workers
     start = time.perf_counter()
     ctx = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(max_workers=max(1, jobs), mp_context=ctx) as pool:
         X_test, Y_test = _test_set(problem, test_points, seed, pool, max(1, jobs))
         tasks = [
-            _Task(problem_name, method, r, repeat_seed(seed, r), config, X_test, Y_test)
+            _Task(problem_name, method, r, repeat_seed(seed, r), config, X_test, Y_test, tuple(reference_counts))
             for r in range(repeats)
             for method in methods
         ]
         results = _run_all(pool, tasks, on_task_done)
-    counts = list(range(n_hf0, hf_samples + 1))
-    mape_by_method = {method: np.full((repeats, len(counts), problem.n_outputs), np.nan) for method in methods}
+    ref_counts = sorted(reference_counts)
+
+    def empty(n):
+        return {method: np.full((repeats, n, problem.n_outputs), np.nan) for method in methods}
+
+    mape_by_method, reference = empty(len(counts)), empty(len(ref_counts))
     task_seconds = {method: 0.0 for method in methods}
-    for method, r, rows, seconds in results:
+    for method, r, rows, reference_rows, seconds in results:
         task_seconds[method] += seconds
         for n_hf, err in rows:
             mape_by_method[method][r, counts.index(n_hf)] = err
+        for n_hf, err in reference_rows:
+            reference[method][r, ref_counts.index(n_hf)] = err
     return {
         "problem": problem_name,
         "outputs": list(problem.output_names),
@@ -154,9 +194,40 @@ def run_benchmark(
         "test_points": test_points,
         "n_hf": counts,
         "mape": mape_by_method,
+        "reference": {"counts": ref_counts, "mape": reference} if ref_counts else None,
         "wall_seconds": time.perf_counter() - start,
         "task_seconds_per_method": task_seconds,
     }
+
+
+def check_request(
+    problem_name: str,
+    hf_samples: int,
+    n_lf0: int | None = None,
+    n_hf0: int | None = None,
+    methods: tuple[str, ...] | None = None,
+    reference_counts: tuple[int, ...] = (),
+) -> tuple[tuple[str, ...], int, int]:
+    """The methods ("fair" expanded) and initial design sizes of a request; LookupError naming
+    an unknown problem or method, a reference count outside the run, or a missing extra."""
+    problem = get_problem(problem_name)
+    multi = problem.lf is None
+    methods = methods or (MULTI_OUTPUT_METHODS if multi else SINGLE_OUTPUT_METHODS)
+    known = MULTI_OUTPUT_METHODS if multi else SINGLE_OUTPUT_METHODS + tuple(VARIANTS)
+    if methods == ("fair",):
+        methods = FAIR_METHODS
+    if unknown := set(methods) - set(known):
+        raise LookupError(f"unknown method(s) {sorted(unknown)} for {problem_name}; use {known}")
+    lf0, hf0 = default_design(problem.d)
+    n_lf0, n_hf0 = n_lf0 or lf0, n_hf0 or hf0
+    if bad := [n for n in reference_counts if not n_hf0 <= n <= hf_samples]:
+        raise LookupError(f"--reference: count(s) {bad} outside the HF counts {n_hf0}..{hf_samples}")
+    if reference_counts:
+        from nearsub.common.learning.reference_gp import missing
+
+        if reason := missing():
+            raise LookupError(f"--reference: the reference GP cannot run: {reason}")
+    return tuple(methods), max(n_lf0, n_hf0), n_hf0
 
 
 def _run_all(pool, tasks, on_task_done):
@@ -188,26 +259,43 @@ def summarise(result: dict[str, Any]) -> dict[str, Any]:
     methods, counts = result["methods"], result["n_hf"]
     reference, baselines = methods[0], methods[1:]
     outputs = list(result["outputs"])
-    mapes = {m: result["mape"][m] for m in methods}
-    if len(outputs) > 1:  # figure 2-10 also averages the outputs
+    with_mean = len(outputs) > 1  # figure 2-10 also averages the outputs
+    if with_mean:
         outputs.append("mean")
-        mapes = {m: np.concatenate([a, a.mean(axis=2, keepdims=True)], axis=2) for m, a in mapes.items()}
+
+    def per_output(arrays):
+        if not with_mean:
+            return arrays
+        return {m: np.concatenate([a, a.mean(axis=2, keepdims=True)], axis=2) for m, a in arrays.items()}
+
+    mapes = per_output(result["mape"])
+    ref_gp = result.get("reference")
+    ref_mapes = per_output(ref_gp["mape"]) if ref_gp else None
     summary: dict[str, Any] = {"reference": reference, "outputs": {}}
     for j, name in enumerate(outputs):
-        per_method = {}
-        for m in methods:
-            a = mapes[m][:, :, j]
-            n = a.shape[0]
-            half = stats.t.ppf(0.975, n - 1) * a.std(axis=0, ddof=1) / np.sqrt(n) if n > 1 else 0 * a[0]
-            per_method[m] = {
-                "median": np.median(a, axis=0).tolist(),
-                "q25": np.percentile(a, 25, axis=0).tolist(),
-                "q75": np.percentile(a, 75, axis=0).tolist(),
-                "mean": a.mean(axis=0).tolist(),
-                "ci95_half_width": np.asarray(half).tolist(),
-            }
+        per_method = {m: _stats(mapes[m][:, :, j], stats) for m in methods}
         ref = mapes[reference][:, :, j]
         win = {b: np.mean(ref < mapes[b][:, :, j], axis=0).tolist() for b in baselines}
         cross = {b: crossover(counts, per_method[reference]["median"], per_method[b]["median"]) for b in baselines}
         summary["outputs"][name] = {"stats": per_method, "win_rate": win, "crossover": cross}
+        if ref_mapes:  # the same training sets, refitted by the reference GP
+            a = {m: ref_mapes[m][:, :, j] for m in methods}
+            summary["outputs"][name]["reference_gp"] = {
+                "counts": ref_gp["counts"],
+                "stats": {m: _stats(a[m], stats) for m in methods},
+                "win_rate": {b: np.mean(a[reference] < a[b], axis=0).tolist() for b in baselines},
+            }
     return summary
+
+
+def _stats(a: np.ndarray, stats) -> dict[str, list[float]]:
+    """Median, quartiles, mean and the 95 % CI half width (t) over repeats (axis 0)."""
+    n = a.shape[0]
+    half = stats.t.ppf(0.975, n - 1) * a.std(axis=0, ddof=1) / np.sqrt(n) if n > 1 else 0 * a[0]
+    return {
+        "median": np.median(a, axis=0).tolist(),
+        "q25": np.percentile(a, 25, axis=0).tolist(),
+        "q75": np.percentile(a, 75, axis=0).tolist(),
+        "mean": a.mean(axis=0).tolist(),
+        "ci95_half_width": np.asarray(half).tolist(),
+    }
