@@ -29,3 +29,21 @@ def test_an_unwritable_cache_only_costs_the_computation(tmp_path, monkeypatch):
     monkeypatch.setenv("NEARSUB_CACHE", str(blocked))
     values = cache.cached_arrays("table", "k", lambda: (np.ones(2),))
     assert values[0].tolist() == [1.0, 1.0]
+
+
+def test_the_shipped_field_table_is_the_ring_panel_solution_at_its_nodes():
+    """nearsub/data/lf-field.npz must match this LF (version, panels, grid) and hold the ring-panel
+    velocities at its nodes: checked at 200 random nodes against the solution itself."""
+    from nearsub.common.hydro import low_fidelity as lf
+    from nearsub.common.physics.hull import suboff_profile
+
+    x, r = lf._field_grid()
+    shipped = lf._shipped_field(lf.N_FRUSTA, x, r)
+    assert shipped is not None, "the shipped lf-field.npz was made for another LF: rerun `nearsub lf-field`"
+    ux, ur = (a.reshape(x.size, r.size) for a in shipped)
+    rng = np.random.default_rng(7)
+    i, j = rng.integers(0, x.size, 200), rng.integers(0, r.size, 200)
+    panels = lf.solve_ring_panels(suboff_profile(lf.N_FRUSTA + 1))
+    vx, vr = panels.velocity(x[i], r[j])
+    np.testing.assert_allclose(ux[i, j], vx, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(ur[i, j], vr, rtol=1e-12, atol=1e-15)

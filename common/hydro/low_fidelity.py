@@ -293,25 +293,55 @@ def submarine_field(n_frusta: int = N_FRUSTA) -> SubmarineField:
     return _submarine_field(int(n_frusta))
 
 
+def tabulate_field(n_frusta: int = N_FRUSTA) -> dict[str, np.ndarray]:
+    """The ring-panel velocities (u_x, u_R) at every node of `_field_grid`, with what they
+    depend on: what `nearsub lf-field` writes and the package ships (`nearsub/data/lf-field.npz`)."""
+    x, r = _field_grid()
+    xx, rr = np.meshgrid(x, r, indexing="ij")
+    panels = solve_ring_panels(suboff_profile(n_frusta + 1))
+    ux = np.empty(xx.size)
+    ur = np.empty(xx.size)
+    chunk = 4000
+    for start in range(0, xx.size, chunk):
+        part = slice(start, start + chunk)
+        ux[part], ur[part] = panels.velocity(xx.ravel()[part], rr.ravel()[part])
+    return {"lf_version": np.array(LF_VERSION), "n_frusta": np.array(n_frusta), "x": x, "r": r, "ux": ux, "ur": ur}
+
+
+def _shipped_field(n_frusta: int, x: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """The shipped node velocities when they were made for this LF version, panel count and grid."""
+    from importlib import resources
+
+    try:
+        with resources.as_file(resources.files("nearsub.data") / "lf-field.npz") as path, np.load(path) as table:
+            same = (
+                int(table["lf_version"]) == LF_VERSION
+                and int(table["n_frusta"]) == n_frusta
+                and np.array_equal(table["x"], x)
+                and np.array_equal(table["r"], r)
+            )
+            return (table["ux"], table["ur"]) if same else None
+    except (OSError, KeyError, ValueError):
+        return None
+
+
 @lru_cache(maxsize=4)
 def _submarine_field(n_frusta: int) -> SubmarineField:
     x, r = _field_grid()
-    xx, rr = np.meshgrid(x, r, indexing="ij")
 
     def tabulate() -> tuple[np.ndarray, np.ndarray]:
-        panels = solve_ring_panels(suboff_profile(n_frusta + 1))
-        ux = np.empty(xx.size)
-        ur = np.empty(xx.size)
-        chunk = 4000
-        for start in range(0, xx.size, chunk):
-            part = slice(start, start + chunk)
-            ux[part], ur[part] = panels.velocity(xx.ravel()[part], rr.ravel()[part])
-        return ux, ur
+        table = tabulate_field(n_frusta)
+        return table["ux"], table["ur"]
 
-    # Seconds of CPU per process otherwise (a mission's server and sim both need it at start-up).
-    key = cache_key([__file__, hull_module.__file__], str(n_frusta), x.tobytes(), r.tobytes())
-    ux, ur = cached_arrays("lf-field", key, tabulate)
-    shape = xx.shape
+    # Seconds of CPU per process otherwise (a mission's server, sim and helm all need it at
+    # start-up): the shipped table, else one computed once per machine (tests/test_hydro_cache.py
+    # checks the shipped one against the ring-panel solution).
+    shipped = _shipped_field(n_frusta, x, r)
+    if shipped is None:
+        key = cache_key([__file__, hull_module.__file__], str(n_frusta), x.tobytes(), r.tobytes())
+        shipped = cached_arrays("lf-field", key, tabulate)
+    ux, ur = shipped
+    shape = (x.size, r.size)
     return SubmarineField(
         RectBivariateSpline(x, r, ux.reshape(shape)),
         RectBivariateSpline(x, r, ur.reshape(shape)),
