@@ -15,4 +15,6 @@ fi
 python3 -m venv .venv
 .venv/bin/python -m pip install --quiet --upgrade pip
 .venv/bin/python -m pip install --quiet -e '.[dev]'
+# numba compiles the LF's kernels once into its cache here, not in a mission's first processes.
+.venv/bin/python -c 'from nearsub.common.hydro.low_fidelity import compile_kernels; compile_kernels()'
 exec .venv/bin/python -m pytest "$@"

@@ -418,7 +418,7 @@ def lf_coefficients(inputs, *, n_strips: int = N_STRIPS, n_frusta: int = N_FRUST
     """Low-fidelity [X', Y', N'] (n, 3) for input rows [R_long, R_lat, u_kn, psi_deg, d_ratio, ld_ratio].
 
     Rows whose UUV reaches outside the tabulated field (closer than 1 cm to the submarine's widest
-    radius, or beyond |x| = 1.5 L_sub, R = 25 m) come back as NaN."""
+    radius, or beyond the table's reach, R_FIELD_MAX from the axis and from either tip) come back as NaN."""
     return _strip_model(inputs, n_strips, n_frusta, hold=False)[0]
 
 
@@ -438,3 +438,13 @@ def lf_increment_terms(inputs, *, n_strips: int = N_STRIPS, n_frusta: int = N_FR
     up to contact (`interaction.interaction_at` flags it; a collision or close call is declared
     there anyway). Rows beyond the table's outer edges are NaN, as in `lf_coefficients`."""
     return _strip_model(inputs, n_strips, n_frusta, hold=True)
+
+
+def compile_kernels() -> None:
+    """Evaluate every path of the LF once, so numba compiles its kernels into its on-disk cache
+    now (seconds, once per install) and not in the first processes of a mission (tools/run.sh
+    and tools/test.sh call it after installing)."""
+    row = np.array([[0.0, 0.08, 3.0, 1.0, 8.0, 7.0]])  # any valid row: R_long, R_lat, kn, deg, ratios
+    lf_coefficients(row)
+    lf_free_stream(row)
+    lf_increment_terms(row)
