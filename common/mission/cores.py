@@ -9,7 +9,8 @@ import math
 
 import numpy as np
 
-from nearsub.common.autonomy import behaviours, control
+from nearsub.common.autonomy import behaviours, control, logic
+from nearsub.common.autonomy import helm as ivphelm
 from nearsub.common.mission.schema import Mission
 from nearsub.common.physics import dynamics
 from nearsub.common.physics import proximity as events
@@ -45,8 +46,10 @@ def guard_clearance(mission: Mission) -> float:
 
 
 class HelmCore:
-    """pHelmIvP: the waypoints behaviour (thesis 5.7) or the modified one (6.3.2), optionally with
-    N_uv compensation (6.3.1, which asks the surrogate for N_s), turning x_k into x_d,k."""
+    """pHelmIvP: the mission's behaviours arbitrated by priority (`autonomy.helm.Helm`; the legacy
+    single behaviour is one waypoints behaviour, thesis 5.7 or 6.3.2), with N_uv compensation
+    (6.3.1, which asks the surrogate for N_s) modifying the chosen heading, turning x_k into x_d,k.
+    Pokes (`nearsub poke`) set mission variables from the step they arrive at."""
 
     role = "helm"
     inputs = ("state",)
@@ -56,23 +59,24 @@ class HelmCore:
         self.settings = mission.apps.helm
         self.vehicle = mission.vehicle_model
         self.rho = mission.environment.rho
-        self.surrogate = surrogate if self.settings.compensated else None
+        specs = self.settings.behaviour_specs()
+        self.avoids = any(spec.type == "hull_avoidance" for spec in specs)
+        self.surrogate = surrogate if self.settings.compensated or self.avoids else None
         if self.settings.compensated and surrogate is None:
             raise ValueError("N_uv compensation needs the surrogate (a force model)")
         v = self.vehicle
         # gamma from (6.4) at the M11 the thesis quotes for library vehicles (5.21, 1.30, 1.03).
         self.gamma = self.settings.gamma or float(behaviours.gamma_from_m11(v.thesis_M11 or v.M11))
-        self.legs = self.settings.legs
         # N_s is the yaw moment the interaction adds to the vehicle's own model, as the sim applies
         # it: the interaction increment in "increment" mode, the surrogate's total otherwise.
         self.interaction_mode = "increment" if mission.apps.sim.interaction == "increment" else "replace"
         if self.surrogate is not None:
             prepare(self.interaction_mode)
-        self.cross_flow = None
-        if self.settings.modified:
-            u_sub = mission.environment.u_sub
-            self.cross_flow = behaviours.CrossFlow(u_sub, self.settings.alpha, mission.vehicle_model.length)
-        self.progress_state = behaviours.initial_progress(self.legs, (mission.start.x, mission.start.y))
+        modes = tuple(rule.rule() for rule in self.settings.modes)
+        self.helm = ivphelm.Helm(
+            specs, self.settings.variables, modes, v, mission.environment.u_sub, self.settings.max_speed
+        )
+        self.report = behaviours.WaypointProgress()
         self.guard_clearance = guard_clearance(mission)
         self.guard_step = math.radians(self.settings.guard_rate_deg) * mission.dt * self.settings.period
         self.delta_psi = 0.0  # the guarded offset of the last iteration (the rate limit's reference)
@@ -85,22 +89,28 @@ class HelmCore:
     def new_mail(self, mail: dict[str, Message]) -> None:
         if "state" in mail:
             self.state = mail["state"]
+        if "poke" in mail:
+            self.helm.poke(mail["poke"].values)
+
+    def forces(self, x: np.ndarray) -> InteractionAt:
+        return interaction_at(self.surrogate, x, self.vehicle, self.rho, self.interaction_mode)
 
     def iterate(self, step: int, t: float) -> Iteration:
         s = self.state
-        decision = behaviours.waypoints(self.legs, self.progress_state, s.x, s.y, s.psi, self.cross_flow)
-        self.progress_state = decision.progress
-        psi_d, delta_psi, n_s, commanded, guard = decision.psi_d, 0.0, 0.0, 0.0, None
-        if self.surrogate is not None and not decision.progress.complete:
-            seen = interaction_at(self.surrogate, state_array(s), self.vehicle, self.rho, self.interaction_mode)
+        x = state_array(s)
+        seen = self.forces(x) if self.surrogate is not None and self.avoids else None
+        decision = self.helm.iterate(x, t, None if seen is None else seen.interaction)
+        choice = decision.choice
+        u_d, psi_d = (0.0, s.psi) if choice is None else (choice.u, choice.psi)
+        delta_psi, n_s, commanded, guard = 0.0, 0.0, 0.0, None
+        if self.settings.compensated and choice is not None:
+            seen = seen or self.forces(x)
             n_s = float(seen.applied[0, 2])
-            commanded = float(
-                behaviours.nuv_heading_offset(n_s, decision.u_d, self.vehicle.compensation_N_uv, self.gamma)
-            )
+            commanded = float(behaviours.nuv_heading_offset(n_s, u_d, self.vehicle.compensation_N_uv, self.gamma))
             guard = behaviours.guard_heading_offset(
                 s.x,
                 s.y,
-                decision.psi_d,
+                psi_d,
                 commanded,
                 self.delta_psi,
                 self.vehicle.length,
@@ -109,24 +119,18 @@ class HelmCore:
                 self.guard_step,
             )
             delta_psi = float(guard.delta_psi)
-            psi_d = decision.psi_d + delta_psi
+            psi_d = psi_d + delta_psi
         self.delta_psi = delta_psi
         result = Iteration()
-        for leg, index, point in decision.captured:
-            result.events.append(
-                event(
-                    self.role,
-                    step,
-                    t,
-                    "waypoint",
-                    f"reached {self.legs[leg].name} point {index + 1} at ({point[0]:g}, {point[1]:g})",
-                    {"leg": leg, "index": index, "x": s.x, "y": s.y},
-                )
-            )
-        progress = decision.progress
+        for kind, detail, data in decision.events:
+            result.events.append(event(self.role, step, t, kind, detail, data))
+        for name, value, why in decision.postings:
+            detail = f"{name} = {logic.format_value(value)} ({why})"
+            result.events.append(event(self.role, step, t, "info", detail, {"variable": name, "value": value}))
+        self.report = decision.waypoints or self.report
         cross_track = 0.0
-        if progress.previous is not None and decision.target is not None:
-            cross_track = float(events.track_distance(s.x, s.y, progress.previous, decision.target))
+        if decision.track is not None:
+            cross_track = float(events.track_distance(s.x, s.y, *decision.track))
         straying = cross_track > events.STRAY_LIMIT
         if straying and not self.straying:
             result.events.append(
@@ -140,7 +144,7 @@ class HelmCore:
                 )
             )
         self.straying = straying
-        result.outputs.append(("desired", Desired(step=step, t=t, source=self.role, u_d=decision.u_d, psi_d=psi_d)))
+        result.outputs.append(("desired", Desired(step=step, t=t, source=self.role, u_d=u_d, psi_d=psi_d)))
         result.outputs.append(
             (
                 "helm",
@@ -149,14 +153,17 @@ class HelmCore:
                     t=t,
                     source=self.role,
                     behaviour=self.settings.behaviour,
-                    leg=progress.leg,
-                    waypoint_index=progress.index,
-                    waypoints_reached=progress.reached,
+                    leg=self.report.leg,
+                    waypoint_index=self.report.index,
+                    waypoints_reached=self.report.reached,
                     psi_d=psi_d,
                     delta_psi=delta_psi,
                     cross_track=cross_track,
                     n_s=n_s,
-                    complete=progress.complete,
+                    complete=self.report.complete,
+                    mode=logic.format_value(self.helm.variables.get("MODE", "")),
+                    active=decision.active,
+                    winner=decision.winner,
                     delta_psi_commanded=commanded,
                     guard_active=guard is not None and bool(guard.active),
                     guard_saturated=guard is not None and bool(guard.saturated),
@@ -165,15 +172,21 @@ class HelmCore:
                 ),
             )
         )
-        if progress.complete:
-            result.end, result.reason = "completed", f"all {progress.reached} waypoints reached"
+        if decision.end is not None:
+            result.end, result.reason = decision.end
         return result
 
     def progress(self) -> dict:
-        return {"waypoints": self.progress_state.to_dict(), "straying": self.straying, "delta_psi": self.delta_psi}
+        return {
+            "helm": self.helm.progress(),
+            "report": self.report.to_dict(),
+            "straying": self.straying,
+            "delta_psi": self.delta_psi,
+        }
 
     def restore(self, progress: dict) -> None:
-        self.progress_state = behaviours.WaypointProgress.from_dict(progress["waypoints"])
+        self.helm.restore(progress["helm"])
+        self.report = behaviours.WaypointProgress.from_dict(progress["report"])
         self.straying = bool(progress["straying"])
         self.delta_psi = float(progress["delta_psi"])
 

@@ -1,0 +1,178 @@
+"""Objective functions over the helm's decision space (heading, speed) and their arbitration.
+
+pHelmIvP's semantics (the MOOS-IvP helm documentation, Benjamin et al.): every active behaviour
+hands the helm an objective function over the decision space with a priority weight, and the
+helm takes the decision that maximises the weighted sum. nearsub solves it by brute force
+instead of interval programming (docs/design.md, "The helm"): the sum is evaluated on a grid of
+1 deg x 0.05 m/s plus, as extra candidates, the exact peak of every objective, so a single
+behaviour is obeyed exactly (not rounded to the grid) and the result is the same as the
+behaviour's own decision, bit for bit.
+
+An objective is a separable part, a_h f_h(psi) + a_s f_s(u) (the ZAIC peak functions of
+MOOS-IvP, coupled by the weights a_h + a_s = 1, as BHV_Waypoint couples course and speed 50/50),
+plus optionally a coupled table over a coarse (heading, speed) grid (hull avoidance), read by
+bilinear interpolation. Utilities lie in [0, 1].
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+HEADING_STEP_DEG = 1.0  # the decision grid: 1 deg x 0.05 m/s (docs/design.md, "The helm")
+SPEED_STEP = 0.05
+
+
+@dataclass(frozen=True)
+class Zaic:
+    """A ZAIC peak function (MOOS-IvP's ZAIC_PEAK): 1 at `summit`, falling linearly by
+    `summit_delta` across `peak_width` on either side, then to 0 across `base_width`. Headings
+    measure the distance the short way round the circle."""
+
+    summit: float
+    peak_width: float = 0.0
+    base_width: float = math.inf
+    summit_delta: float = 0.0
+    circular: bool = False
+
+    def __call__(self, value):
+        d = np.asarray(value, dtype=float) - self.summit
+        if self.circular:
+            d = (d + math.pi) % (2.0 * math.pi) - math.pi
+        d = np.abs(d)
+        inner = 1.0 - self.summit_delta * (d / self.peak_width if self.peak_width > 0 else 0.0)
+        if math.isinf(self.base_width):
+            outer = np.full_like(d, 1.0 - self.summit_delta)
+        else:
+            outer = (1.0 - self.summit_delta) * (1.0 - (d - self.peak_width) / self.base_width)
+        return np.clip(np.where(d <= self.peak_width, inner, outer), 0.0, 1.0)
+
+
+@dataclass(frozen=True)
+class Table:
+    """A coupled objective sampled on a coarse grid: `values[i, j]` at headings[i] (evenly spaced,
+    the whole circle) and speeds[j] (ascending); read bilinearly, periodic in heading."""
+
+    headings: np.ndarray
+    speeds: np.ndarray
+    values: np.ndarray
+
+    def __call__(self, psi, u):
+        n = len(self.headings)
+        step = 2.0 * math.pi / n
+        fi = ((np.asarray(psi, dtype=float) - self.headings[0]) / step) % n
+        i0 = np.floor(fi).astype(int) % n
+        wi = fi - np.floor(fi)
+        i1 = (i0 + 1) % n
+        uu = np.clip(np.asarray(u, dtype=float), self.speeds[0], self.speeds[-1])
+        j0 = np.clip(np.searchsorted(self.speeds, uu, side="right") - 1, 0, len(self.speeds) - 2)
+        wj = (uu - self.speeds[j0]) / (self.speeds[j0 + 1] - self.speeds[j0])
+        v = self.values
+        return (1 - wi) * ((1 - wj) * v[i0, j0] + wj * v[i0, j0 + 1]) + wi * (
+            (1 - wj) * v[i1, j0] + wj * v[i1, j0 + 1]
+        )
+
+
+@dataclass(frozen=True)
+class Objective:
+    """One behaviour's objective function: two ZAICs coupled by `heading_weight` and its
+    complement (one of them may be None: indifferent in that variable), or a coupled `table`
+    alone. `peak` is the decision it prefers (None for a table)."""
+
+    peak: tuple[float, float] | None
+    heading: Zaic | None = None
+    speed: Zaic | None = None
+    heading_weight: float = 0.5
+    table: Table | None = None
+
+    def separable(self, psi, u):
+        """(heading part over psi, speed part over u), each already weighted."""
+        h = 0.0 if self.heading is None else self.weights()[0] * self.heading(psi)
+        s = 0.0 if self.speed is None else self.weights()[1] * self.speed(u)
+        return h, s
+
+    def weights(self) -> tuple[float, float]:
+        if self.heading is None:
+            return 0.0, 1.0
+        if self.speed is None:
+            return 1.0, 0.0
+        return self.heading_weight, 1.0 - self.heading_weight
+
+    def __call__(self, psi, u):
+        if self.table is not None:
+            return self.table(psi, u)
+        h, s = self.separable(psi, u)
+        return np.asarray(h) + np.asarray(s)
+
+
+def peak_objective(psi: float, u: float, heading_base: float = math.pi, speed_peak: float | None = None) -> Objective:
+    """BHV_Waypoint's objective: a course ZAIC at psi (base width 180 deg) and a speed ZAIC at u
+    (peak width u / 2), coupled 50/50."""
+    return Objective(
+        (psi, u),
+        Zaic(psi, 0.0, heading_base, circular=True),
+        Zaic(u, u / 2.0 if speed_peak is None else speed_peak, max(u, 0.5), summit_delta=0.1),
+    )
+
+
+@lru_cache(maxsize=8)
+def decision_grid(max_speed: float) -> tuple[np.ndarray, np.ndarray]:
+    """Headings [-180, 180) deg and speeds [0, max_speed] m/s of the decision grid, in radians and m/s."""
+    headings = np.radians(np.arange(-180.0, 180.0, HEADING_STEP_DEG))
+    speeds = np.round(np.arange(0.0, max_speed + SPEED_STEP / 2, SPEED_STEP), 10)
+    headings.setflags(write=False)
+    speeds.setflags(write=False)
+    return headings, speeds
+
+
+@dataclass(frozen=True)
+class Choice:
+    psi: float
+    u: float
+    utility: float
+    winner: int  # index of the objective whose peak was chosen, or -1 for a grid cell
+
+
+def arbitrate(objectives: list[tuple[float, Objective]], max_speed: float) -> Choice | None:
+    """The decision maximising sum_i w_i f_i(psi, u) over the grid and every objective's peak.
+    Ties go to the first candidate: the peaks in the order given (the helm lists them by
+    priority), then the grid in heading-major order from -180 deg and 0 m/s. None when no
+    objective is given."""
+    if not objectives:
+        return None
+    headings, speeds = decision_grid(max_speed)
+    h_sum = np.zeros(len(headings))
+    s_sum = np.zeros(len(speeds))
+    peaks = [(i, o.peak) for i, (_, o) in enumerate(objectives) if o.peak is not None]
+    pk_psi = np.array([p[0] for _, p in peaks])
+    pk_u = np.array([p[1] for _, p in peaks])
+    pk_total = np.zeros(len(peaks))
+    tables = np.zeros((len(headings), len(speeds)))
+    coupled = False
+    for weight, objective in objectives:
+        if objective.table is not None:
+            coupled = True
+            tables += weight * objective(headings[:, None], speeds[None, :])
+            if len(peaks):
+                pk_total += weight * objective(pk_psi, pk_u)
+            continue
+        h, s = objective.separable(headings, speeds)
+        h_sum += weight * h
+        s_sum += weight * s
+        if len(peaks):
+            ph, ps = objective.separable(pk_psi, pk_u)
+            pk_total += weight * (ph + ps)
+    grid = h_sum[:, None] + s_sum[None, :]
+    if coupled:
+        grid = grid + tables
+    best = int(np.argmax(grid))
+    best_value = float(grid.flat[best])
+    if len(peaks):
+        k = int(np.argmax(pk_total))
+        if pk_total[k] >= best_value:
+            return Choice(float(pk_psi[k]), float(pk_u[k]), float(pk_total[k]), peaks[k][0])
+    i, j = divmod(best, len(speeds))
+    return Choice(float(headings[i]), float(speeds[j]), best_value, -1)
