@@ -31,7 +31,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from nearsub.common.autonomy import behaviours, control, ivp, logic
-from nearsub.common.autonomy.behaviours import Coordinate, Leg, Speed
+from nearsub.common.autonomy.behaviours import Coordinate, Leg
 from nearsub.common.physics import dynamics, proximity
 from nearsub.common.physics.vehicles import Vehicle
 
@@ -238,11 +238,12 @@ def loiter(spec: LoiterSpec, s: Situation, memory: dict) -> Result:
     """The waypoints behaviour over the polygon, started again at its first vertex each lap."""
     leg = Leg(points=spec.polygon, speed=spec.speed, lead=spec.lead, capture_radius=spec.capture_radius)
     laps = int(memory.get("laps", 0))
-    inner = waypoints(WaypointsSpec(type="waypoints", name=spec.name, legs=[leg]), s, memory)
+    lap = WaypointsSpec(type="waypoints", name=spec.name, legs=[leg])
+    inner = waypoints(lap, s, memory)
     if inner.complete is not None:
         last = tuple(spec.polygon[-1])
         restart = behaviours.WaypointProgress(previous=(float(last[0]), float(last[1])))
-        inner = waypoints(WaypointsSpec(type="waypoints", name=spec.name, legs=[leg]), s, {"waypoints": restart.to_dict()})
+        inner = waypoints(lap, s, {"waypoints": restart.to_dict()})
         laps += 1
     return replace(inner, memory={**inner.memory, "laps": laps})
 
@@ -306,7 +307,8 @@ def predicted_clearance(s: Situation, psi_c: np.ndarray, u_c: np.ndarray, horizo
     held = None
     if s.interaction is not None:
         f = s.interaction
-        held = dynamics.Interaction(np.broadcast_to(f.forces, x.shape[:-1] + (3,)), np.broadcast_to(f.weight, x.shape[:-1]), f.mode)
+        forces = np.broadcast_to(f.forces, x.shape[:-1] + (3,))
+        held = dynamics.Interaction(forces, np.broadcast_to(f.weight, x.shape[:-1]), f.mode)
     low, high = np.array([-v.max_thrust, -v.max_rudder]), np.array([v.max_thrust, v.max_rudder])
     least = np.full(len(psi_c), np.inf)
     for _ in range(int(math.ceil(horizon / AVOID_DT))):
@@ -472,7 +474,7 @@ class Helm:
         decision.active = [self.specs[i].name for i, _, _ in objectives]
         if decision.choice is not None and decision.choice.winner >= 0:
             decision.winner = decision.active[decision.choice.winner]
-        for name, value, why in postings:
+        for name, value, _ in postings:
             self.variables[name] = value
         decision.postings = postings
         return decision

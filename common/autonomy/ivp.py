@@ -71,9 +71,7 @@ class Table:
         j0 = np.clip(np.searchsorted(self.speeds, uu, side="right") - 1, 0, len(self.speeds) - 2)
         wj = (uu - self.speeds[j0]) / (self.speeds[j0 + 1] - self.speeds[j0])
         v = self.values
-        return (1 - wi) * ((1 - wj) * v[i0, j0] + wj * v[i0, j0 + 1]) + wi * (
-            (1 - wj) * v[i1, j0] + wj * v[i1, j0 + 1]
-        )
+        return (1 - wi) * ((1 - wj) * v[i0, j0] + wj * v[i0, j0 + 1]) + wi * ((1 - wj) * v[i1, j0] + wj * v[i1, j0 + 1])
 
 
 @dataclass(frozen=True)
