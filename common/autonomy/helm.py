@@ -25,6 +25,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
+from functools import lru_cache
 from typing import Annotated, Any, Literal
 
 import numpy as np
@@ -33,6 +34,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 from nearsub.common.autonomy import behaviours, control, ivp, logic
 from nearsub.common.autonomy.behaviours import Coordinate, Leg
 from nearsub.common.physics import dynamics, proximity
+from nearsub.common.physics.hull import uuv_body_outline
 from nearsub.common.physics.vehicles import Vehicle
 
 FlagValue = str | float | bool
@@ -103,12 +105,15 @@ class StationKeepSpec(_Spec):
 
 
 class ApproachAsternSpec(_Spec):
-    """Come up from astern along the line through `point` parallel to the submarine's axis."""
+    """Come up from astern to `point`: along a lane `standoff` metres farther from the hull than
+    the point, merging onto the point's own line over the last `merge_distance` metres."""
 
     type: Literal["approach_astern"]
     point: tuple[Coordinate, Coordinate]
     closing_speed: float = Field(default=0.5, gt=0, le=behaviours.MAX_SPEED, description="over U_sub [m/s]")
     slow_distance: float = Field(default=10.0, gt=0, description="closing slows within this distance [m]")
+    standoff: float = Field(default=0.0, ge=0, description="lane offset from the point, away from the hull [m]")
+    merge_distance: float = Field(default=20.0, gt=0, description="the lane merges over this distance [m]")
     lead: float = Field(default=5.0, gt=0)
     capture_radius: float = Field(default=0.5, gt=0)
 
@@ -120,7 +125,7 @@ class HullAvoidanceSpec(_Spec):
     priority: float = Field(default=300.0, ge=0.0)
     min_clearance: float = Field(default=0.3, ge=0, description="utility 0 below this predicted clearance [m]")
     safe_clearance: float = Field(default=1.0, gt=0, description="utility 1 above this predicted clearance [m]")
-    horizon: float = Field(default=6.0, gt=0, le=60.0, description="prediction horizon [s]")
+    horizon: float = Field(default=5.0, gt=0, le=60.0, description="prediction horizon [s]")
     reach: float = Field(default=15.0, gt=0, description="idle beyond this clearance of the CB [m]")
 
 
@@ -270,36 +275,50 @@ def station_keep(spec: StationKeepSpec, s: Situation, memory: dict) -> Result:
 
 
 def approach_astern(spec: ApproachAsternSpec, s: Situation, memory: dict) -> Result:
-    """Steer at the lead point on the line through the station point along +x (section 5.7's lead
-    point, `behaviours.lead_point`), at U_sub plus the closing speed, slowed linearly within
-    `slow_distance`; complete within `capture_radius` of the point."""
-    point = np.asarray(spec.point, dtype=float)
-    start = point - np.array([1.0, 0.0])
-    aim = behaviours.lead_point(start, point, s.xy, spec.lead)
-    aim = np.where(np.asarray(s.xy[0] >= point[0]), point + np.array([spec.lead, 0.0]), aim)
-    if float(np.hypot(*(point - s.xy))) < spec.capture_radius:
-        return Result(None, memory, f"at the station point ({point[0]:g}, {point[1]:g})")
-    gap = point[0] - s.xy[0]
-    u = s.u_sub + spec.closing_speed * float(np.clip(gap / spec.slow_distance, -1.0, 1.0))
-    psi = float(np.arctan2(aim[1] - s.xy[1], aim[0] - s.xy[0]))
-    track = ((float(point[0]) - spec.slow_distance, float(point[1])), (float(point[0]), float(point[1])))
+    """Steer at a lead point `lead` metres ahead on the lane (which runs on along the point's own
+    line once past the merge), at U_sub plus the closing speed, slowed linearly within
+    `slow_distance` of the point's x (slower than U_sub once past it); complete within
+    `capture_radius` of the point. The lane keeps clear of the stern, where the interaction turns
+    a small UUV in (docs/scenarios/recovery.md)."""
+    px, py = (float(c) for c in spec.point)
+    x, y = float(s.xy[0]), float(s.xy[1])
+    if math.hypot(px - x, py - y) < spec.capture_radius:
+        return Result(None, memory, f"at the station point ({px:g}, {py:g})")
+    away = math.copysign(1.0, py)  # the lane lies on the far side of the point from the axis
+
+    def lane(at: float) -> float:
+        return py + away * spec.standoff * min(max((px - at) / spec.merge_distance, 0.0), 1.0)
+
+    aim_x = x + spec.lead
+    psi = math.atan2(lane(aim_x) - y, spec.lead)
+    gap = px - x
+    u = s.u_sub + spec.closing_speed * min(max(gap / spec.slow_distance, -1.0), 1.0)
+    track = ((px - spec.merge_distance, lane(px - spec.merge_distance)), (px, py))
     return Result(ivp.peak_objective(psi, max(u, 0.0)), memory, track=track)
 
 
-# Hull avoidance candidates: every 15 deg of heading at 4 speeds of the decision range, nearsub's
-# choice (96 predictions of the vehicle's own dynamics per helm step); the objective between
-# them is read bilinearly (`ivp.Table`). Prediction step 0.25 s: inside the PID's 20 Hz loop
-# the vehicle's heading response (tens of seconds for 90 deg, docs/pid-tuning.md) hardly moves.
-AVOID_HEADINGS = np.radians(np.arange(-180.0, 180.0, 15.0))
-AVOID_SPEED_FRACTIONS = np.array([0.0, 1.0 / 3.0, 2.0 / 3.0, 1.0])
-AVOID_DT = 0.25
+# Hull avoidance candidates: every 30 deg of heading at half and all of the top speed, nearsub's
+# choice (24 predictions of the vehicle's own dynamics per helm step, a few ms); the objective
+# between them is read bilinearly (`ivp.Table`). The prediction steps 0.1 s, the step of the
+# envelopes, which Euler integrates stably for every library vehicle, and checks the clearance
+# every AVOID_CHECK steps (0.2 s: 0.4 m at 2 m/s).
+AVOID_HEADINGS = np.radians(np.arange(-180.0, 180.0, 30.0))
+AVOID_SPEED_FRACTIONS = np.array([0.5, 1.0])
+AVOID_DT = 0.1
+AVOID_CHECK = 2
 AVOID_OUTLINE_POINTS = 12  # outline points per side for the predicted clearance
+
+
+@lru_cache(maxsize=16)
+def _outline(length: float, diameter: float) -> tuple[np.ndarray, np.ndarray]:
+    return uuv_body_outline(length, diameter, AVOID_OUTLINE_POINTS)
 
 
 def predicted_clearance(s: Situation, psi_c: np.ndarray, u_c: np.ndarray, horizon: float) -> np.ndarray:
     """Least clearance [m] of the UUV's outline from the hull over `horizon`, for each commanded
     (psi_c, u_c): (5.10) with the vehicle's own coefficients and PID (pMarinePID, from rest), the
-    interaction forces held at their value now, Euler steps of AVOID_DT."""
+    interaction forces held at their value now, Euler steps of AVOID_DT. A prediction that
+    diverges counts as a collision."""
     v = s.vehicle
     x = np.repeat(s.state[None, :], len(psi_c), axis=0)
     memory = control.PidState.zeros((len(psi_c),))
@@ -310,15 +329,21 @@ def predicted_clearance(s: Situation, psi_c: np.ndarray, u_c: np.ndarray, horizo
         forces = np.broadcast_to(f.forces, x.shape[:-1] + (3,))
         held = dynamics.Interaction(forces, np.broadcast_to(f.weight, x.shape[:-1]), f.mode)
     low, high = np.array([-v.max_thrust, -v.max_rudder]), np.array([v.max_thrust, v.max_rudder])
+    bx, by = _outline(v.length, v.diameter)
     least = np.full(len(psi_c), np.inf)
-    for _ in range(int(math.ceil(horizon / AVOID_DT))):
-        memory, out = control.pid_step(memory, u_c, psi_c, x, v, v.pid, AVOID_DT)
-        command = np.clip(np.stack([out.thrust, out.rudder], axis=-1), low, high)
-        x = dynamics.step(x, command, v, env, AVOID_DT, "euler", 0.0, held)
-        gap = proximity.closest_distance(
-            x[:, dynamics.X], x[:, dynamics.Y], x[:, dynamics.PSI], v.length, v.diameter, AVOID_OUTLINE_POINTS
-        )
-        least = np.minimum(least, gap)
+    with np.errstate(all="ignore"):
+        steps = int(math.ceil(horizon / AVOID_DT - 1e-9))
+        for k in range(1, steps + 1):
+            memory, out = control.pid_step(memory, u_c, psi_c, x, v, v.pid, AVOID_DT)
+            command = np.clip(np.stack([out.thrust, out.rudder], axis=-1), low, high)
+            x = dynamics.step(x, command, v, env, AVOID_DT, "euler", 0.0, held)
+            if k % AVOID_CHECK and k != steps:
+                continue
+            c, sn = np.cos(x[:, dynamics.PSI, None]), np.sin(x[:, dynamics.PSI, None])
+            px = x[:, dynamics.X, None] + bx * c - by * sn
+            py = x[:, dynamics.Y, None] + bx * sn + by * c
+            gap = proximity.hull_signed_distance(np.nan_to_num(px, nan=0.0), np.nan_to_num(py, nan=0.0)).min(axis=-1)
+            least = np.minimum(least, np.where(np.isfinite(x).all(axis=-1), gap, -np.inf))
     return least
 
 

@@ -42,13 +42,10 @@ class Zaic:
         d = np.asarray(value, dtype=float) - self.summit
         if self.circular:
             d = (d + math.pi) % (2.0 * math.pi) - math.pi
-        d = np.abs(d)
-        inner = 1.0 - self.summit_delta * (d / self.peak_width if self.peak_width > 0 else 0.0)
+        low = 1.0 - self.summit_delta
         if math.isinf(self.base_width):
-            outer = np.full_like(d, 1.0 - self.summit_delta)
-        else:
-            outer = (1.0 - self.summit_delta) * (1.0 - (d - self.peak_width) / self.base_width)
-        return np.clip(np.where(d <= self.peak_width, inner, outer), 0.0, 1.0)
+            return np.interp(np.abs(d), (0.0, self.peak_width), (1.0, low))
+        return np.interp(np.abs(d), (0.0, self.peak_width, self.peak_width + self.base_width), (1.0, low, 0.0))
 
 
 @dataclass(frozen=True)
@@ -61,17 +58,45 @@ class Table:
     values: np.ndarray
 
     def __call__(self, psi, u):
-        n = len(self.headings)
-        step = 2.0 * math.pi / n
-        fi = ((np.asarray(psi, dtype=float) - self.headings[0]) / step) % n
-        i0 = np.floor(fi).astype(int) % n
-        wi = fi - np.floor(fi)
-        i1 = (i0 + 1) % n
-        uu = np.clip(np.asarray(u, dtype=float), self.speeds[0], self.speeds[-1])
-        j0 = np.clip(np.searchsorted(self.speeds, uu, side="right") - 1, 0, len(self.speeds) - 2)
-        wj = (uu - self.speeds[j0]) / (self.speeds[j0 + 1] - self.speeds[j0])
+        wi, i0, i1, wj, j0 = _weights(
+            self.headings, self.speeds, np.asarray(psi, dtype=float), np.asarray(u, dtype=float)
+        )
         v = self.values
         return (1 - wi) * ((1 - wj) * v[i0, j0] + wj * v[i0, j0 + 1]) + wi * ((1 - wj) * v[i1, j0] + wj * v[i1, j0 + 1])
+
+    def on_grid(self, max_speed: float) -> np.ndarray:
+        """The table read on the whole decision grid: two small matrix products with the
+        interpolation weights, which depend only on the two grids (cached)."""
+        rows, cols = _grid_weights(len(self.headings), float(self.headings[0]), tuple(self.speeds), max_speed)
+        return rows @ self.values @ cols
+
+
+def _weights(headings, speeds, psi, u):
+    n = len(headings)
+    fi = ((psi - headings[0]) / (2.0 * math.pi / n)) % n
+    i0 = np.floor(fi).astype(int) % n
+    wi = fi - np.floor(fi)
+    uu = np.clip(u, speeds[0], speeds[-1])
+    j0 = np.clip(np.searchsorted(speeds, uu, side="right") - 1, 0, len(speeds) - 2)
+    wj = (uu - speeds[j0]) / (speeds[j0 + 1] - speeds[j0])
+    return wi, i0, (i0 + 1) % n, wj, j0
+
+
+@lru_cache(maxsize=32)
+def _grid_weights(n: int, first: float, speeds: tuple, max_speed: float) -> tuple[np.ndarray, np.ndarray]:
+    """(H, n) and (m, S) matrices: grid heading i reads coarse headings bilinearly, and so on."""
+    headings = first + np.arange(n) * (2.0 * math.pi / n)
+    coarse_speeds = np.asarray(speeds)
+    grid_psi, grid_u = decision_grid(max_speed)
+    wi, i0, i1, _, _ = _weights(headings, coarse_speeds, grid_psi, np.zeros_like(grid_psi))
+    rows = np.zeros((len(grid_psi), n))
+    rows[np.arange(len(grid_psi)), i0] += 1 - wi
+    rows[np.arange(len(grid_psi)), i1] += wi
+    _, _, _, wj, j0 = _weights(headings, coarse_speeds, np.zeros_like(grid_u), grid_u)
+    cols = np.zeros((len(coarse_speeds), len(grid_u)))
+    cols[j0, np.arange(len(grid_u))] += 1 - wj
+    cols[j0 + 1, np.arange(len(grid_u))] += wj
+    return rows, cols
 
 
 @dataclass(frozen=True)
@@ -138,39 +163,40 @@ def arbitrate(objectives: list[tuple[float, Objective]], max_speed: float) -> Ch
     """The decision maximising sum_i w_i f_i(psi, u) over the grid and every objective's peak.
     Ties go to the first candidate: the peaks in the order given (the helm lists them by
     priority), then the grid in heading-major order from -180 deg and 0 m/s. None when no
-    objective is given."""
+    objective is given.
+
+    The separable parts add up to H(psi) + S(u), whose maximum over the grid is the maximum of
+    each (the same first cell as the full grid's); only tables need the whole grid."""
     if not objectives:
         return None
     headings, speeds = decision_grid(max_speed)
-    h_sum = np.zeros(len(headings))
-    s_sum = np.zeros(len(speeds))
     peaks = [(i, o.peak) for i, (_, o) in enumerate(objectives) if o.peak is not None]
     pk_psi = np.array([p[0] for _, p in peaks])
     pk_u = np.array([p[1] for _, p in peaks])
     pk_total = np.zeros(len(peaks))
-    tables = np.zeros((len(headings), len(speeds)))
-    coupled = False
+    h_sum = np.zeros(len(headings))
+    s_sum = np.zeros(len(speeds))
+    grid = None
     for weight, objective in objectives:
+        if len(peaks):
+            pk_total += weight * objective(pk_psi, pk_u)
         if objective.table is not None:
-            coupled = True
-            tables += weight * objective(headings[:, None], speeds[None, :])
-            if len(peaks):
-                pk_total += weight * objective(pk_psi, pk_u)
+            part = weight * objective.table.on_grid(max_speed)
+            grid = part if grid is None else grid + part
             continue
         h, s = objective.separable(headings, speeds)
         h_sum += weight * h
         s_sum += weight * s
-        if len(peaks):
-            ph, ps = objective.separable(pk_psi, pk_u)
-            pk_total += weight * (ph + ps)
-    grid = h_sum[:, None] + s_sum[None, :]
-    if coupled:
-        grid = grid + tables
-    best = int(np.argmax(grid))
-    best_value = float(grid.flat[best])
+    if grid is None:
+        i, j = int(np.argmax(h_sum)), int(np.argmax(s_sum))
+        best_value = float(h_sum[i] + s_sum[j])
+    else:
+        grid += h_sum[:, None]
+        grid += s_sum[None, :]
+        i, j = divmod(int(np.argmax(grid)), len(speeds))
+        best_value = float(grid[i, j])
     if len(peaks):
         k = int(np.argmax(pk_total))
         if pk_total[k] >= best_value:
             return Choice(float(pk_psi[k]), float(pk_u[k]), float(pk_total[k]), peaks[k][0])
-    i, j = divmod(best, len(speeds))
     return Choice(float(headings[i]), float(speeds[j]), best_value, -1)

@@ -312,9 +312,8 @@ def apply_overrides(data: dict, overrides: list[str]) -> dict:
     return data
 
 
-def load_mission(path: str | Path, overrides: list[str] = ()) -> Mission:
-    """Read, override and validate a mission file."""
-    path = Path(path)
+def read_toml(path: Path) -> dict:
+    """One TOML file as a dict; MissionError naming the file."""
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
@@ -324,9 +323,53 @@ def load_mission(path: str | Path, overrides: list[str] = ()) -> Mission:
             f"{path}: not UTF-8 text (byte 0x{exc.object[exc.start]:02x} at offset {exc.start})"
         ) from None
     try:
-        data = tomllib.loads(text)
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise MissionError(f"{path}: not valid TOML ({exc})") from None
+
+
+def merge(base: dict, top: dict) -> dict:
+    """`top` over `base`: tables merge key by key, arrays of tables are concatenated (base first,
+    so shared behaviours come before the mission's own), any other value of `top` wins."""
+    merged = dict(base)
+    for key, value in top.items():
+        old = merged.get(key)
+        if isinstance(old, dict) and isinstance(value, dict):
+            merged[key] = merge(old, value)
+        elif isinstance(old, list) and isinstance(value, list) and all(isinstance(v, dict) for v in old + value):
+            merged[key] = old + value
+        else:
+            merged[key] = value
+    return merged
+
+
+def resolve_includes(path: Path, chain: tuple[Path, ...] = ()) -> dict:
+    """A mission file with its `include = ["shared.toml", ...]` resolved (relative to the file
+    that includes them, in order, each under the including file's own settings), recursively.
+    MissionError on a cycle or a missing file, naming the chain."""
+    here = path.resolve()
+    if here in chain:
+        cycle = " -> ".join(str(p) for p in (*chain, here))
+        raise MissionError(f"{path}: include cycle ({cycle})")
+    data = read_toml(path)
+    includes = data.pop("include", [])
+    if isinstance(includes, str):
+        includes = [includes]
+    if not isinstance(includes, list) or not all(isinstance(i, str) for i in includes):
+        raise MissionError(f"{path}: include: expected a list of file names, got {includes!r}")
+    base: dict = {}
+    for name in includes:
+        target = path.parent / name
+        if not target.is_file():
+            raise MissionError(f"{path}: include {name!r}: no such file {target}")
+        base = merge(base, resolve_includes(target, (*chain, here)))
+    return merge(base, data)
+
+
+def load_mission(path: str | Path, overrides: list[str] = ()) -> Mission:
+    """Read (with its includes), override and validate a mission file."""
+    path = Path(path)
+    data = resolve_includes(path)
     apply_overrides(data, list(overrides))
     return mission_from_dict(data, str(path), overrides)
 
