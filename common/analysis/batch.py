@@ -73,6 +73,8 @@ def run_batch(
     which others fly with it."""
     vehicle = mission.vehicle_model
     helm, pid, sim = mission.apps.helm, mission.apps.pid, mission.apps.sim
+    if helm.behaviours:
+        raise ValueError("the batch engine flies one waypoints behaviour (apps.helm.legs), not a behaviour list")
     leg = helm.legs[0]
     env = mission.environment.dynamics()
     dt = mission.dt
