@@ -212,3 +212,60 @@ def test_a_bad_condition_is_one_line_naming_the_field_with_exit_2(tmp_path):
 def test_poke_refuses_a_bad_assignment_with_exit_2():
     run = nearsub("poke", str(MISSIONS / "recovery.toml"), "PHASE")
     assert run.returncode == 2 and "expected NAME=VALUE" in run.stderr
+
+
+POKE_MISSION = """
+name = "pokes"
+time_limit = 30.0
+pause_at_step = 100
+[start]
+speed = 1.0
+[environment]
+submarine = false
+[apps.helm.variables]
+DIRECTION = "east"
+[[apps.helm.behaviours]]
+type = "constant_heading"
+name = "east"
+heading_deg = 0.0
+condition = ["DIRECTION == east"]
+[[apps.helm.behaviours]]
+type = "constant_heading"
+name = "north"
+heading_deg = 90.0
+condition = ["DIRECTION == north"]
+"""
+
+
+def test_nearsub_poke_switches_a_running_helm_and_the_log_replays_it(launches, community, tmp_path):
+    from helpers import finish, log_path, per_topic, wait_registered
+    from test_live import wait_paused
+
+    from nearsub.common.runtime.logfile import read_log
+    from nearsub.common.runtime.messages import encode
+
+    path = tmp_path / "pokes.toml"
+    path.write_text(POKE_MISSION)
+    mission = load_mission(path, [f"name={community}"])
+    process = launches.start(str(path), "--set", f"name={community}")
+    wait_registered(community, timeout=mission.startup_timeout)
+    wait_paused(community, timeout=mission.startup_timeout)
+    poked = nearsub("poke", community, "DIRECTION=north", "--vehicle", "remus100")
+    assert poked.returncode == 0, poked.stderr
+    assert "helm: operator poke from step 100" in poked.stdout
+    assert nearsub("clock", community, "resume").returncode == 0
+    code, summary, err = finish(process)
+    assert code == 0 and summary["outcome"] == "time_limit", err
+
+    events = [r.value() for r in read_log(log_path(summary)).records if "/events/helm" in r.topic]
+    [override] = [e for e in events if e["detail"].startswith("operator poke")]
+    assert override["step"] == 100
+    replay = [("helm", "poke", override["step"], Poke(**override["data"]["message"]))]
+    reference = run_inprocess(
+        build_cores(mission), Schedule(mission.periods()), mission.dt, mission.max_steps, operator=replay
+    )
+    logged = per_topic(log_path(summary))
+    for leaf in ("state", "desired"):
+        assert logged[f"remus100/{leaf}"] == [encode(m) for m in reference.topic(leaf)], leaf
+    headings = {m.step: m.psi_d for m in reference.topic("desired")}
+    assert headings[95] == 0.0 and headings[100] == pytest.approx(math.pi / 2)
