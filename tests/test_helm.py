@@ -7,14 +7,17 @@ import math
 
 import numpy as np
 import pytest
+from test_live import wait_paused
 
 from conftest import ROOT, nearsub
+from helpers import finish, log_path, per_topic, wait_registered
 from nearsub.common.autonomy import helm, ivp, logic
 from nearsub.common.mission.cores import build_cores, run_mission
 from nearsub.common.mission.schema import MissionError, load_mission, mission_from_dict
 from nearsub.common.physics.vehicles import get_vehicle
 from nearsub.common.runtime.lifecycle import Schedule, run_inprocess
-from nearsub.common.runtime.messages import Poke
+from nearsub.common.runtime.logfile import read_log
+from nearsub.common.runtime.messages import Poke, encode
 
 MISSIONS = ROOT / "missions"
 REMUS = get_vehicle("remus100")
@@ -103,7 +106,12 @@ def test_hierarchical_modes_build_a_path():
 
 def test_flags_are_posted_on_transitions_and_seen_from_the_next_iteration():
     timer = spec(
-        "timer", "t", duration=1.0, condition=["GO == true"], runflag={"RUN": 1}, idleflag={"IDLE": 1},
+        "timer",
+        "t",
+        duration=1.0,
+        condition=["GO == true"],
+        runflag={"RUN": 1},
+        idleflag={"IDLE": 1},
         endflag={"DONE": True},
     )
     h = make_helm(heading_mission([timer], variables={"GO": False}))
@@ -128,7 +136,10 @@ def test_a_poke_switches_behaviours_at_the_next_helm_step_and_replays():
     )
     poke = Poke(step=0, t=0.0, source="operator", values={"DIRECTION": "north"})
     result = run_inprocess(
-        build_cores(mission), Schedule(mission.periods()), mission.dt, mission.max_steps,
+        build_cores(mission),
+        Schedule(mission.periods()),
+        mission.dt,
+        mission.max_steps,
         operator=[("helm", "poke", 101, poke)],
     )
     headings = {m.step: m.psi_d for m in result.topic("desired")}
@@ -142,7 +153,10 @@ def test_two_pokes_due_at_one_step_are_merged_in_order():
     first = Poke(step=0, t=0.0, source="operator", values={"A": 1, "B": 3})
     second = Poke(step=0, t=0.0, source="operator", values={"A": 2})
     result = run_inprocess(
-        build_cores(mission), Schedule(mission.periods()), mission.dt, mission.max_steps,
+        build_cores(mission),
+        Schedule(mission.periods()),
+        mission.dt,
+        mission.max_steps,
         operator=[("helm", "poke", 50, first), ("helm", "poke", 50, second)],
     )
     speeds = {m.step: m.u_d for m in result.topic("desired")}
@@ -168,7 +182,8 @@ def check_reference(name):
     result = run_mission(load_mission(MISSIONS / f"{name}.toml"))
     desired = np.array([[m.step, m.u_d, m.psi_d] for m in result.topic("desired")])
     assert hashlib.sha256(desired.tobytes()).hexdigest() == reference["sha256"]
-    assert (result.outcome, result.reason, result.steps) == (reference["outcome"], reference["reason"], reference["steps"])
+    ending = (result.outcome, result.reason, result.steps)
+    assert ending == (reference["outcome"], reference["reason"], reference["steps"])
 
 
 def test_includes_resolve_relative_to_the_including_file(tmp_path):
@@ -176,7 +191,7 @@ def test_includes_resolve_relative_to_the_including_file(tmp_path):
     (tmp_path / "shared" / "safety.toml").write_text(
         '[[apps.helm.behaviours]]\ntype = "op_region"\nname = "region"\n'
         "polygon = [[-100.0, -100.0], [100.0, -100.0], [100.0, 100.0]]\n"
-        '[apps.helm.variables]\nDEPLOY = true\n'
+        "[apps.helm.variables]\nDEPLOY = true\n"
     )
     (tmp_path / "m.toml").write_text(
         'include = ["shared/safety.toml"]\nname = "inc"\n[environment]\nsubmarine = false\n'
@@ -238,11 +253,6 @@ condition = ["DIRECTION == north"]
 
 
 def test_nearsub_poke_switches_a_running_helm_and_the_log_replays_it(launches, community, tmp_path):
-    from helpers import finish, log_path, per_topic, wait_registered
-    from test_live import wait_paused
-
-    from nearsub.common.runtime.logfile import read_log
-    from nearsub.common.runtime.messages import encode
 
     path = tmp_path / "pokes.toml"
     path.write_text(POKE_MISSION)
