@@ -279,3 +279,53 @@ def test_nearsub_poke_switches_a_running_helm_and_the_log_replays_it(launches, c
         assert logged[f"remus100/{leaf}"] == [encode(m) for m in reference.topic(leaf)], leaf
     headings = {m.step: m.psi_d for m in reference.topic("desired")}
     assert headings[95] == 0.0 and headings[100] == pytest.approx(math.pi / 2)
+
+
+RECOVERY = MISSIONS / "recovery.toml"
+STATION = (-3.44, 6.5)
+
+
+def station_errors(result, mission, mode="RECOVERY:HOLD"):
+    """Times [s] and distances [m] of the vehicle from the station point while the helm is in `mode`."""
+    held = {m.step for m in result.topic("helm") if m.mode == mode}
+    first, last = min(held), max(held)
+    states = [m for m in result.topic("state") if first <= m.step <= last]
+    t = np.array([m.t for m in states])
+    error = np.array([math.hypot(m.x - STATION[0], m.y - STATION[1]) for m in states])
+    return t, error
+
+
+@pytest.mark.slow
+def test_station_keeping_holds_within_its_tolerance_for_120_s_beside_the_moving_hull():
+    """U_sub = 1.5 m/s, the interaction on (increment mode), starting on the station point."""
+    overrides = [f"start.x={STATION[0]}", f"start.y={STATION[1]}", "apps.helm.variables.PHASE='hold'", "time_limit=121"]
+    mission = load_mission(RECOVERY, overrides)
+    assert mission.environment.u_sub == 1.5 and mission.apps.sim.interaction == "increment"
+    hold = next(b for b in mission.apps.helm.behaviours if b.type == "station_keep")
+    result = run_mission(mission)
+    forces = result.topic("forces")
+    assert max(abs(m.applied_Y) for m in forces) > 0.0  # the interaction acts on the held station
+    t, error = station_errors(result, mission)
+    assert t[-1] - t[0] >= 120.0
+    assert error.max() <= hold.tolerance
+
+
+@pytest.mark.slow
+def test_the_recovery_approaches_from_astern_holds_120_s_and_departs():
+    mission = load_mission(RECOVERY)
+    result = run_mission(mission)
+    assert result.outcome == "completed", result.reason
+    kinds = [e.kind for e in result.topic("events")]
+    assert "collision" not in kinds and "close_call" not in kinds
+    modes = [m.mode for m in result.topic("helm")]
+    order = [mode for i, mode in enumerate(modes) if i == 0 or mode != modes[i - 1]]
+    assert order == ["RECOVERY:APPROACH", "RECOVERY:HOLD", "RECOVERY:DEPART"]
+    hold = next(b for b in mission.apps.helm.behaviours if b.type == "station_keep")
+    t, error = station_errors(result, mission)
+    assert t[-1] - t[0] >= 120.0
+    # The approach hands over within its capture radius; on station within 20 s, then held.
+    settled = t >= t[0] + 20.0
+    assert error[settled].max() <= hold.tolerance
+    first_hold = min(m.step for m in result.topic("helm") if m.mode == "RECOVERY:HOLD")
+    astern = [m for m in result.topic("state") if m.step <= first_hold]
+    assert all(m.x <= STATION[0] + hold.tolerance for m in astern)  # it came up from astern

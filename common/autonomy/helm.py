@@ -98,7 +98,7 @@ class StationKeepSpec(_Spec):
 
     type: Literal["station_keep"]
     point: tuple[Coordinate, Coordinate]
-    tolerance: float = Field(default=0.5, gt=0, description="on station within this distance [m]")
+    tolerance: float = Field(default=0.5, gt=0, description="on station within this distance [m] (an event)")
     time_constant: float = Field(default=4.0, gt=0, description="position error decay [s]")
     integral_time: float = Field(default=20.0, gt=0, description="integral action on the position error [s]")
     max_relative_speed: float = Field(default=0.5, gt=0, description="largest speed over the hull frame [m/s]")
@@ -270,8 +270,15 @@ def station_keep(spec: StationKeepSpec, s: Situation, memory: dict) -> Result:
         g = g * (spec.max_relative_speed / norm)
     water = g + np.array([s.u_sub, 0.0])
     psi, u = float(np.arctan2(water[1], water[0])), float(np.hypot(*water))
-    new = {"t": s.t, "integral": integral.tolist()}
-    return Result(ivp.peak_objective(psi, u), new)
+    distance = float(np.hypot(*error))
+    on = distance <= spec.tolerance
+    events = ()
+    if on != memory.get("on", False):
+        word = "on" if on else "off"
+        detail = f"{spec.name}: {word} station, {distance:.3f} m from ({spec.point[0]:g}, {spec.point[1]:g})"
+        events = (("info", detail, {"behaviour": spec.name, "on_station": on, "distance": distance}),)
+    new = {"t": s.t, "integral": integral.tolist(), "on": on}
+    return Result(ivp.peak_objective(psi, u), new, events=events)
 
 
 def approach_astern(spec: ApproachAsternSpec, s: Situation, memory: dict) -> Result:
