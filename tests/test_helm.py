@@ -169,6 +169,7 @@ def test_the_legacy_waypoint_mission_keeps_its_decisions_bit_for_bit():
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(1200)
 @pytest.mark.parametrize(
     "name",
     ["overtake_stern_standard", "overtake_stern_nuv", "octagon_standard", "octagon_modified", "lateral_approach"],
@@ -295,7 +296,9 @@ def station_errors(result, mission, mode="RECOVERY:HOLD"):
     return t, error
 
 
+# In-process runs of the LF in the loop: 1-5 minutes on a busy two-core machine.
 @pytest.mark.slow
+@pytest.mark.timeout(1200)
 def test_station_keeping_holds_within_its_tolerance_for_120_s_beside_the_moving_hull():
     """U_sub = 1.5 m/s, the interaction on (increment mode), starting on the station point."""
     overrides = [f"start.x={STATION[0]}", f"start.y={STATION[1]}", "apps.helm.variables.PHASE='hold'", "time_limit=121"]
@@ -311,6 +314,7 @@ def test_station_keeping_holds_within_its_tolerance_for_120_s_beside_the_moving_
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(1200)
 def test_the_recovery_approaches_from_astern_holds_120_s_and_departs():
     mission = load_mission(RECOVERY)
     result = run_mission(mission)

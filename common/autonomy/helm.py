@@ -304,12 +304,15 @@ def approach_astern(spec: ApproachAsternSpec, s: Situation, memory: dict) -> Res
     return Result(ivp.peak_objective(psi, max(u, 0.0)), memory, track=track)
 
 
-# Hull avoidance candidates: every 30 deg of heading at half and all of the top speed, nearsub's
-# choice (24 predictions of the vehicle's own dynamics per helm step, a few ms); the objective
-# between them is read bilinearly (`ivp.Table`). The prediction steps 0.1 s, the step of the
-# envelopes, which Euler integrates stably for every library vehicle, and checks the clearance
-# every AVOID_CHECK steps (0.2 s: 0.4 m at 2 m/s).
-AVOID_HEADINGS = np.radians(np.arange(-180.0, 180.0, 30.0))
+# Hull avoidance candidates: headings relative to the current one, dense near it (where the other
+# behaviours steer) and coarse behind, at half and all of the top speed: nearsub's choice, 32
+# predictions of the vehicle's own dynamics per helm step; the objective between them is read
+# linearly (`ivp.Table`). The prediction steps 0.1 s, the step of the envelopes, which Euler
+# integrates stably for every library vehicle, and checks the clearance every AVOID_CHECK steps
+# (0.2 s: 0.4 m at 2 m/s).
+AVOID_OFFSETS = np.radians(
+    [0.0, 5.0, 10.0, 20.0, 35.0, 60.0, 90.0, 135.0, 180.0, -135.0, -90.0, -60.0, -35.0, -20.0, -10.0, -5.0]
+)
 AVOID_SPEED_FRACTIONS = np.array([0.5, 1.0])
 AVOID_DT = 0.1
 AVOID_CHECK = 2
@@ -362,11 +365,13 @@ def hull_avoidance(spec: HullAvoidanceSpec, s: Situation, memory: dict) -> Resul
     if centre - v.length / 2.0 > spec.reach:
         return Result(None, memory)
     speeds = AVOID_SPEED_FRACTIONS * top_speed(v)
-    psi_c, u_c = np.meshgrid(AVOID_HEADINGS, speeds, indexing="ij")
+    headings = dynamics.wrap_angle(s.state[dynamics.PSI] + AVOID_OFFSETS)
+    psi_c, u_c = np.meshgrid(headings, speeds, indexing="ij")
     least = predicted_clearance(s, psi_c.ravel(), u_c.ravel(), spec.horizon).reshape(psi_c.shape)
     span = max(spec.safe_clearance - spec.min_clearance, 1e-9)
     values = np.clip((least - spec.min_clearance) / span, 0.0, 1.0)
-    return Result(ivp.Objective(None, table=ivp.Table(AVOID_HEADINGS, speeds, values)), {"least": float(least.min())})
+    table = ivp.Table(headings, speeds, values)
+    return Result(ivp.Objective(None, table=table), {"least": float(least.min())})
 
 
 def op_region(spec: OpRegionSpec, s: Situation, memory: dict) -> Result:
@@ -502,7 +507,8 @@ class Helm:
             self.state[i] = now
         # Ties between peaks go to the higher priority, then the earlier declaration.
         objectives.sort(key=lambda item: (-item[1], item[0]))
-        decision.choice = ivp.arbitrate([(w, o) for _, w, o in objectives], self.max_speed)
+        current = (float(state[dynamics.PSI]), float(state[dynamics.U]))
+        decision.choice = ivp.arbitrate([(w, o) for _, w, o in objectives], self.max_speed, current)
         decision.active = [self.specs[i].name for i, _, _ in objectives]
         if decision.choice is not None and decision.choice.winner >= 0:
             decision.winner = decision.active[decision.choice.winner]

@@ -10,8 +10,7 @@ behaviour's own decision, bit for bit.
 
 An objective is a separable part, a_h f_h(psi) + a_s f_s(u) (the ZAIC peak functions of
 MOOS-IvP, coupled by the weights a_h + a_s = 1, as BHV_Waypoint couples course and speed 50/50),
-plus optionally a coupled table over a coarse (heading, speed) grid (hull avoidance), read by
-bilinear interpolation. Utilities lie in [0, 1].
+or a coupled table at coarse (heading, speed) points (hull avoidance), read linearly in each. Utilities lie in [0, 1].
 """
 
 from __future__ import annotations
@@ -50,53 +49,47 @@ class Zaic:
 
 @dataclass(frozen=True)
 class Table:
-    """A coupled objective sampled on a coarse grid: `values[i, j]` at headings[i] (evenly spaced,
-    the whole circle) and speeds[j] (ascending); read bilinearly, periodic in heading."""
+    """A coupled objective sampled at coarse points: `values[i, j]` at headings[i] (any spacing,
+    read periodically round the circle) and speeds[j] (ascending), read linearly in each."""
 
     headings: np.ndarray
     speeds: np.ndarray
     values: np.ndarray
 
+    def _columns(self, psi: np.ndarray) -> np.ndarray:
+        """Each speed column read at the headings psi: (..., n_speeds)."""
+        period = 2.0 * math.pi
+        return np.stack([np.interp(psi, self.headings, column, period=period) for column in self.values.T], axis=-1)
+
     def __call__(self, psi, u):
-        wi, i0, i1, wj, j0 = _weights(
-            self.headings, self.speeds, np.asarray(psi, dtype=float), np.asarray(u, dtype=float)
-        )
-        v = self.values
-        return (1 - wi) * ((1 - wj) * v[i0, j0] + wj * v[i0, j0 + 1]) + wi * ((1 - wj) * v[i1, j0] + wj * v[i1, j0 + 1])
+        psi, u = np.broadcast_arrays(np.asarray(psi, dtype=float), np.asarray(u, dtype=float))
+        columns = self._columns(psi)
+        uu = np.clip(u, self.speeds[0], self.speeds[-1])
+        j0 = np.clip(np.searchsorted(self.speeds, uu, side="right") - 1, 0, len(self.speeds) - 2)
+        wj = (uu - self.speeds[j0]) / (self.speeds[j0 + 1] - self.speeds[j0])
+        low = np.take_along_axis(columns, j0[..., None], axis=-1)[..., 0]
+        high = np.take_along_axis(columns, j0[..., None] + 1, axis=-1)[..., 0]
+        return (1 - wj) * low + wj * high
 
     def on_grid(self, max_speed: float) -> np.ndarray:
-        """The table read on the whole decision grid: two small matrix products with the
-        interpolation weights, which depend only on the two grids (cached)."""
-        rows, cols = _grid_weights(len(self.headings), float(self.headings[0]), tuple(self.speeds), max_speed)
-        return rows @ self.values @ cols
-
-
-def _weights(headings, speeds, psi, u):
-    n = len(headings)
-    fi = ((psi - headings[0]) / (2.0 * math.pi / n)) % n
-    i0 = np.floor(fi).astype(int) % n
-    wi = fi - np.floor(fi)
-    uu = np.clip(u, speeds[0], speeds[-1])
-    j0 = np.clip(np.searchsorted(speeds, uu, side="right") - 1, 0, len(speeds) - 2)
-    wj = (uu - speeds[j0]) / (speeds[j0 + 1] - speeds[j0])
-    return wi, i0, (i0 + 1) % n, wj, j0
+        """The table read on the whole decision grid: the columns at the grid's headings times the
+        speed interpolation weights, which depend only on the two speed grids (cached)."""
+        grid_psi, _ = decision_grid(max_speed)
+        return self._columns(grid_psi) @ _speed_weights(tuple(self.speeds), max_speed)
 
 
 @lru_cache(maxsize=32)
-def _grid_weights(n: int, first: float, speeds: tuple, max_speed: float) -> tuple[np.ndarray, np.ndarray]:
-    """(H, n) and (m, S) matrices: grid heading i reads coarse headings bilinearly, and so on."""
-    headings = first + np.arange(n) * (2.0 * math.pi / n)
-    coarse_speeds = np.asarray(speeds)
-    grid_psi, grid_u = decision_grid(max_speed)
-    wi, i0, i1, _, _ = _weights(headings, coarse_speeds, grid_psi, np.zeros_like(grid_psi))
-    rows = np.zeros((len(grid_psi), n))
-    rows[np.arange(len(grid_psi)), i0] += 1 - wi
-    rows[np.arange(len(grid_psi)), i1] += wi
-    _, _, _, wj, j0 = _weights(headings, coarse_speeds, np.zeros_like(grid_u), grid_u)
-    cols = np.zeros((len(coarse_speeds), len(grid_u)))
-    cols[j0, np.arange(len(grid_u))] += 1 - wj
-    cols[j0 + 1, np.arange(len(grid_u))] += wj
-    return rows, cols
+def _speed_weights(speeds: tuple, max_speed: float) -> np.ndarray:
+    """(n_speeds, S): grid speed k reads the coarse speeds linearly (clamped at the ends)."""
+    coarse = np.asarray(speeds)
+    _, grid_u = decision_grid(max_speed)
+    uu = np.clip(grid_u, coarse[0], coarse[-1])
+    j0 = np.clip(np.searchsorted(coarse, uu, side="right") - 1, 0, len(coarse) - 2)
+    wj = (uu - coarse[j0]) / (coarse[j0 + 1] - coarse[j0])
+    weights = np.zeros((len(coarse), len(grid_u)))
+    weights[j0, np.arange(len(grid_u))] += 1 - wj
+    weights[j0 + 1, np.arange(len(grid_u))] += wj
+    return weights
 
 
 @dataclass(frozen=True)
@@ -159,11 +152,14 @@ class Choice:
     winner: int  # index of the objective whose peak was chosen, or -1 for a grid cell
 
 
-def arbitrate(objectives: list[tuple[float, Objective]], max_speed: float) -> Choice | None:
-    """The decision maximising sum_i w_i f_i(psi, u) over the grid and every objective's peak.
-    Ties go to the first candidate: the peaks in the order given (the helm lists them by
-    priority), then the grid in heading-major order from -180 deg and 0 m/s. None when no
-    objective is given.
+def arbitrate(
+    objectives: list[tuple[float, Objective]], max_speed: float, current: tuple[float, float] | None = None
+) -> Choice | None:
+    """The decision maximising sum_i w_i f_i(psi, u) over the grid, every objective's peak and
+    the `current` (heading, speed). Ties go to the first candidate: the peaks in the order given
+    (the helm lists them by priority), then the current decision (carry on: what a table alone,
+    such as hull avoidance with nothing to avoid, leaves), then the grid in heading-major order
+    from -180 deg and 0 m/s. None when no objective is given.
 
     The separable parts add up to H(psi) + S(u), whose maximum over the grid is the maximum of
     each (the same first cell as the full grid's); only tables need the whole grid."""
@@ -171,6 +167,8 @@ def arbitrate(objectives: list[tuple[float, Objective]], max_speed: float) -> Ch
         return None
     headings, speeds = decision_grid(max_speed)
     peaks = [(i, o.peak) for i, (_, o) in enumerate(objectives) if o.peak is not None]
+    if current is not None:
+        peaks.append((-1, current))
     pk_psi = np.array([p[0] for _, p in peaks])
     pk_u = np.array([p[1] for _, p in peaks])
     pk_total = np.zeros(len(peaks))
