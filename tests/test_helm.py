@@ -84,6 +84,21 @@ def test_a_compromise_off_every_peak_comes_from_the_grid():
     assert abs(choice.psi - 0.5) <= math.radians(ivp.HEADING_STEP_DEG) / 2
 
 
+def test_a_table_read_on_the_grid_equals_its_pointwise_reading():
+    table = ivp.Table(np.radians([0.0, 5.0, -5.0, 90.0, 180.0, -90.0]), np.array([1.2, 2.4]), np.eye(6, 2) + 0.1)
+    headings, speeds = ivp.decision_grid(2.48)
+    assert np.allclose(table.on_grid(2.48), table(headings[:, None], speeds[None, :]), rtol=0, atol=1e-12)
+
+
+def test_hull_avoidance_predicts_that_turning_in_beside_the_hull_collides():
+    """1.2 m off the parallel middle body at U_sub: heading in scores 0, heading along or out 1."""
+    situation = helm.Situation(np.array([1.5, 0.0, 0.0, -3.44, 6.5, 0.0]), 0.0, {}, REMUS, 1.5)
+    avoid = helm.HullAvoidanceSpec(type="hull_avoidance", name="avoid", min_clearance=0.2, safe_clearance=0.45)
+    table = helm.hull_avoidance(avoid, situation, {}).objective.table
+    assert table(math.radians(-60.0), 2.0) == 0.0
+    assert table(0.0, 1.5) == 1.0 and table(math.radians(60.0), 2.0) == 1.0
+
+
 def test_conditions_parse_and_evaluate():
     c = logic.parse_condition("DEPLOY == true and DEPTH < 10 or MODE = A:B")
     assert c.holds({"DEPLOY": "true", "DEPTH": 5.0})

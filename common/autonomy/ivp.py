@@ -64,9 +64,7 @@ class Table:
     def __call__(self, psi, u):
         psi, u = np.broadcast_arrays(np.asarray(psi, dtype=float), np.asarray(u, dtype=float))
         columns = self._columns(psi)
-        uu = np.clip(u, self.speeds[0], self.speeds[-1])
-        j0 = np.clip(np.searchsorted(self.speeds, uu, side="right") - 1, 0, len(self.speeds) - 2)
-        wj = (uu - self.speeds[j0]) / (self.speeds[j0 + 1] - self.speeds[j0])
+        j0, wj = _speed_index(self.speeds, u)
         low = np.take_along_axis(columns, j0[..., None], axis=-1)[..., 0]
         high = np.take_along_axis(columns, j0[..., None] + 1, axis=-1)[..., 0]
         return (1 - wj) * low + wj * high
@@ -78,14 +76,19 @@ class Table:
         return self._columns(grid_psi) @ _speed_weights(tuple(self.speeds), max_speed)
 
 
+def _speed_index(coarse: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The coarse interval of each speed (clamped at the ends) and the weight of its upper end."""
+    uu = np.clip(u, coarse[0], coarse[-1])
+    j0 = np.clip(np.searchsorted(coarse, uu, side="right") - 1, 0, len(coarse) - 2)
+    return j0, (uu - coarse[j0]) / (coarse[j0 + 1] - coarse[j0])
+
+
 @lru_cache(maxsize=32)
 def _speed_weights(speeds: tuple, max_speed: float) -> np.ndarray:
     """(n_speeds, S): grid speed k reads the coarse speeds linearly (clamped at the ends)."""
     coarse = np.asarray(speeds)
     _, grid_u = decision_grid(max_speed)
-    uu = np.clip(grid_u, coarse[0], coarse[-1])
-    j0 = np.clip(np.searchsorted(coarse, uu, side="right") - 1, 0, len(coarse) - 2)
-    wj = (uu - coarse[j0]) / (coarse[j0 + 1] - coarse[j0])
+    j0, wj = _speed_index(coarse, grid_u)
     weights = np.zeros((len(coarse), len(grid_u)))
     weights[j0, np.arange(len(grid_u))] += 1 - wj
     weights[j0 + 1, np.arange(len(grid_u))] += wj
@@ -124,14 +127,10 @@ class Objective:
         return np.asarray(h) + np.asarray(s)
 
 
-def peak_objective(psi: float, u: float, heading_base: float = math.pi, speed_peak: float | None = None) -> Objective:
+def peak_objective(psi: float, u: float) -> Objective:
     """BHV_Waypoint's objective: a course ZAIC at psi (base width 180 deg) and a speed ZAIC at u
     (peak width u / 2), coupled 50/50."""
-    return Objective(
-        (psi, u),
-        Zaic(psi, 0.0, heading_base, circular=True),
-        Zaic(u, u / 2.0 if speed_peak is None else speed_peak, max(u, 0.5), summit_delta=0.1),
-    )
+    return Objective((psi, u), Zaic(psi, 0.0, math.pi, circular=True), Zaic(u, u / 2.0, max(u, 0.5), summit_delta=0.1))
 
 
 @lru_cache(maxsize=8)
