@@ -348,3 +348,26 @@ def test_the_recovery_approaches_from_astern_holds_120_s_and_departs():
     first_hold = min(m.step for m in result.topic("helm") if m.mode == "RECOVERY:HOLD")
     astern = [m for m in result.topic("state") if m.step <= first_hold]
     assert all(m.x <= STATION[0] + hold.tolerance for m in astern)  # it came up from astern
+
+
+def test_loiter_rounds_its_polygon_lap_after_lap_and_op_region_ends_the_mission_outside():
+    square = [[30.0, -10.0], [30.0, 10.0], [10.0, 10.0], [10.0, -10.0]]
+    mission = heading_mission(
+        [spec("loiter", "round", polygon=square, speed=1.5, capture_radius=3.0)], time_limit=200.0
+    )
+    result = run_mission(mission)
+    reached = [e for e in result.topic("events") if e.kind == "waypoint"]
+    assert len(reached) > len(square)  # past the first lap
+    assert reached[len(square)].detail.startswith("reached round point 1")
+    region = [[-50.0, -50.0], [20.0, -50.0], [20.0, 50.0], [-50.0, 50.0]]
+    fenced = heading_mission(
+        [
+            spec("constant_heading", "east", heading_deg=0.0),
+            spec("constant_speed", "fast", speed=2.0),
+            spec("op_region", "fence", polygon=region),
+        ],
+        time_limit=60.0,
+    )
+    result = run_mission(fenced)
+    assert result.outcome == "error" and "fence: left the operating region" in result.reason
+    assert 20.0 < result.topic("state")[-1].x < 21.0

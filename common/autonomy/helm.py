@@ -241,14 +241,16 @@ def constant_speed(spec: ConstantSpeedSpec, s: Situation, memory: dict) -> Resul
 
 def loiter(spec: LoiterSpec, s: Situation, memory: dict) -> Result:
     """The waypoints behaviour over the polygon, started again at its first vertex each lap."""
-    leg = Leg(points=spec.polygon, speed=spec.speed, lead=spec.lead, capture_radius=spec.capture_radius)
+    leg = Leg(name=spec.name, points=spec.polygon, speed=spec.speed, lead=spec.lead, capture_radius=spec.capture_radius)
     laps = int(memory.get("laps", 0))
     lap = WaypointsSpec(type="waypoints", name=spec.name, legs=[leg])
     inner = waypoints(lap, s, memory)
     if inner.complete is not None:
         last = tuple(spec.polygon[-1])
         restart = behaviours.WaypointProgress(previous=(float(last[0]), float(last[1])))
+        ended = inner
         inner = waypoints(lap, s, {"waypoints": restart.to_dict()})
+        inner = replace(inner, events=ended.events + inner.events)
         laps += 1
     return replace(inner, memory={**inner.memory, "laps": laps})
 
