@@ -371,3 +371,20 @@ def test_loiter_rounds_its_polygon_lap_after_lap_and_op_region_ends_the_mission_
     result = run_mission(fenced)
     assert result.outcome == "error" and "fence: left the operating region" in result.reason
     assert 20.0 < result.topic("state")[-1].x < 21.0
+
+
+def test_the_batch_engine_runs_the_helm_apps_own_arbitration():
+    """A behaviour list through `run_batch` ends where the same mission run as apps ends."""
+    from nearsub.common.analysis.batch import run_batch
+
+    behaviours = [
+        spec("constant_heading", "heading", heading_deg=30.0),
+        spec("constant_speed", "speed", speed=1.2),
+    ]
+    starts = [(0.0, 40.0), (5.0, 35.0)]  # clear of the hull, which the batch always checks
+    mission = heading_mission(behaviours)
+    batch = run_batch(mission, np.array([[1.0, 0.0, 0.0, x, y, 0.0] for x, y in starts]), np.array([[100.0, 0.0]] * 2))
+    for (x, y), final in zip(starts, batch.final, strict=True):
+        alone = mission.model_copy(update={"start": mission.start.model_copy(update={"x": x, "y": y})})
+        last = run_mission(alone).topic("state")[-1]
+        assert np.allclose(final, [last.u, last.v, last.r, last.x, last.y, last.psi], rtol=0, atol=1e-9)

@@ -434,6 +434,12 @@ class Decision:
     track: tuple | None = None
     waypoints: behaviours.WaypointProgress | None = None
 
+    def desired(self, state: np.ndarray) -> tuple[float, float]:
+        """(u_d, psi_d): the choice, or speed 0 at the current heading (pHelmIvP's all-stop)."""
+        if self.choice is None:
+            return 0.0, float(state[dynamics.PSI])
+        return self.choice.u, self.choice.psi
+
 
 class Helm:
     """The variables, modes and behaviours of one vehicle's helm."""

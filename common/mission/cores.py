@@ -45,6 +45,15 @@ def guard_clearance(mission: Mission) -> float:
     return mission.vehicle_model.diameter if clearance is None else clearance
 
 
+def make_helm(mission: Mission) -> ivphelm.Helm:
+    """The mission's helm: its behaviours, variables and mode rules (docs/design.md, "The helm")."""
+    h = mission.apps.helm
+    modes = tuple(rule.rule() for rule in h.modes)
+    return ivphelm.Helm(
+        h.behaviour_specs(), h.variables, modes, mission.vehicle_model, mission.environment.u_sub, h.max_speed
+    )
+
+
 class HelmCore:
     """pHelmIvP: the mission's behaviours arbitrated by priority (`autonomy.helm.Helm`; the legacy
     single behaviour is one waypoints behaviour, thesis 5.7 or 6.3.2), with N_uv compensation
@@ -72,10 +81,7 @@ class HelmCore:
         self.interaction_mode = "increment" if mission.apps.sim.interaction == "increment" else "replace"
         if self.surrogate is not None:
             prepare(self.interaction_mode)
-        modes = tuple(rule.rule() for rule in self.settings.modes)
-        self.helm = ivphelm.Helm(
-            specs, self.settings.variables, modes, v, mission.environment.u_sub, self.settings.max_speed
-        )
+        self.helm = make_helm(mission)
         self.report = behaviours.WaypointProgress()
         self.guard_clearance = guard_clearance(mission)
         self.guard_step = math.radians(self.settings.guard_rate_deg) * mission.dt * self.settings.period
@@ -101,7 +107,7 @@ class HelmCore:
         seen = self.forces(x) if self.surrogate is not None and self.avoids else None
         decision = self.helm.iterate(x, t, None if seen is None else seen.interaction)
         choice = decision.choice
-        u_d, psi_d = (0.0, s.psi) if choice is None else (choice.u, choice.psi)
+        u_d, psi_d = decision.desired(x)
         delta_psi, n_s, commanded, guard = 0.0, 0.0, 0.0, None
         if self.settings.compensated and choice is not None:
             seen = seen or self.forces(x)
