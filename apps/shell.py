@@ -36,6 +36,7 @@ from nearsub.common.runtime.lifecycle import (
     ACK,
     EVENTS,
     OPERATOR,
+    OPERATOR_ONLY,
     OPERATOR_TOPICS,
     Core,
     Schedule,
@@ -138,7 +139,10 @@ class AppShell:
             self.stepper = Stepper(
                 self.core, Schedule(mission.periods()), self.dt, mission.max_steps, recoverable=(ServiceError,)
             )
-            self.input_of_key = {keys.vehicle_topic(c, self.vehicle, leaf): leaf for leaf in self.core.inputs}
+            pokes = [leaf for leaf, role in OPERATOR_ONLY.items() if role == self.core.role]
+            self.input_of_key = {
+                keys.vehicle_topic(c, self.vehicle, leaf): leaf for leaf in (*self.core.inputs, *pokes)
+            }
             self.stream = bus.inputs([*self.input_of_key, keys.clock_traffic(c), self.control_key, self.reply_key])
             bus.on_liveliness_lost(keys.alive(c, "launcher", "*"), signal_self())
             self.publishers = {

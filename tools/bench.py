@@ -26,6 +26,7 @@ NUV_MISSION = DEFAULT_MISSION.with_name("overtake_stern_nuv.toml")  # submarine,
 
 
 def add_parser(subparsers) -> None:
+    from .helm_bench import add_bench_parser as add_helm_bench_parser
     from .surrogate import add_bench_parser
 
     p = subparsers.add_parser("bench")
@@ -37,6 +38,7 @@ def add_parser(subparsers) -> None:
     t.set_defaults(func=bench_pipeline)
     add_bench_parser(b)
     add_envelope_bench_parser(b)
+    add_helm_bench_parser(b)
     t = b.add_parser("hydro", help="cost per evaluation of the low- and high-fidelity hydrodynamic models")
     t.set_defaults(func=bench_hydro)
 

@@ -23,6 +23,7 @@ TOOLS = {
     "tap": ("tap", "watch a running mission: list, echo, hz, pub"),
     "log": ("log", "inspect, export and plot mission logs"),
     "swap": ("swap", "replace a running app (the helm) without stopping the mission"),
+    "poke": ("poke", "set mission variables of a running helm (uPokeDB)"),
     "clock": ("clock", "status, pause or resume a running mission's clock"),
     "router": ("router", "run a Zenoh router (for multi-host setups)"),
     "surrogate": ("surrogate", "inspect and query a surrogate model file"),

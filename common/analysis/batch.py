@@ -21,7 +21,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from nearsub.common.autonomy import behaviours, control
-from nearsub.common.mission.cores import guard_clearance
+from nearsub.common.mission.cores import guard_clearance, make_helm
 from nearsub.common.mission.schema import Mission
 from nearsub.common.physics import dynamics
 from nearsub.common.physics import proximity as events
@@ -73,7 +73,7 @@ def run_batch(
     which others fly with it."""
     vehicle = mission.vehicle_model
     helm, pid, sim = mission.apps.helm, mission.apps.pid, mission.apps.sim
-    leg = helm.legs[0]
+    leg = helm.legs[0] if helm.legs else None
     env = mission.environment.dynamics()
     dt = mission.dt
     n = len(starts)
@@ -98,6 +98,8 @@ def run_batch(
     limits_high = np.array([vehicle.max_thrust, vehicle.max_rudder])
 
     flying = np.flatnonzero(active)  # indices of the UUVs still integrated, in order
+    # A behaviour list runs the helm app's own helm, one per UUV (not vectorised: docs/design.md, "The helm").
+    helms = [make_helm(mission) for _ in flying] if helm.behaviours else None
     x = final[flying]
     track_start = x[:, [dynamics.X, dynamics.Y]].copy()
     track_end = np.asarray(track_ends, dtype=float)[flying]
@@ -117,15 +119,13 @@ def run_batch(
                 surrogate, x, vehicle, mission.environment.rho, sim.interaction, with_std=False, weighted_only=True
             )
         if helm_runs:  # helm(x_k)
-            speed, heading = behaviours.steer(
-                track_start,
-                track_end,
-                x[:, [dynamics.X, dynamics.Y]],
-                leg.speed,
-                leg.lead,
-                leg.lead_damper,
-                cross_flow,
-            )
+            if helms is not None:  # a behaviour list: each UUV's own helm
+                speed, heading = _arbitrated(helms, x, t, seen)
+            else:
+                xy = x[:, [dynamics.X, dynamics.Y]]
+                speed, heading = behaviours.steer(
+                    track_start, track_end, xy, leg.speed, leg.lead, leg.lead_damper, cross_flow
+                )
             if compensate:
                 commanded = behaviours.nuv_heading_offset(seen.applied[:, 2], speed, vehicle.compensation_N_uv, gamma)
                 delta_psi = behaviours.guard_heading_offset(
@@ -162,6 +162,7 @@ def run_batch(
             flying, x, track_start, track_end = flying[keep], x[keep], track_start[keep], track_end[keep]
             memory, u_d, psi_d, command = _keep(memory, keep), u_d[keep], psi_d[keep], command[keep]
             delta_psi = delta_psi[keep]
+            helms = None if helms is None else [h for h, k in zip(helms, keep, strict=True) if k]
         if on_step is not None:
             on_step(step + 1, mission.max_steps)
     final[flying] = x
@@ -177,3 +178,15 @@ def run_batch(
         OUTCOMES.index("safe"),
     )
     return BatchResult(outcome, closest, max_cross, final, steps)
+
+
+def _arbitrated(helms: list, x: np.ndarray, t: float, seen) -> tuple[np.ndarray, np.ndarray]:
+    """u_d and psi_d from each UUV's helm at its state, with its interaction forces when asked."""
+    desired = np.empty((len(helms), 2))
+    for i, one in enumerate(helms):
+        interaction = None
+        if seen is not None:
+            f = seen.interaction
+            interaction = dynamics.Interaction(f.forces[i], f.weight[i], f.mode)
+        desired[i] = one.iterate(x[i], t, interaction).desired(x[i])
+    return desired[:, 0], desired[:, 1]

@@ -1,6 +1,9 @@
 """Autonomy: what the helm and the controller decide.
 
-- behaviours: helm behaviours (waypoints, modified waypoints, N_uv compensation) as pure functions.
+- behaviours: the thesis's waypoint geometry (5.7, 6.3.2) and N_uv compensation (6.1) as pure functions.
+- helm: behaviours as objective functions, their settings, and the helm (conditions, flags, modes).
+- ivp: objective functions over (heading, speed) and their arbitration by priority.
+- logic: mission variables, logic conditions and hierarchical modes.
 - control: the speed and heading PID of thesis (5.21), positional and incremental.
 - pid_design: the library PID gains, designed from the linearised vehicle.
 """

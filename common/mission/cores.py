@@ -10,7 +10,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from nearsub.common.autonomy import behaviours, control
+from nearsub.common.autonomy import behaviours, control, logic
+from nearsub.common.autonomy import helm as ivphelm
 from nearsub.common.mission.schema import Mission
 from nearsub.common.physics import dynamics
 from nearsub.common.physics import proximity as events
@@ -54,11 +55,23 @@ def sim_forces(mission: Mission) -> bool:
     return mission.environment.submarine and mission.apps.sim.interaction != "off"
 
 
+def make_helm(mission: Mission) -> ivphelm.Helm:
+    """The mission's helm: its behaviours, variables and mode rules (docs/design.md, "The helm")."""
+    h = mission.apps.helm
+    modes = tuple(rule.rule() for rule in h.modes)
+    return ivphelm.Helm(
+        h.behaviour_specs(), h.variables, modes, mission.vehicle_model, mission.environment.u_sub, h.max_speed
+    )
+
+
 class HelmCore:
-    """pHelmIvP: the waypoints behaviour (thesis 5.7) or the modified one (6.3.2), optionally with
-    N_uv compensation (6.3.1), turning x_k into x_d,k. Its N_s at x_k is the sim's: the forces the
-    sim published with x_k, a declared input, so each vehicle-step asks the surrogate once; only
-    when the sim has no forces (interaction "off") does a compensating helm ask itself."""
+    """pHelmIvP: the mission's behaviours arbitrated by priority (`autonomy.helm.Helm`; the legacy
+    single behaviour is one waypoints behaviour, thesis 5.7 or 6.3.2), with N_uv compensation
+    (6.3.1) modifying the chosen heading, turning x_k into x_d,k. The interaction at x_k (N_s, and
+    the forces hull avoidance predicts with) is the sim's: the forces it published with x_k, a
+    declared input, so each vehicle-step asks the surrogate once; only when the sim has no forces
+    (interaction "off") does the helm ask itself. Pokes (`nearsub poke`) set mission variables
+    from the step they arrive at."""
 
     role = "helm"
     outputs = ("desired", "helm")
@@ -67,13 +80,14 @@ class HelmCore:
         self.settings = mission.apps.helm
         self.vehicle = mission.vehicle_model
         self.rho = mission.environment.rho
-        self.surrogate = surrogate if self.settings.compensated else None
+        specs = self.settings.behaviour_specs()
+        self.avoids = any(spec.type == "hull_avoidance" for spec in specs)
+        self.surrogate = surrogate if self.settings.compensated or self.avoids else None
         if self.settings.compensated and surrogate is None:
             raise ValueError("N_uv compensation needs the surrogate (a force model)")
         v = self.vehicle
         # gamma from (6.4) at the M11 the thesis quotes for library vehicles (5.21, 1.30, 1.03).
         self.gamma = self.settings.gamma or float(behaviours.gamma_from_m11(v.thesis_M11 or v.M11))
-        self.legs = self.settings.legs
         # N_s is the yaw moment the interaction adds to the vehicle's own model, as the sim applies
         # it: the interaction increment in "increment" mode, the surrogate's total otherwise.
         # The sim's applied forces are the same numbers in "thesis" as in "replace" mode.
@@ -84,11 +98,8 @@ class HelmCore:
         self.shares_forces = "forces" in self.inputs
         if self.surrogate is not None and not self.shares_forces:
             interaction().prepare(self.interaction_mode)
-        self.cross_flow = None
-        if self.settings.modified:
-            u_sub = mission.environment.u_sub
-            self.cross_flow = behaviours.CrossFlow(u_sub, self.settings.alpha, mission.vehicle_model.length)
-        self.progress_state = behaviours.initial_progress(self.legs, (mission.start.x, mission.start.y))
+        self.helm = make_helm(mission)
+        self.report = behaviours.WaypointProgress()
         self.guard_clearance = guard_clearance(mission)
         self.guard_step = math.radians(self.settings.guard_rate_deg) * mission.dt * self.settings.period
         self.delta_psi = 0.0  # the guarded offset of the last iteration (the rate limit's reference)
@@ -100,32 +111,38 @@ class HelmCore:
         return []
 
     def new_mail(self, mail: dict[str, Message]) -> None:
-        self.state = mail.get("state", self.state)
-        self.forces = mail.get("forces", self.forces)
+        if "state" in mail:
+            self.state = mail["state"]
+        if "forces" in mail:
+            self.forces = mail["forces"]
+        if "poke" in mail:
+            self.helm.poke(mail["poke"].values)
 
-    def yaw_moment(self, s: State) -> float:
-        """N_s at x_k, as the sim applies it (section 6.3.1)."""
+    def interaction_at(self, x: np.ndarray) -> tuple[dynamics.Interaction, float]:
+        """The interaction at x_k as the sim applies it, and its applied N_s (section 6.3.1)."""
         if self.shares_forces:
-            return self.forces.applied_N
-        seen = interaction().interaction_at(
-            self.surrogate, state_array(s), self.vehicle, self.rho, self.interaction_mode
-        )
-        return float(seen.applied[0, 2])
+            f = self.forces
+            forces = np.array([[f.X_s, f.Y_s, f.N_s]])
+            return dynamics.Interaction(forces, np.array([f.weight]), self.interaction_mode), f.applied_N
+        seen = interaction().interaction_at(self.surrogate, x, self.vehicle, self.rho, self.interaction_mode)
+        return seen.interaction, float(seen.applied[0, 2])
 
     def iterate(self, step: int, t: float) -> Iteration:
         s = self.state
-        decision = behaviours.waypoints(self.legs, self.progress_state, s.x, s.y, s.psi, self.cross_flow)
-        self.progress_state = decision.progress
-        psi_d, delta_psi, n_s, commanded, guard = decision.psi_d, 0.0, 0.0, 0.0, None
-        if self.surrogate is not None and not decision.progress.complete:
-            n_s = self.yaw_moment(s)
-            commanded = float(
-                behaviours.nuv_heading_offset(n_s, decision.u_d, self.vehicle.compensation_N_uv, self.gamma)
-            )
+        x = state_array(s)
+        seen = self.interaction_at(x) if self.surrogate is not None and self.avoids else None
+        decision = self.helm.iterate(x, t, None if seen is None else seen[0])
+        choice = decision.choice
+        u_d, psi_d = decision.desired(x)
+        delta_psi, n_s, commanded, guard = 0.0, 0.0, 0.0, None
+        if self.settings.compensated and choice is not None:
+            seen = seen or self.interaction_at(x)
+            n_s = seen[1]
+            commanded = float(behaviours.nuv_heading_offset(n_s, u_d, self.vehicle.compensation_N_uv, self.gamma))
             guard = behaviours.guard_heading_offset(
                 s.x,
                 s.y,
-                decision.psi_d,
+                psi_d,
                 commanded,
                 self.delta_psi,
                 self.vehicle.length,
@@ -134,24 +151,18 @@ class HelmCore:
                 self.guard_step,
             )
             delta_psi = float(guard.delta_psi)
-            psi_d = decision.psi_d + delta_psi
+            psi_d = psi_d + delta_psi
         self.delta_psi = delta_psi
         result = Iteration()
-        for leg, index, point in decision.captured:
-            result.events.append(
-                event(
-                    self.role,
-                    step,
-                    t,
-                    "waypoint",
-                    f"reached {self.legs[leg].name} point {index + 1} at ({point[0]:g}, {point[1]:g})",
-                    {"leg": leg, "index": index, "x": s.x, "y": s.y},
-                )
-            )
-        progress = decision.progress
+        for kind, detail, data in decision.events:
+            result.events.append(event(self.role, step, t, kind, detail, data))
+        for name, value, why in decision.postings:
+            detail = f"{name} = {logic.format_value(value)} ({why})"
+            result.events.append(event(self.role, step, t, "info", detail, {"variable": name, "value": value}))
+        self.report = decision.waypoints or self.report
         cross_track = 0.0
-        if progress.previous is not None and decision.target is not None:
-            cross_track = float(events.track_distance(s.x, s.y, progress.previous, decision.target))
+        if decision.track is not None:
+            cross_track = float(events.track_distance(s.x, s.y, *decision.track))
         straying = cross_track > events.STRAY_LIMIT
         if straying and not self.straying:
             result.events.append(
@@ -165,7 +176,7 @@ class HelmCore:
                 )
             )
         self.straying = straying
-        result.outputs.append(("desired", Desired(step=step, t=t, source=self.role, u_d=decision.u_d, psi_d=psi_d)))
+        result.outputs.append(("desired", Desired(step=step, t=t, source=self.role, u_d=u_d, psi_d=psi_d)))
         result.outputs.append(
             (
                 "helm",
@@ -174,14 +185,17 @@ class HelmCore:
                     t=t,
                     source=self.role,
                     behaviour=self.settings.behaviour,
-                    leg=progress.leg,
-                    waypoint_index=progress.index,
-                    waypoints_reached=progress.reached,
+                    leg=self.report.leg,
+                    waypoint_index=self.report.index,
+                    waypoints_reached=self.report.reached,
                     psi_d=psi_d,
                     delta_psi=delta_psi,
                     cross_track=cross_track,
                     n_s=n_s,
-                    complete=progress.complete,
+                    complete=self.report.complete,
+                    mode=logic.format_value(self.helm.variables.get("MODE", "")),
+                    active=decision.active,
+                    winner=decision.winner,
                     delta_psi_commanded=commanded,
                     guard_active=guard is not None and bool(guard.active),
                     guard_saturated=guard is not None and bool(guard.saturated),
@@ -190,15 +204,21 @@ class HelmCore:
                 ),
             )
         )
-        if progress.complete:
-            result.end, result.reason = "completed", f"all {progress.reached} waypoints reached"
+        if decision.end is not None:
+            result.end, result.reason = decision.end
         return result
 
     def progress(self) -> dict:
-        return {"waypoints": self.progress_state.to_dict(), "straying": self.straying, "delta_psi": self.delta_psi}
+        return {
+            "helm": self.helm.progress(),
+            "report": self.report.to_dict(),
+            "straying": self.straying,
+            "delta_psi": self.delta_psi,
+        }
 
     def restore(self, progress: dict) -> None:
-        self.progress_state = behaviours.WaypointProgress.from_dict(progress["waypoints"])
+        self.helm.restore(progress["helm"])
+        self.report = behaviours.WaypointProgress.from_dict(progress["report"])
         self.straying = bool(progress["straying"])
         self.delta_psi = float(progress["delta_psi"])
 

@@ -15,7 +15,9 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from nearsub.common.autonomy.behaviours import Coordinate, Leg, Speed
+from nearsub.common.autonomy import helm as ivphelm
+from nearsub.common.autonomy import logic
+from nearsub.common.autonomy.behaviours import MAX_SPEED, Coordinate, Leg, Speed
 from nearsub.common.physics import dynamics
 from nearsub.common.physics.vehicles import Vehicle, get_vehicle
 from nearsub.common.runtime.messages import describe_validation_error
@@ -85,12 +87,47 @@ class AppSettings(Strict):
 BEHAVIOURS = ("waypoints", "modified_waypoints", "nuv_compensation", "modified_waypoints+nuv_compensation")
 
 
+VARIABLE_PATTERN = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+
+
+class ModeSettings(Strict):
+    """One hierarchical mode rule, pHelmIvP's `set VARIABLE = VALUE { VARIABLE = PARENT; condition
+    ... } ELSE_VALUE` (`logic.ModeRule`)."""
+
+    variable: str = "MODE"
+    value: str = Field(min_length=1)
+    parent: str = Field(default="", description="applies while the variable equals this ('' = top level)")
+    condition: list[str] = Field(default_factory=list)
+    else_value: str | None = None
+
+    @field_validator("condition")
+    @classmethod
+    def _parsable(cls, value: list[str]) -> list[str]:
+        for text in value:
+            logic.parse_condition(text)
+        return value
+
+    def rule(self) -> logic.ModeRule:
+        conditions = tuple(logic.parse_condition(c) for c in self.condition)
+        return logic.ModeRule(self.variable, self.value, self.parent or None, conditions, self.else_value)
+
+
 class HelmSettings(AppSettings):
-    """The helm's behaviour: the standard waypoints (thesis 5.7), the modified waypoints (6.3.2),
-    N_uv compensation (6.3.1) on top of the standard waypoints, or both composed."""
+    """The helm (docs/design.md, "The helm"). Either one legacy behaviour (`behaviour` with
+    `legs`): the standard waypoints (thesis 5.7), the modified waypoints (6.3.2), N_uv
+    compensation (6.3.1) on top of the standard waypoints, or both composed; or a list of
+    `behaviours` arbitrated by priority, with mission `variables` and `modes`. With a list,
+    `behaviour` only says whether the N_uv compensation modifies the chosen heading (a name ending
+    in "nuv_compensation")."""
 
     period: int = Field(default=5, ge=1)
     behaviour: Literal[BEHAVIOURS] = "waypoints"
+    behaviours: list[ivphelm.BehaviourSpec] = Field(default_factory=list)
+    variables: dict[str, str | float | bool] = Field(default_factory=dict)
+    modes: list[ModeSettings] = Field(default_factory=list)
+    max_speed: float | None = Field(
+        default=None, gt=0, le=MAX_SPEED, description="top of the decision grid [m/s]; default the vehicle's"
+    )
     alpha: float = Field(default=1.0, ge=0.0, le=1.0, description="modified waypoints: alpha of (6.2)")
     gamma: float | None = Field(default=None, gt=0, description="N_uv compensation gain; default from (6.4)")
     # The guard on (6.1)'s offset (behaviours.guard_heading_offset). Default clearance: one UUV
@@ -101,11 +138,45 @@ class HelmSettings(AppSettings):
         default=None, ge=0, description="N_uv compensation: least tip clearance from the hull [m]; default D_uuv"
     )
     guard_rate_deg: float = Field(default=5.0, gt=0, description="N_uv compensation: largest offset rate [deg/s]")
-    legs: list[Leg] = Field(min_length=1)
+    legs: list[Leg] = Field(default_factory=list)
+
+    @field_validator("variables")
+    @classmethod
+    def _names(cls, value: dict) -> dict:
+        for name in value:
+            if not VARIABLE_PATTERN.match(name):
+                raise ValueError(f"variable name {name!r} is not letters, digits and '_'")
+        return value
+
+    @model_validator(mode="after")
+    def _one_form(self) -> HelmSettings:
+        if not self.behaviours and not self.legs:
+            raise ValueError("give the waypoint legs, or a list of behaviours")
+        if self.behaviours and self.legs:
+            raise ValueError("give either legs (one waypoints behaviour) or a list of behaviours, not both")
+        names = [spec.name for spec in self.behaviours]
+        if len(set(names)) != len(names):
+            raise ValueError(f"behaviour names must be unique (got {names})")
+        return self
+
+    def behaviour_specs(self) -> list:
+        """The behaviours the helm arbitrates: the list, or the legacy behaviour as one waypoints
+        behaviour that completes the mission with its last waypoint."""
+        if self.behaviours:
+            return list(self.behaviours)
+        spec = ivphelm.WaypointsSpec(
+            type="waypoints",
+            name=self.behaviour,
+            legs=self.legs,
+            modified=self.behaviour.startswith("modified_waypoints"),
+            alpha=self.alpha,
+            endflag={ivphelm.MISSION: "complete"},
+        )
+        return [spec]
 
     @property
     def modified(self) -> bool:
-        return self.behaviour.startswith("modified_waypoints")
+        return any(getattr(spec, "modified", False) for spec in self.behaviour_specs())
 
     @property
     def compensated(self) -> bool:
@@ -181,8 +252,11 @@ class Mission(Strict):
         if not math.isfinite(self.dt * self.time_limit):
             raise ValueError("dt and time_limit must be finite")
         if self.apps.helm.modified and self.environment.u_sub <= 0:
+            what = "a modified waypoints behaviour"
+            if not self.apps.helm.behaviours:
+                what = f"apps.helm.behaviour = {self.apps.helm.behaviour!r}"
             raise ValueError(
-                f"apps.helm.behaviour = {self.apps.helm.behaviour!r} steers against the submarine's cross-flow "
+                f"{what} steers against the submarine's cross-flow "
                 f"and needs environment.u_sub > 0 (got {self.environment.u_sub})"
             )
         return self
@@ -238,9 +312,8 @@ def apply_overrides(data: dict, overrides: list[str]) -> dict:
     return data
 
 
-def load_mission(path: str | Path, overrides: list[str] = ()) -> Mission:
-    """Read, override and validate a mission file."""
-    path = Path(path)
+def read_toml(path: Path) -> dict:
+    """One TOML file as a dict; MissionError naming the file."""
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
@@ -250,9 +323,53 @@ def load_mission(path: str | Path, overrides: list[str] = ()) -> Mission:
             f"{path}: not UTF-8 text (byte 0x{exc.object[exc.start]:02x} at offset {exc.start})"
         ) from None
     try:
-        data = tomllib.loads(text)
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise MissionError(f"{path}: not valid TOML ({exc})") from None
+
+
+def merge(base: dict, top: dict) -> dict:
+    """`top` over `base`: tables merge key by key, arrays of tables are concatenated (base first,
+    so shared behaviours come before the mission's own), any other value of `top` wins."""
+    merged = dict(base)
+    for key, value in top.items():
+        old = merged.get(key)
+        if isinstance(old, dict) and isinstance(value, dict):
+            merged[key] = merge(old, value)
+        elif isinstance(old, list) and isinstance(value, list) and all(isinstance(v, dict) for v in old + value):
+            merged[key] = old + value
+        else:
+            merged[key] = value
+    return merged
+
+
+def resolve_includes(path: Path, chain: tuple[Path, ...] = ()) -> dict:
+    """A mission file with its `include = ["shared.toml", ...]` resolved (relative to the file
+    that includes them, in order, each under the including file's own settings), recursively.
+    MissionError on a cycle or a missing file, naming the chain."""
+    here = path.resolve()
+    if here in chain:
+        cycle = " -> ".join(str(p) for p in (*chain, here))
+        raise MissionError(f"{path}: include cycle ({cycle})")
+    data = read_toml(path)
+    includes = data.pop("include", [])
+    if isinstance(includes, str):
+        includes = [includes]
+    if not isinstance(includes, list) or not all(isinstance(i, str) for i in includes):
+        raise MissionError(f"{path}: include: expected a list of file names, got {includes!r}")
+    base: dict = {}
+    for name in includes:
+        target = path.parent / name
+        if not target.is_file():
+            raise MissionError(f"{path}: include {name!r}: no such file {target}")
+        base = merge(base, resolve_includes(target, (*chain, here)))
+    return merge(base, data)
+
+
+def load_mission(path: str | Path, overrides: list[str] = ()) -> Mission:
+    """Read (with its includes), override and validate a mission file."""
+    path = Path(path)
+    data = resolve_includes(path)
     apply_overrides(data, list(overrides))
     return mission_from_dict(data, str(path), overrides)
 

@@ -31,6 +31,7 @@ from nearsub.common.runtime.messages import (
     ControlReply,
     Event,
     Message,
+    Poke,
     decode,
     encode,
 )
@@ -49,7 +50,11 @@ DONE_TOPIC = {"helm": "desired", "pid": "input", "sim": "state"}
 # The source name of a person steering a running mission (`nearsub tap pub`), and the topics an
 # operator may override: the helm's desired state (at the pid) and the pid's input (at the sim).
 OPERATOR = "operator"
-OPERATOR_TOPICS = ("desired", "input")
+OPERATOR_TOPICS = ("desired", "input", "poke")
+# Topics only an operator publishes, and the role that consumes them: the helm's mission variables
+# (`nearsub poke`). Each poke is delivered once, at the first step it is due; pokes due at the same
+# step are merged in the order they came (the later value of a variable wins).
+OPERATOR_ONLY = {"poke": "helm"}
 
 # Topics labelled with the step they lead to (the sim's x_{k+1} after step k, and its forces there).
 NEXT_STEP_TOPICS = frozenset({"state", "forces"})
@@ -117,7 +122,7 @@ class Inbox:
 
     def offer(self, leaf: str, message: Message, step: int) -> str | None:
         """Offer an input to an app that is about to run `step`."""
-        producer = PRODUCER[leaf]
+        producer = PRODUCER.get(leaf, OPERATOR)
         if message.source != producer:
             return f"{leaf} from source {message.source!r} ignored: only {producer!r} publishes {leaf}"
         held = self.held.get(leaf)
@@ -234,7 +239,7 @@ class Stepper:
         mission or the next override. Returns the event that records it, with its step, so the
         run can be replayed (`run_inprocess(operator=...)`)."""
         step = self.step if from_step is None else from_step
-        pending = [(k, m) for k, m in self.overrides.get(leaf, []) if k < step]
+        pending = [(k, m) for k, m in self.overrides.get(leaf, []) if k < step or leaf in OPERATOR_ONLY]
         self.overrides[leaf] = [*pending, (step, message)]
         fields = message.model_dump(mode="json", exclude={"schema_version", "step", "t", "source"})
         detail = f"operator {leaf} from step {step}: " + ", ".join(f"{k}={v}" for k, v in fields.items())
@@ -242,11 +247,16 @@ class Stepper:
         return Event(step=step, t=step * self.dt, source=self.core.role, kind="info", detail=detail, data=data)
 
     def _overridden(self, step: int) -> dict[str, Message]:
-        """The operator values in force at `step`; the ones they replace are forgotten."""
+        """The operator values in force at `step`; the ones they replace are forgotten (pokes:
+        the ones due, once, merged)."""
         mail = {}
         for leaf, entries in self.overrides.items():
             due = [entry for entry in entries if entry[0] <= step]
-            if due:
+            if due and leaf in OPERATOR_ONLY:
+                values = {name: value for _, poke in due for name, value in poke.values.items()}
+                mail[leaf] = Poke(step=step, t=step * self.dt, source=OPERATOR, values=values)
+                self.overrides[leaf] = [entry for entry in entries if entry[0] > step]
+            elif due:
                 mail[leaf] = due[-1][1]
                 self.overrides[leaf] = [due[-1], *(entry for entry in entries if entry[0] > step)]
         return mail

@@ -92,11 +92,29 @@ class HelmProgress(Message):
     cross_track: float = Field(default=0.0, description="distance to the current track-line [m]")
     n_s: float = Field(default=0.0, description="interaction yaw moment used by N_uv compensation [N m]")
     complete: bool = False
+    mode: str = Field(default="", description="the helm's MODE variable (hierarchical, ':' separated)")
+    active: list[str] = Field(default_factory=list, description="behaviours with an objective, by priority")
+    winner: str = Field(default="", description="the behaviour whose own decision was taken, if any")
     delta_psi_commanded: float = 0.0
     guard_active: bool = False
     guard_saturated: bool = False
     guard_limit: float = math.inf
     guard_clearance: float = 0.0
+
+
+class Poke(Message):
+    """Mission variables an operator sets in a running helm (`nearsub poke`, uPokeDB): applied at
+    the next step the helm runs, as an operator override (runtime.lifecycle.Stepper.override)."""
+
+    values: dict[str, str | float | bool] = Field(min_length=1)
+
+    @field_validator("values")
+    @classmethod
+    def _finite_values(cls, value: dict) -> dict:
+        for number in value.values():
+            if isinstance(number, float):
+                _finite(number)
+        return value
 
 
 class Forces(Message):
@@ -237,6 +255,7 @@ VEHICLE_TOPICS: dict[str, type[Message]] = {
     "input": Input,
     "helm": HelmProgress,
     "forces": Forces,
+    "poke": Poke,
 }
 
 
@@ -267,6 +286,7 @@ ALL_MODELS: tuple[type[Message], ...] = (
     Input,
     HelmProgress,
     Forces,
+    Poke,
     Tick,
     Ack,
     MissionEnd,
