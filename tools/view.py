@@ -141,6 +141,7 @@ def _live(community: str, connect: list[str] | None, run_file: str | None, port:
     from . import registry
     from .view_server import LiveSource, serve_viewer
 
+    credentials = None  # from the registry; else $NEARSUB_CREDENTIALS (set for the launcher's children)
     if run_file:
         from nearsub.common.mission.schema import RunConfig
 
@@ -162,9 +163,10 @@ def _live(community: str, connect: list[str] | None, run_file: str | None, port:
             print(f"nearsub view: {exc}", file=sys.stderr)
             return 2
         endpoints, mission, log = tuple(entry["connect"]), mission_of_run(entry), entry.get("log")
+        credentials = entry.get("credentials")
 
     async def main() -> None:
-        with Bus(Endpoints("client", endpoints)) as bus:
+        with Bus(Endpoints("client", endpoints, credentials=credentials)) as bus:
             await serve_viewer(LiveSource(bus, community, mission, log), port, _ready)
 
     return _serve(main(), port)

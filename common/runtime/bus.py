@@ -37,6 +37,8 @@ from typing import Any
 
 import zenoh
 
+from . import credentials as mission_credentials
+
 ENCODING = "application/msgpack"
 
 # How long a client keeps trying to reach its router before giving up. The launcher sets the
@@ -73,9 +75,12 @@ def make_config(
     multicast_scouting: bool = False,
     admin_space: bool = False,
     timeout: float | None = None,
+    credentials: str | os.PathLike | None = None,
 ) -> zenoh.Config:
     """A session configuration; a client or peer waits up to `timeout` seconds (default
-    `connect_timeout()`) for its `connect` endpoints, retrying, then fails."""
+    `connect_timeout()`) for its `connect` endpoints, retrying, then fails. With a `credentials`
+    file the session authenticates with its user and password, and a router also admits only
+    sessions that present them (the file is its dictionary)."""
     conf = zenoh.Config()
     conf.insert_json5("mode", json.dumps(mode))
     conf.insert_json5("scouting/multicast/enabled", json.dumps(multicast_scouting))
@@ -86,6 +91,15 @@ def make_config(
         seconds = connect_timeout() if timeout is None else timeout
         conf.insert_json5("connect/timeout_ms", json.dumps(int(seconds * 1000)))
         conf.insert_json5("connect/exit_on_failure", json.dumps(True))
+    if credentials is not None:
+        try:
+            found = mission_credentials.load(credentials)
+        except mission_credentials.CredentialsError as exc:
+            raise BusError(str(exc)) from None
+        auth = {"user": found.user, "password": found.password}
+        if mode == "router":
+            auth["dictionary_file"] = str(found.path)
+        conf.insert_json5("transport/auth/usrpwd", json.dumps(auth))
     if admin_space:
         conf.insert_json5("adminspace", json.dumps({"enabled": True, "permissions": {"read": True, "write": False}}))
     return conf
@@ -100,10 +114,14 @@ class Endpoints:
     listen: tuple[str, ...] = ()
     multicast_scouting: bool = False
     timeout: float | None = None  # seconds to keep trying `connect`; None: connect_timeout()
+    credentials: str | None = None  # the mission's credentials file; None: $NEARSUB_CREDENTIALS
 
     def config(self) -> zenoh.Config:
         listen = self.listen if self.mode == "peer" else ()
-        return make_config(self.mode, self.connect, listen, self.multicast_scouting, timeout=self.timeout)
+        credentials = self.credentials or mission_credentials.from_environment()
+        return make_config(
+            self.mode, self.connect, listen, self.multicast_scouting, timeout=self.timeout, credentials=credentials
+        )
 
 
 @dataclass
@@ -294,7 +312,10 @@ def open_error(config: zenoh.Config, exc: Exception) -> str:
     if "Timeout" in reason and connect:
         timeout_ms = read("connect/timeout_ms")
         within = f" within {timeout_ms / 1000:g} s" if isinstance(timeout_ms, int | float) else ""
-        return f"cannot reach {', '.join(connect)}{within} (is the router running there?)"
+        # A router refusing the credentials (or their absence) looks the same as no router.
+        user = read("transport/auth/usrpwd/user")
+        hint = f"does it accept user {user}?" if user else "does it require credentials?"
+        return f"cannot reach {', '.join(connect)}{within} (is the router running there, and {hint})"
     listen = read("listen/endpoints") or []
     where = ", ".join(connect) or (", ".join(listen) if isinstance(listen, list) else str(listen))
     return f"cannot open a Zenoh session on {where or 'no endpoint'}: {reason}"
