@@ -73,7 +73,8 @@ def test_an_unreachable_router_fails_after_the_startup_timeout_naming_it(tmp_pat
     out = nearsub("launch", str(ALPHA), "--log", str(tmp_path / "logs"), *[a for s in settings for a in ("--set", s)])
     assert out.returncode == 1
     assert one_line(out.stderr) == (
-        f"nearsub launch: cannot reach {endpoint} within {mission.startup_timeout:g} s (is the router running there, and does it require credentials?)"
+        f"nearsub launch: cannot reach {endpoint} within {mission.startup_timeout:g} s "
+        "(is the router running there, and does it require credentials?)"
     )
     assert time.monotonic() - started >= mission.startup_timeout  # it kept trying, then gave up
     assert not (tmp_path / "logs").exists() or list((tmp_path / "logs").iterdir()) == []  # no half-empty run folder

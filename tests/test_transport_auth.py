@@ -13,7 +13,7 @@ import pytest
 from conftest import ALPHA, nearsub
 from helpers import finish, wait_registered
 from nearsub.common.mission.schema import load_mission
-from nearsub.common.runtime import credentials, keys
+from nearsub.common.runtime import credentials
 from nearsub.common.runtime.bus import Bus, BusError, Endpoints, Mailbox
 
 

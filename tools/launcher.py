@@ -144,7 +144,8 @@ def spawn_router(
     exits first, or stays silent, is a LaunchError naming it; `interrupted()` ends the wait."""
     ready, output = folder / "router.json", folder / "router.out"
     mission_credentials.create(credentials)
-    argv = ["--listen", "tcp/127.0.0.1:0", "--ready-file", str(ready), "--with-parent", "--credentials", str(credentials)]
+    argv = ["--listen", "tcp/127.0.0.1:0", "--ready-file", str(ready), "--with-parent"]
+    argv += ["--credentials", str(credentials)]
     with open(output, "wb") as out:
         router = spawn_app("router", argv, out)
     deadline = time.monotonic() + timeout

@@ -151,7 +151,8 @@ def _play(args, selection: Selection, connect: list[str], own_router: bool, cred
     from nearsub.common.runtime.bus import Bus, BusError, Endpoints
 
     try:
-        with Bus(Endpoints("client", tuple(connect), timeout=selection.startup_timeout, credentials=credentials)) as bus:
+        endpoints = Endpoints("client", tuple(connect), timeout=selection.startup_timeout, credentials=credentials)
+        with Bus(endpoints) as bus:
             return _publish(args, selection, bus, connect, own_router, credentials)
     except BusError as exc:
         print(f"nearsub log play: {exc}", file=sys.stderr)

@@ -1,8 +1,9 @@
 """Where running missions can be found: one small JSON file per community in a runtime folder.
 
 The launcher writes `<community>.json` (router endpoint, launcher pid, log path, the path of the
-mission's credentials file) when it starts and removes it when it stops; `tap` and `swap` read it so that users can name a community instead of
-an endpoint. Set NEARSUB_RUNTIME_DIR to move the folder (the tests do, to stay isolated).
+mission's credentials file) when it starts and removes it when it stops; `tap` and `swap` read it
+so that users can name a community instead of an endpoint. Set NEARSUB_RUNTIME_DIR to move the
+folder (the tests do, to stay isolated).
 
 A launcher first claims its name (`claim`): an exclusive `flock` on `<community>.lock`, taken
 without waiting and held until the launcher exits. The kernel drops the lock when the process
