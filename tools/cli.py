@@ -4,7 +4,8 @@ Subcommand X lives in the module named in TOOLS, which exports `add_parser(subpa
 its parser and sets `func`, which runs it. Only the module of the subcommand being run is imported,
 and a tool imports its heavy modules (numpy, scipy, zenoh, matplotlib) only when it runs, so that
 `nearsub --help` and a tool's `--help` answer at once. A LookupError a tool raises (no such
-mission, problem or behaviour) is printed as one line naming it, with exit code 2.
+mission, problem or behaviour) is printed as one line naming it, with exit code 2, and so is a bus
+that cannot be reached or is lost mid-command (BusError: the text names the endpoint).
 """
 
 from __future__ import annotations
@@ -59,6 +60,15 @@ def main(argv=None) -> int:
         return args.func(args)
     except LookupError as exc:
         print(f"nearsub {args.command}: {exc.args[0] if exc.args else exc}", file=sys.stderr)
+        return 2
+    except Exception as exc:
+        # The bus could not be opened, or the router vanished mid-command: one line naming the
+        # endpoint (BusError's text). Only a tool that loaded the bus can raise it; the others
+        # must not pay for importing Zenoh here.
+        bus = sys.modules.get("nearsub.common.runtime.bus")
+        if bus is None or not isinstance(exc, bus.BusError):
+            raise
+        print(f"nearsub {args.command}: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return 130

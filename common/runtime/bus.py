@@ -24,6 +24,7 @@ append to a `queue.SimpleQueue`, which allows timeouts and mixes samples, querie
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import queue
@@ -321,6 +322,21 @@ def open_error(config: zenoh.Config, exc: Exception) -> str:
     return f"cannot open a Zenoh session on {where or 'no endpoint'}: {reason}"
 
 
+def _router_lost(method):
+    """A Zenoh error inside `method` (the router vanished mid-command) as a BusError naming the
+    endpoints, which the command line prints as one line."""
+
+    @functools.wraps(method)
+    def wrapper(self, *args, **kwargs):
+        try:
+            return method(self, *args, **kwargs)
+        except zenoh.ZError as exc:
+            reason = str(exc).splitlines()[0].split(" at /", 1)[0] if str(exc) else type(exc).__name__
+            raise BusError(f"lost the bus at {self.where()}: {reason}") from None
+
+    return wrapper
+
+
 class Bus:
     """A Zenoh session with the few operations nearsub needs. Use as a context manager."""
 
@@ -354,16 +370,26 @@ class Bus:
     def session(self) -> zenoh.Session:
         return self._session
 
+    def where(self) -> str:
+        """The endpoints this session connects to, for messages."""
+        try:
+            connect = json.loads(self._config.get_json("connect/endpoints"))
+        except Exception:  # a config this Zenoh cannot read back: say less
+            connect = []
+        return ", ".join(connect) if isinstance(connect, list) and connect else "its endpoint"
+
     def publisher(self, key: str, lossless: bool = True) -> Publisher:
         congestion = zenoh.CongestionControl.BLOCK if lossless else zenoh.CongestionControl.DROP
         pub = self._session.declare_publisher(key, encoding=ENCODING, congestion_control=congestion, express=True)
         self._keep.append(pub)
         return Publisher(pub)
 
+    @_router_lost
     def put(self, key: str, payload: bytes) -> None:
         """One-off lossless publication (tools, rare events)."""
         self._session.put(key, payload, encoding=ENCODING, congestion_control=zenoh.CongestionControl.BLOCK)
 
+    @_router_lost
     def put_when_matched(self, key: str, payload: bytes, wait: float = 2.0) -> bool:
         """Publish once some subscriber matches `key` (a fresh session may not yet know the
         subscribers, and data put before that is not delivered). Returns whether a match was seen;
@@ -371,13 +397,20 @@ class Bus:
         pub = self._session.declare_publisher(key, encoding=ENCODING, congestion_control=zenoh.CongestionControl.BLOCK)
         try:
             end = time.monotonic() + wait
-            while not pub.matching_status and time.monotonic() < end:
+            # `matching_status` is an object (always truthy); its answer is `.matching`.
+            while not (matched := pub.matching_status.matching) and time.monotonic() < end:
                 time.sleep(0.005)
-            matched = pub.matching_status
             pub.put(payload)
             return matched
         finally:
             pub.undeclare()
+
+    def put_reply(self, key: str, payload: bytes) -> None:
+        """Answer a request on the requester's reply key at once, never waiting for a match: the
+        requester subscribed to that key before it sent the request, and a client's every put
+        goes to the router, which took the subscription before the request (one link, in order)
+        and so routes the answer. A requester that left meanwhile costs nothing."""
+        self.put(key, payload)
 
     def stream(self, key: str, capacity: int = 8192, lossy: bool = False) -> Stream:
         """One FIFO-channel subscription (the logger's view of everything). Lossless
@@ -401,6 +434,7 @@ class Bus:
         sub = self._session.liveliness().declare_subscriber(key, _direct(callback), history=False)
         self._keep.append(sub)
 
+    @_router_lost
     def subscribe(self, key: str, mailbox: Mailbox) -> None:
         self._keep.append(self._session.declare_subscriber(key, _direct(mailbox.on_sample)))
 
@@ -428,11 +462,13 @@ class Bus:
         sub = self._session.liveliness().declare_subscriber(key, _direct(mailbox.on_liveliness), history=history)
         self._keep.append(sub)
 
+    @_router_lost
     def alive(self, key: str, timeout: float = 1.0) -> list[str]:
         """Keys of the liveliness tokens alive now under `key`."""
         replies = self._session.liveliness().get(key, timeout=timeout)
         return sorted(str(r.ok.key_expr) for r in replies if r.ok is not None)
 
+    @_router_lost
     def request(self, key: str, payload: bytes = b"", timeout: float = 5.0) -> list[tuple[bool, bytes]]:
         """Query `key`; each reply is (ok, payload). No replier gives an empty list."""
         replies = self._session.get(key, payload=payload, timeout=timeout)
@@ -453,6 +489,7 @@ class Bus:
                 return list(json.loads(reply.ok.payload.to_bytes()).get("locators", []))
         return []
 
+    @_router_lost
     def admin_keys(self, what: str, timeout: float = 1.0) -> list[str]:
         """Declared entities known to routers (`what` = publisher, subscriber or queryable)."""
         keys = set()
