@@ -64,3 +64,13 @@ def test_a_stranger_cannot_reach_a_running_mission_and_its_own_tools_can(launche
     code, summary, err = finish(process, timeout=5 * mission.startup_timeout + mission.time_limit * 5)
     assert code == 0 and summary["outcome"] == "time_limit", err
     assert not os.path.exists(path)  # a mission's credentials end with it
+
+
+def test_an_unreadable_credentials_file_is_refused_in_one_line(tmp_path, runtime_dir):
+    missing = tmp_path / "nowhere"
+    setting = ["--set", 'network.connect=["tcp/192.0.2.10:7447"]', "--set", f'network.credentials="{missing}"']
+    out = nearsub("launch", str(ALPHA), "--log", str(tmp_path / "logs"), *setting)
+    assert out.returncode == 2
+    assert out.stderr.strip().splitlines() == [
+        f"nearsub launch: network.credentials: credentials file {missing}: No such file or directory"
+    ]
