@@ -61,3 +61,26 @@ def process_with(log_dir, marker: str) -> int:
         if marker in argv and any(str(log_dir) in a for a in argv):
             return int(entry)
     raise AssertionError(f"no process with {marker} under {log_dir}")
+
+
+def clock_status(community: str) -> dict:
+    """`nearsub clock <community> status` as a dict."""
+    import subprocess
+    import sys
+
+    out = subprocess.run(
+        [sys.executable, "-m", "nearsub", "clock", community, "status"], capture_output=True, text=True, timeout=60
+    )
+    assert out.returncode == 0, out.stderr
+    return json.loads(out.stdout)
+
+
+def wait_paused(community: str, timeout: float = 30.0) -> dict:
+    """The clock's status once it has paused; fails after `timeout` wall seconds."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        status = clock_status(community)
+        if status["paused"]:
+            return status
+        time.sleep(0.2)
+    raise AssertionError(f"the clock of {community} did not pause")

@@ -7,10 +7,8 @@ waits for what it needs, bounded by a budget derived from the mission's own star
 step_timeout. Run them with `pytest -m reliability -s` (the figures are printed); the default
 run leaves them out.
 
-Still to add once the clock's stall timer counts only unpaused time: a 30 s pause and resume, a
-swap that takes longer than step_timeout, a future-step message and a 10,000-message flood into
-a running mission, and (marked slow) a 200,000-step soak asserting zero lost messages in the log
-and RSS growth under 10 MB per process.
+The 200,000-step soak (zero lost messages, RSS growth under 10 MB per process) is marked `soak`
+and runs only with `pytest -m soak -s`: it takes about an hour on the shared machine.
 """
 
 from __future__ import annotations
@@ -27,9 +25,12 @@ import time
 import pytest
 
 from conftest import ROOT
-from helpers import process_with, wait_registered
+from helpers import clock_status, finish, log_path, per_topic, process_with, wait_paused, wait_registered
+from nearsub.common.mission.cores import build_cores
 from nearsub.common.mission.schema import Mission, load_mission
+from nearsub.common.runtime.lifecycle import Schedule, run_inprocess
 from nearsub.common.runtime.logfile import read_log
+from nearsub.common.runtime.messages import encode
 
 pytestmark = [pytest.mark.reliability, pytest.mark.timeout(600)]
 
@@ -212,3 +213,146 @@ def test_a_name_in_use_on_a_shared_router_is_refused(busy_machine, launches, com
     finally:
         os.killpg(router.pid, signal.SIGKILL)
         router.wait()
+
+
+def assert_equals_inprocess(mission: Mission, summary: dict) -> None:
+    """The logged trajectory is the in-process run's, bit for bit."""
+    reference = run_inprocess(build_cores(mission), Schedule(mission.periods()), mission.dt, mission.max_steps)
+    logged = per_topic(log_path(summary))
+    for leaf in ("state", "desired", "input"):
+        assert logged[f"remus100/{leaf}"] == [encode(m) for m in reference.topic(leaf)], leaf
+
+
+def settings_args(settings: list[str]) -> list[str]:
+    return [a for s in settings for a in ("--set", s)]
+
+
+PAUSE = 30.0  # wall seconds, three default step_timeouts
+
+
+def test_a_30_s_pause_and_resume_completes_as_in_process(busy_machine, launches, community):
+    settings = [f"name={community}", "pause_at_step=200", "time_limit=20"]
+    mission = load_mission(ALPHA, settings)
+    assert PAUSE > mission.step_timeout  # a stall timer that counted the pause would end it
+    process = launches.start(ALPHA, *settings_args(settings))
+    wait_registered(community, timeout=start_budget(mission))
+    status = wait_paused(community, timeout=run_budget(mission))
+    assert status["step"] == 200
+    paused_at = time.monotonic()
+    while (left := paused_at + PAUSE - time.monotonic()) > 0:
+        assert process.poll() is None, "the mission ended during the pause"
+        time.sleep(min(left, 1.0))
+    assert clock_status(community)["paused"] and clock_status(community)["step"] == 200
+    resumed = subprocess.run(
+        [sys.executable, "-m", "nearsub", "clock", community, "resume"], capture_output=True, text=True, timeout=60
+    )
+    assert resumed.returncode == 0, resumed.stderr
+    code, summary, err = finish(process, timeout=run_budget(mission))
+    print(f"\npaused {time.monotonic() - paused_at:.1f} s in all; mission {summary['outcome']} at {summary['steps']}")
+    assert code == 0 and summary["outcome"] == "time_limit" and summary["steps"] == mission.max_steps, err
+    assert_equals_inprocess(mission, summary)
+
+
+def test_a_swap_longer_than_step_timeout_keeps_the_mission_and_its_trajectory(busy_machine, launches, community):
+    """The new helm's start-up (a Python process importing numpy and Zenoh, on a busy machine)
+    takes longer than a 2 s step_timeout; the clock is paused meanwhile, so nothing stalls."""
+    settings = [f"name={community}", "pause_at_step=300", "time_limit=30", "step_timeout=2"]
+    mission = load_mission(ALPHA, settings)
+    process = launches.start(ALPHA, *settings_args(settings))
+    wait_registered(community, timeout=start_budget(mission))
+    wait_paused(community, timeout=run_budget(mission))
+    started = time.monotonic()
+    argv = ["swap", community, "helm", "--at-step", "300", "--with", "behaviour=waypoints"]
+    swap = subprocess.run(
+        [sys.executable, "-m", "nearsub", *argv, "--timeout", f"{start_budget(mission) + 30:g}"],
+        capture_output=True,
+        text=True,
+        timeout=start_budget(mission) + 60,
+    )
+    took = time.monotonic() - started  # the launcher resumes the clock when the swap is done
+    assert swap.returncode == 0, swap.stderr
+    code, summary, err = finish(process, timeout=run_budget(mission))
+    print(f"\nswap took {took:.2f} s against a step_timeout of {mission.step_timeout:g} s")
+    assert took > mission.step_timeout, f"the swap took {took:.2f} s: it did not test a swap longer than step_timeout"
+    assert code == 0 and summary["outcome"] == "time_limit" and summary["steps"] == mission.max_steps, err
+    assert summary["swaps"] == [{"old": "helm-1", "new": "helm-2", "step": 300}]
+    assert_equals_inprocess(mission, summary)
+
+
+SOAK_STEPS = 200_000
+RSS_GROWTH_LIMIT_KB = 10 * 1024
+SOAK_WARMUP_STEPS = 2_000  # the first RSS sample: after start-up caches and the first steps
+
+
+def rss_kb(pid: int) -> int | None:
+    """Resident set size from /proc/<pid>/status (VmRSS, kB); None once the process is gone."""
+    try:
+        for line in open(f"/proc/{pid}/status"):
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1])
+    except OSError:
+        return None
+    return None
+
+
+def mission_processes(log_dir) -> dict[int, str]:
+    """pid -> name of the launcher and every process it started (each names the log folder)."""
+    found = {}
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            argv = open(f"/proc/{entry}/cmdline").read().split("\0")
+        except OSError:
+            continue
+        if any(str(log_dir) in a for a in argv):
+            name = argv[argv.index("--instance") + 1] if "--instance" in argv else argv[3] if len(argv) > 3 else entry
+            found[int(entry)] = "router" if "nearsub.apps.router" in argv else name
+    return found
+
+
+@pytest.mark.soak
+@pytest.mark.timeout(3 * 3600)
+def test_a_200000_step_soak_loses_no_message_and_holds_its_memory(launches, community):
+    # One far waypoint (50 km at 1.2 m/s: 11.6 h) so the mission runs to its time limit.
+    settings = [
+        f"name={community}",
+        f"time_limit={SOAK_STEPS * 0.05:g}",
+        'apps.helm.legs=[{name = "far", points = [[0.0, -50000.0]], speed = 1.2}]',
+    ]
+    mission = load_mission(ALPHA, settings)
+    assert mission.max_steps == SOAK_STEPS
+    process = launches.start(ALPHA, *settings_args(settings))
+    wait_registered(community, timeout=start_budget(mission))
+    while clock_status(community)["step"] < SOAK_WARMUP_STEPS:
+        time.sleep(1.0)
+    pids = mission_processes(launches.log_dir)
+    first = {pid: rss_kb(pid) for pid in pids}
+    last = dict(first)
+    started = time.monotonic()
+    while process.poll() is None:
+        for pid in pids:
+            if (now := rss_kb(pid)) is not None:
+                last[pid] = now
+        time.sleep(5.0)
+    code, summary, err = finish(process, timeout=60)
+    wall = time.monotonic() - started
+    assert code == 0 and summary["outcome"] == "time_limit" and summary["steps"] == SOAK_STEPS, err
+
+    contents = read_log(summary["log"])
+    steps = {}
+    for record in contents.records:
+        leaf = record.topic.rsplit("/", 1)[-1]
+        if "/remus100/" in record.topic and leaf in ("state", "desired", "input"):
+            steps.setdefault(leaf, []).append(record.value()["step"])
+    expected = {
+        "state": list(range(SOAK_STEPS + 1)),
+        "input": list(range(SOAK_STEPS)),
+        "desired": list(range(0, SOAK_STEPS, mission.apps.helm.period)),
+    }
+    lost = {leaf: len(set(expected[leaf]) - set(steps.get(leaf, []))) for leaf in expected}
+    growth = {pids[pid]: (last[pid] - first[pid]) for pid in pids if first[pid] is not None}
+    print(f"\nsoak: {SOAK_STEPS} steps in {wall:.0f} s after warm-up; lost {lost}; RSS growth kB {growth}")
+    assert lost == {leaf: 0 for leaf in expected} and all(steps[leaf] == expected[leaf] for leaf in expected)
+    assert not contents.recovered
+    assert all(g < RSS_GROWTH_LIMIT_KB for g in growth.values()), growth
