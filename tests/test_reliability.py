@@ -25,7 +25,16 @@ import time
 import pytest
 
 from conftest import ROOT
-from helpers import clock_status, finish, log_path, per_topic, process_with, wait_paused, wait_registered
+from helpers import (
+    clock_status,
+    finish,
+    log_path,
+    per_topic,
+    process_with,
+    processes_under,
+    wait_paused,
+    wait_registered,
+)
 from nearsub.common.mission.cores import build_cores
 from nearsub.common.mission.schema import Mission, load_mission
 from nearsub.common.runtime.lifecycle import Schedule, run_inprocess
@@ -298,16 +307,9 @@ def rss_kb(pid: int) -> int | None:
 def mission_processes(log_dir) -> dict[int, str]:
     """pid -> name of the launcher and every process it started (each names the log folder)."""
     found = {}
-    for entry in os.listdir("/proc"):
-        if not entry.isdigit():
-            continue
-        try:
-            argv = open(f"/proc/{entry}/cmdline").read().split("\0")
-        except OSError:
-            continue
-        if any(str(log_dir) in a for a in argv):
-            name = argv[argv.index("--instance") + 1] if "--instance" in argv else argv[3] if len(argv) > 3 else entry
-            found[int(entry)] = "router" if "nearsub.apps.router" in argv else name
+    for pid, argv in processes_under(log_dir).items():
+        name = argv[argv.index("--instance") + 1] if "--instance" in argv else argv[3] if len(argv) > 3 else str(pid)
+        found[pid] = "router" if "nearsub.apps.router" in argv else name
     return found
 
 
