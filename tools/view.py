@@ -154,6 +154,7 @@ def _live(community: str, connect: list[str] | None, run_file: str | None, port:
             return 2
         log = Path(run.log_dir) / f"{run.mission.name}.mcap"  # where the launcher's logger writes
         endpoints, mission = tuple(connect or run.connect), run.mission
+        credentials = registry.running().get(mission.name, {}).get("credentials")
     elif connect:
         endpoints, mission, log = tuple(connect), None, None
     else:
