@@ -49,3 +49,19 @@ def test_tools_name_an_unreachable_router_in_one_line_and_exit_2(tmp_path):
         assert out.returncode == 2, (argv, out.stderr)
         lines = out.stderr.strip().splitlines()
         assert len(lines) == 1 and lines[0].startswith(f"nearsub {argv[0]}: cannot reach {endpoint}"), lines
+
+
+def test_a_zenoh_error_mid_command_is_a_bus_error_naming_the_endpoint():
+    import pytest
+    import zenoh
+
+    from nearsub.common.runtime.bus import BusError
+
+    class Vanished:  # a session whose router went away: Zenoh raises on the next operation
+        def put(self, *args, **kwargs):
+            raise zenoh.ZError("Session closed at /root/.cargo/x.rs:1.")
+
+    bus = Bus(Endpoints("client", ("tcp/127.0.0.1:7447",)))
+    bus._session = Vanished()
+    with pytest.raises(BusError, match=r"^lost the bus at tcp/127.0.0.1:7447: Session closed$"):
+        bus.put("test/key", b"x")

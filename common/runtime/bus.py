@@ -295,9 +295,14 @@ class Publisher:
         self._publisher.put(payload)
 
 
+def _reason(exc: Exception) -> str:
+    """Zenoh's first line, without the Rust source location it appends ("... at /root/...rs:388.")."""
+    reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+    return reason.split(" at /", 1)[0].rstrip(".")
+
+
 def open_error(config: zenoh.Config, exc: Exception) -> str:
-    """One line for a session that did not open: the endpoints and Zenoh's reason, without the
-    Rust source location Zenoh appends ("... Timeout! at /root/.cargo/...rs:388.")."""
+    """One line for a session that did not open: the endpoints and Zenoh's reason."""
 
     def read(key: str):
         try:
@@ -308,8 +313,7 @@ def open_error(config: zenoh.Config, exc: Exception) -> str:
     connect = read("connect/endpoints") or []
     if isinstance(connect, dict):  # per-mode form {"router": [...], "peer": [...], "client": [...]}
         connect = [e for v in connect.values() for e in v]
-    reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-    reason = reason.split(" at /", 1)[0].rstrip(".")
+    reason = _reason(exc)
     if "Timeout" in reason and connect:
         timeout_ms = read("connect/timeout_ms")
         within = f" within {timeout_ms / 1000:g} s" if isinstance(timeout_ms, int | float) else ""
@@ -331,8 +335,7 @@ def _router_lost(method):
         try:
             return method(self, *args, **kwargs)
         except zenoh.ZError as exc:
-            reason = str(exc).splitlines()[0].split(" at /", 1)[0] if str(exc) else type(exc).__name__
-            raise BusError(f"lost the bus at {self.where()}: {reason}") from None
+            raise BusError(f"lost the bus at {self.where()}: {_reason(exc)}") from None
 
     return wrapper
 
