@@ -100,7 +100,7 @@ def test_the_router_reports_the_endpoint_it_listens_on(tmp_path):
     try:
         line = router.stdout.readline()  # printed once listening, after the ready file is written
         endpoints = json.loads(ready.read_text())
-        assert line.strip() == f"router listening on {endpoints[0]}"
+        assert line.strip() == f"router listening on {endpoints[0]}, admitting any session (no credentials)"
         host, port = endpoints[0].removeprefix("tcp/").rsplit(":", 1)
         assert host == "127.0.0.1" and int(port) > 0
         with socket.create_connection((host, int(port)), timeout=5):
