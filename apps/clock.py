@@ -73,7 +73,7 @@ class Clock:
 
     def send(self, replies: list[Reply]) -> None:
         for requester, reply in replies:
-            self.bus.put_when_matched(keys.reply(self.community, requester), encode(reply))
+            self.bus.put_reply(keys.reply(self.community, requester), encode(reply))
 
     def handle(self, key: str, payload: bytes) -> None:
         """One stream item: progress, a control request, or someone else's mission end."""

@@ -3,8 +3,10 @@
 
 `nearsub launch` starts one on loopback port 0 and waits for the `--ready-file` it writes once it
 listens: the endpoints it really listens on (read back from its own admin space), so the launcher
-neither guesses a free port nor sleeps. `nearsub router --listen ENDPOINT` runs one by hand, for
-example to join apps on several hosts.
+neither guesses a free port nor sleeps. With `--credentials FILE` it admits only sessions that
+present the `user:password` in FILE (Zenoh's user/password authentication; docs/design.md,
+"Transport"). `nearsub router --listen ENDPOINT` runs one by hand, for example to join apps on
+several hosts.
 """
 
 from __future__ import annotations
@@ -29,19 +31,26 @@ def write_ready(path: str | Path, endpoints: list[str]) -> None:
     os.replace(partial, path)
 
 
-def serve(listen: list[str], connect: list[str] = (), with_parent: bool = False, ready_file: str | None = None) -> int:
+def serve(
+    listen: list[str],
+    connect: list[str] = (),
+    with_parent: bool = False,
+    ready_file: str | None = None,
+    credentials: str | None = None,
+) -> int:
     """Route until SIGINT/SIGTERM; `with_parent` also stops when the launcher process dies."""
     stop = threading.Event()
     if with_parent:
         prepare_process()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     signal.signal(signal.SIGINT, lambda *_: stop.set())
-    config = make_config("router", connect=connect, listen=listen, admin_space=True)
+    config = make_config("router", connect=connect, listen=listen, admin_space=True, credentials=credentials)
     with Bus(config) as bus:
         endpoints = bus.locators() or list(listen)
         if ready_file:
             write_ready(ready_file, endpoints)
-        print(f"router listening on {', '.join(endpoints)}", flush=True)
+        admits = f"sessions with the credentials in {credentials}" if credentials else "any session (no credentials)"
+        print(f"router listening on {', '.join(endpoints)}, admitting {admits}", flush=True)
         while not stop.wait(0.5):
             pass
     return 0
@@ -53,10 +62,11 @@ def main(argv=None) -> int:
     parser.add_argument("--connect", action="append", default=[], help="other routers to join")
     parser.add_argument("--with-parent", action="store_true", help="exit when the parent process dies")
     parser.add_argument("--ready-file", help="write the endpoints listened on (JSON list) here once listening")
+    parser.add_argument("--credentials", help="admit only sessions with the user:password in this file (mode 0600)")
     args = parser.parse_args(argv)
     listen = args.listen or ["tcp/127.0.0.1:7447"]
     try:
-        return serve(listen, args.connect, args.with_parent, args.ready_file)
+        return serve(listen, args.connect, args.with_parent, args.ready_file, args.credentials)
     except (BusError, OSError) as exc:  # e.g. the port is taken: say so in one line
         print(f"router: cannot listen on {', '.join(listen)}: {exc}", file=sys.stderr)
         return 1

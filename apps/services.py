@@ -9,6 +9,17 @@ from nearsub.common.runtime.messages import MessageError
 from nearsub.common.surrogate import query as sg
 from nearsub.common.surrogate.query import ServiceError
 
+# The server answers at most MAX_BATCH points per query and refuses a larger batch with an error
+# reply saying so (apps/surrogate.py): a client asks for one UUV's point a step, and a hostile
+# 100,000-point query would otherwise hold the server for minutes.
+MAX_BATCH = 1024
+# Wall seconds per point of the server's costlier answer (the full prediction) for a batch of
+# MAX_BATCH points of the shipped model: 1.45 ms, measured on the shared 2-core machine at a load
+# average of 14.7 (docs/design.md, "Transport"). The queries' timeout leaves twice the worst
+# legitimate answer, plus 2 s for the round trip and scheduling on a loaded machine.
+SECONDS_PER_POINT = 1.5e-3
+QUERY_TIMEOUT = 2.0 + 2 * MAX_BATCH * SECONDS_PER_POINT  # 5.07 s
+
 
 def discrepancy_key(community: str) -> str:
     """The server's answers of the residual GP alone (the LF-in-the-loop kind's delta)."""
@@ -25,7 +36,7 @@ class RemoteSurrogate:
     It answers with the numbers `Surrogate.predict` and `Surrogate.discrepancy` give in-process,
     bit for bit (msgpack carries the doubles unchanged)."""
 
-    def __init__(self, bus: Bus, community: str, timeout: float = 5.0):
+    def __init__(self, bus: Bus, community: str, timeout: float = QUERY_TIMEOUT):
         self.key = sg.surrogate_key(community)
         self._querier = bus.querier(self.key, timeout)
         self._discrepancy = bus.querier(discrepancy_key(community), timeout)

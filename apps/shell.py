@@ -255,7 +255,7 @@ class AppShell:
 
     def reply(self, request: Control, **answer) -> None:
         reply = control_reply(request, self.instance, self.stepper.step, self.dt, **answer)
-        self.bus.put_when_matched(keys.reply(self.community, request.reply_to), encode(reply))
+        self.bus.put_reply(keys.reply(self.community, request.reply_to), encode(reply))
 
     # -- reporting ----------------------------------------------------------------------------
     def decode_or_report(self, payload: bytes, model: type[Message], key: str) -> Message | None:

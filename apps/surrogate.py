@@ -4,7 +4,8 @@
     python -m nearsub.apps.surrogate [--model PATH] --run RUNFILE [--instance NAME]
 
 Each query is a `SurrogateQuery` (common/surrogate/model.py) with a batch of points; the whole batch
-is predicted at once and answered with a `SurrogateReply`. The same queryable answers
+is predicted at once and answered with a `SurrogateReply`; a batch of more than
+`services.MAX_BATCH` points is refused with an error reply that says the cap. The same queryable answers
 nearsub/<community>/surrogate/discrepancy with the residual GP alone (the LF-in-the-loop kind's
 delta, which the increment mode adds to the LF it evaluates itself; `apps.services`) and
 nearsub/<community>/surrogate/kind with the model's kind. A malformed query gets an error reply
@@ -19,9 +20,10 @@ import argparse
 import sys
 from typing import NoReturn
 
+import msgpack
 import numpy as np
 
-from nearsub.apps.services import discrepancy_key, kind_key
+from nearsub.apps.services import MAX_BATCH, discrepancy_key, kind_key
 from nearsub.common.mission.schema import MissionError, RunConfig
 from nearsub.common.runtime import keys
 from nearsub.common.runtime.bus import Bus, Endpoints, signal_self
@@ -64,6 +66,19 @@ def answer_discrepancy(surrogate: Surrogate, payload: bytes, source: str = "surr
     return encode(reply)
 
 
+def oversized(payload: bytes) -> str | None:
+    """The error text for a query of more than MAX_BATCH points, found before the query is
+    validated or predicted (both cost time per point); None for any other payload, which the
+    decoder then judges."""
+    try:
+        points = msgpack.unpackb(payload).get("points")
+    except Exception:  # not a msgpack map: the decoder names what is wrong
+        return None
+    if isinstance(points, list) and len(points) > MAX_BATCH:
+        return f"points: {len(points)} points in one query; this server answers at most {MAX_BATCH} per query"
+    return None
+
+
 def serve(bus: Bus, community: str, surrogate: Surrogate, instance: str = "surrogate") -> NoReturn:
     """Answer queries until the process is stopped; the liveliness token
     nearsub/<community>/alive/surrogate/<instance> says the server is up."""
@@ -79,13 +94,17 @@ def serve(bus: Bus, community: str, surrogate: Surrogate, instance: str = "surro
     while True:
         request = requests.recv()
         try:
+            if too_many := oversized(request.payload):
+                raise MessageError(too_many)
             if request.key == kind_key(community):
                 answer = surrogate.kind.encode()
             elif request.key == discrepancy_key(community):
                 answer = answer_discrepancy(surrogate, request.payload, instance)
             else:
                 answer = answer_query(surrogate, request.payload, instance)
-        except (MessageError, TypeError) as exc:  # TypeError: no discrepancy in this kind of model
+        # MessageError is a ValueError, as is a prediction the reply refuses (not finite), which
+        # must not stop the server either; TypeError: no discrepancy in this kind of model.
+        except (TypeError, ValueError) as exc:
             text = str(exc)
             if len(text) > MAX_ERROR_CHARS:
                 text = text[:MAX_ERROR_CHARS] + f" ... ({len(text) - MAX_ERROR_CHARS} more characters)"

@@ -48,9 +48,9 @@ def finish(process, timeout: float = 120) -> tuple[int, dict, str]:
     return process.returncode, json.loads(out.strip().splitlines()[-1]), err
 
 
-def process_with(log_dir, marker: str) -> int:
-    """The pid of the process whose command line has the argument `marker` (an instance name,
-    a module) and mentions `log_dir` (so only this test's processes match)."""
+def processes_under(log_dir) -> dict[int, list[str]]:
+    """pid -> argv of the processes whose command line mentions `log_dir` (only this test's)."""
+    found = {}
     for entry in os.listdir("/proc"):
         if not entry.isdigit():
             continue
@@ -58,6 +58,38 @@ def process_with(log_dir, marker: str) -> int:
             argv = open(f"/proc/{entry}/cmdline").read().split("\0")
         except OSError:
             continue
-        if marker in argv and any(str(log_dir) in a for a in argv):
-            return int(entry)
+        if any(str(log_dir) in a for a in argv):
+            found[int(entry)] = argv
+    return found
+
+
+def process_with(log_dir, marker: str) -> int:
+    """The pid of the process whose command line has the argument `marker` (an instance name,
+    a module) and mentions `log_dir` (so only this test's processes match)."""
+    for pid, argv in processes_under(log_dir).items():
+        if marker in argv:
+            return pid
     raise AssertionError(f"no process with {marker} under {log_dir}")
+
+
+def clock_status(community: str) -> dict:
+    """`nearsub clock <community> status` as a dict."""
+    import subprocess
+    import sys
+
+    out = subprocess.run(
+        [sys.executable, "-m", "nearsub", "clock", community, "status"], capture_output=True, text=True, timeout=60
+    )
+    assert out.returncode == 0, out.stderr
+    return json.loads(out.stdout)
+
+
+def wait_paused(community: str, timeout: float = 30.0) -> dict:
+    """The clock's status once it has paused; fails after `timeout` wall seconds."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        status = clock_status(community)
+        if status["paused"]:
+            return status
+        time.sleep(0.2)
+    raise AssertionError(f"the clock of {community} did not pause")

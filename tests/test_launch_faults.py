@@ -73,7 +73,8 @@ def test_an_unreachable_router_fails_after_the_startup_timeout_naming_it(tmp_pat
     out = nearsub("launch", str(ALPHA), "--log", str(tmp_path / "logs"), *[a for s in settings for a in ("--set", s)])
     assert out.returncode == 1
     assert one_line(out.stderr) == (
-        f"nearsub launch: cannot reach {endpoint} within {mission.startup_timeout:g} s (is the router running there?)"
+        f"nearsub launch: cannot reach {endpoint} within {mission.startup_timeout:g} s "
+        "(is the router running there, and does it require credentials?)"
     )
     assert time.monotonic() - started >= mission.startup_timeout  # it kept trying, then gave up
     assert not (tmp_path / "logs").exists() or list((tmp_path / "logs").iterdir()) == []  # no half-empty run folder
@@ -99,7 +100,7 @@ def test_the_router_reports_the_endpoint_it_listens_on(tmp_path):
     try:
         line = router.stdout.readline()  # printed once listening, after the ready file is written
         endpoints = json.loads(ready.read_text())
-        assert line.strip() == f"router listening on {endpoints[0]}"
+        assert line.strip() == f"router listening on {endpoints[0]}, admitting any session (no credentials)"
         host, port = endpoints[0].removeprefix("tcp/").rsplit(":", 1)
         assert host == "127.0.0.1" and int(port) > 0
         with socket.create_connection((host, int(port)), timeout=5):

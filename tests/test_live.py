@@ -6,7 +6,7 @@ import time
 import pytest
 
 from conftest import ALPHA, nearsub
-from helpers import finish, log_path, per_topic, wait_registered
+from helpers import finish, log_path, per_topic, wait_paused, wait_registered
 from nearsub.common.mission.cores import build_cores
 from nearsub.common.mission.schema import load_mission
 from nearsub.common.runtime.lifecycle import Schedule, run_inprocess
@@ -46,16 +46,6 @@ def test_tap_echo_and_hz_on_a_running_mission(launches, community):
     assert topics["remus100/state"]["hz"] == pytest.approx(20.0, rel=0.01)  # over the default 1 s sample
     code, summary, err = finish(process)
     assert code == 0 and summary["outcome"] == "time_limit", err
-
-
-def wait_paused(community, timeout=30.0) -> dict:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        status = json.loads(nearsub("clock", community, "status").stdout)
-        if status["paused"]:
-            return status
-        time.sleep(0.2)
-    raise AssertionError(f"the clock of {community} did not pause")
 
 
 def subset(data: dict, *names: str) -> dict:

@@ -56,7 +56,9 @@ def test_replay_equals_the_log_message_for_message(log, runtime_dir, community):
     try:
         entry = wait_registered(community, player)
         received = defaultdict(list)
-        with Bus(Endpoints("client", tuple(entry["connect"]), timeout=STARTUP)) as bus:
+        with Bus(
+            Endpoints("client", tuple(entry["connect"]), timeout=STARTUP, credentials=entry["credentials"])
+        ) as bus:
             mailbox = Mailbox()
             bus.subscribe(f"nearsub/{community}/**", mailbox)
             end = time.monotonic() + STARTUP + STEP

@@ -7,10 +7,7 @@ waits for what it needs, bounded by a budget derived from the mission's own star
 step_timeout. Run them with `pytest -m reliability -s` (the figures are printed); the default
 run leaves them out.
 
-Still to add once the clock's stall timer counts only unpaused time: a 30 s pause and resume, a
-swap that takes longer than step_timeout, a future-step message and a 10,000-message flood into
-a running mission, and (marked slow) a 200,000-step soak asserting zero lost messages in the log
-and RSS growth under 10 MB per process.
+The 200,000-step soak is in test_soak.py (`pytest -m soak -s`).
 """
 
 from __future__ import annotations
@@ -27,9 +24,20 @@ import time
 import pytest
 
 from conftest import ROOT
-from helpers import process_with, wait_registered
+from helpers import (
+    clock_status,
+    finish,
+    log_path,
+    per_topic,
+    process_with,
+    wait_paused,
+    wait_registered,
+)
+from nearsub.common.mission.cores import build_cores
 from nearsub.common.mission.schema import Mission, load_mission
+from nearsub.common.runtime.lifecycle import Schedule, run_inprocess
 from nearsub.common.runtime.logfile import read_log
+from nearsub.common.runtime.messages import encode
 
 pytestmark = [pytest.mark.reliability, pytest.mark.timeout(600)]
 
@@ -212,3 +220,67 @@ def test_a_name_in_use_on_a_shared_router_is_refused(busy_machine, launches, com
     finally:
         os.killpg(router.pid, signal.SIGKILL)
         router.wait()
+
+
+def assert_equals_inprocess(mission: Mission, summary: dict) -> None:
+    """The logged trajectory is the in-process run's, bit for bit."""
+    reference = run_inprocess(build_cores(mission), Schedule(mission.periods()), mission.dt, mission.max_steps)
+    logged = per_topic(log_path(summary))
+    for leaf in ("state", "desired", "input"):
+        assert logged[f"remus100/{leaf}"] == [encode(m) for m in reference.topic(leaf)], leaf
+
+
+def settings_args(settings: list[str]) -> list[str]:
+    return [a for s in settings for a in ("--set", s)]
+
+
+PAUSE = 30.0  # wall seconds, three default step_timeouts
+
+
+def test_a_30_s_pause_and_resume_completes_as_in_process(busy_machine, launches, community):
+    settings = [f"name={community}", "pause_at_step=200", "time_limit=20"]
+    mission = load_mission(ALPHA, settings)
+    assert PAUSE > mission.step_timeout  # a stall timer that counted the pause would end it
+    process = launches.start(ALPHA, *settings_args(settings))
+    wait_registered(community, timeout=start_budget(mission))
+    status = wait_paused(community, timeout=run_budget(mission))
+    assert status["step"] == 200
+    paused_at = time.monotonic()
+    while (left := paused_at + PAUSE - time.monotonic()) > 0:
+        assert process.poll() is None, "the mission ended during the pause"
+        time.sleep(min(left, 1.0))
+    assert clock_status(community)["paused"] and clock_status(community)["step"] == 200
+    resumed = subprocess.run(
+        [sys.executable, "-m", "nearsub", "clock", community, "resume"], capture_output=True, text=True, timeout=60
+    )
+    assert resumed.returncode == 0, resumed.stderr
+    code, summary, err = finish(process, timeout=run_budget(mission))
+    print(f"\npaused {time.monotonic() - paused_at:.1f} s in all; mission {summary['outcome']} at {summary['steps']}")
+    assert code == 0 and summary["outcome"] == "time_limit" and summary["steps"] == mission.max_steps, err
+    assert_equals_inprocess(mission, summary)
+
+
+def test_a_swap_longer_than_step_timeout_keeps_the_mission_and_its_trajectory(busy_machine, launches, community):
+    """The new helm's start-up (a Python process importing numpy and Zenoh, on a busy machine)
+    takes longer than a 2 s step_timeout; the clock is paused meanwhile, so nothing stalls."""
+    settings = [f"name={community}", "pause_at_step=300", "time_limit=30", "step_timeout=2"]
+    mission = load_mission(ALPHA, settings)
+    process = launches.start(ALPHA, *settings_args(settings))
+    wait_registered(community, timeout=start_budget(mission))
+    wait_paused(community, timeout=run_budget(mission))
+    started = time.monotonic()
+    argv = ["swap", community, "helm", "--at-step", "300", "--with", "behaviour=waypoints"]
+    swap = subprocess.run(
+        [sys.executable, "-m", "nearsub", *argv, "--timeout", f"{start_budget(mission) + 30:g}"],
+        capture_output=True,
+        text=True,
+        timeout=start_budget(mission) + 60,
+    )
+    took = time.monotonic() - started  # the launcher resumes the clock when the swap is done
+    assert swap.returncode == 0, swap.stderr
+    code, summary, err = finish(process, timeout=run_budget(mission))
+    print(f"\nswap took {took:.2f} s against a step_timeout of {mission.step_timeout:g} s")
+    assert took > mission.step_timeout, f"the swap took {took:.2f} s: it did not test a swap longer than step_timeout"
+    assert code == 0 and summary["outcome"] == "time_limit" and summary["steps"] == mission.max_steps, err
+    assert summary["swaps"] == [{"old": "helm-1", "new": "helm-2", "step": 300}]
+    assert_equals_inprocess(mission, summary)

@@ -26,7 +26,7 @@ def test_a_future_step_and_a_flood_do_not_stop_the_mission(launches, community):
     process = launches.start(ALPHA, "--set", f"name={community}", "--set", "pause_at_step=100", "--until", "30")
     entry = wait_registered(community)
     key = f"nearsub/{community}/remus100/desired"
-    with Bus(Endpoints("client", tuple(entry["connect"]))) as bus:
+    with Bus(Endpoints("client", tuple(entry["connect"]), credentials=entry["credentials"])) as bus:
         future = Desired(step=10**9, t=0.0, source="helm", u_d=1.0, psi_d=0.0)
         assert bus.put_when_matched(key, encode(future), wait=30.0)
         wrong_source = encode(Desired(step=100, t=5.0, source="intruder", u_d=1.0, psi_d=0.0))

@@ -95,6 +95,17 @@ def test_malformed_queries_get_an_error_and_the_server_keeps_serving(querier, su
     assert np.array_equal(reply.prediction().mean, surrogate.predict(point).mean)
 
 
+def test_a_batch_over_the_cap_is_refused_saying_the_cap_and_the_server_keeps_serving(querier, surrogate):
+    from nearsub.apps.services import MAX_BATCH
+
+    with pytest.raises(ReplyError, match=f"{MAX_BATCH + 1} points in one query; .* at most {MAX_BATCH} per query"):
+        querier.ask(sg.encode_query(domain.sample_feasible(MAX_BATCH + 1, seed=9)))
+    point = domain.sample_feasible(1, seed=10)
+    assert np.array_equal(
+        sg.decode_reply(querier.ask(sg.encode_query(point))).prediction().mean, surrogate.predict(point).mean
+    )
+
+
 def test_a_second_instance_from_a_run_file_and_clean_sigterm(server, model_path, tmp_path):
     bus, endpoint = server
     other = f"t{uuid.uuid4().hex[:10]}"

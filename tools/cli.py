@@ -5,7 +5,8 @@ its parser and sets `func`, which runs it. Only the module of the subcommand bei
 and a tool imports its heavy modules (numpy, scipy, zenoh, matplotlib) only when it runs, so that
 `nearsub --help` and a tool's `--help` answer at once. A LookupError a tool raises (no such
 mission, problem or behaviour; `errors.InputError` for any bad input) is printed as one line
-naming it, with exit code 2.
+naming it, with exit code 2, and so is a bus that cannot be reached or is lost mid-command
+(BusError: the text names the endpoint).
 """
 
 from __future__ import annotations
@@ -69,6 +70,15 @@ def main(argv=None) -> int:
         action = getattr(args, f"{args.command.replace('-', '_')}_command", None)  # `log export`
         name = f"{args.command} {action}" if isinstance(action, str) else args.command
         print(f"nearsub {name}: {exc.args[0] if exc.args else exc}", file=sys.stderr)
+        return 2
+    except Exception as exc:
+        # The bus could not be opened, or the router vanished mid-command: one line naming the
+        # endpoint (BusError's text). Only a tool that loaded the bus can raise it; the others
+        # must not pay for importing Zenoh here.
+        bus = sys.modules.get("nearsub.common.runtime.bus")
+        if bus is None or not isinstance(exc, bus.BusError):
+            raise
+        print(f"nearsub {args.command}: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return 130

@@ -11,16 +11,19 @@ if TYPE_CHECKING:
 
 
 def add_connect_arguments(parser) -> None:
-    parser.add_argument(
-        "--connect", action="append", metavar="ENDPOINT", help="router endpoint, e.g. tcp/127.0.0.1:7447"
-    )
+    add_router_argument(parser)
     parser.add_argument("--community", help="mission (community) name; default: from the key, or the only running one")
 
 
 def add_router_argument(parser) -> None:
-    """`--connect` for the tools that name their mission as a positional argument."""
+    """`--connect` and `--credentials` for the tools that name their mission as a positional argument."""
     parser.add_argument(
         "--connect", action="append", metavar="ENDPOINT", help="router endpoint (default: from the registry)"
+    )
+    parser.add_argument(
+        "--credentials",
+        metavar="FILE",
+        help="the router's user:password file (default: the registry's, else $NEARSUB_CREDENTIALS)",
     )
 
 
@@ -33,13 +36,16 @@ def community_from_key(key: str | None) -> str | None:
 
 def open_bus(args, key: str | None = None) -> tuple[Bus, str | None]:
     """A client bus for a tool, and the community it resolved (None when unknown). The registry is
-    read first, so that a tool with no mission to talk to says so before Zenoh loads."""
+    read first, so that a tool with no mission to talk to says so before Zenoh loads. The
+    credentials are those the launcher recorded for the mission, unless given."""
     community = args.community or community_from_key(key)
+    credentials = args.credentials
     if args.connect:
         connect = args.connect
     else:
         entry = registry.lookup(community)
         connect, community = entry["connect"], entry["community"]
+        credentials = credentials or entry.get("credentials")
     from nearsub.common.runtime.bus import Bus, Endpoints
 
-    return Bus(Endpoints("client", tuple(connect))), community
+    return Bus(Endpoints("client", tuple(connect), credentials=credentials)), community

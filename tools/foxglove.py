@@ -140,14 +140,14 @@ def foxglove_command(args) -> int:
     from .view import check_port, mission_endpoints
 
     check_port(args.port)
-    endpoints, mission, _ = mission_endpoints(args.community, args.connect, args.run)
+    endpoints, mission, _, credentials = mission_endpoints(args.community, args.connect, args.run)
     from nearsub.common.runtime.bus import Bus, Endpoints
 
     def ready(url: str) -> None:
         print(f"nearsub foxglove: {url}", flush=True)
 
     try:
-        with Bus(Endpoints("client", endpoints)) as bus:
+        with Bus(Endpoints("client", endpoints, credentials=credentials)) as bus:
             serve_mission(bus, args.community, mission, args.port, ready)
     except KeyboardInterrupt:  # the way to stop it
         pass

@@ -88,6 +88,14 @@ def launch_command(args) -> int:
         if problem := endpoint_problem(endpoint):
             print(f"nearsub launch: {problem}", file=sys.stderr)
             return 2
+    if mission.network.credentials:
+        from nearsub.common.runtime.credentials import CredentialsError, load
+
+        try:
+            load(mission.network.credentials)
+        except CredentialsError as exc:
+            print(f"nearsub launch: network.credentials: {exc}", file=sys.stderr)
+            return 2
     # The claim is held until this process exits; a second launch of the name refuses at once.
     try:
         with registry.claim(mission.name):

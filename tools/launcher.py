@@ -39,6 +39,7 @@ from nearsub.common.mission.schema import (
     apply_overrides,
     mission_from_dict,
 )
+from nearsub.common.runtime import credentials as mission_credentials
 from nearsub.common.runtime import keys
 from nearsub.common.runtime.bus import CONNECT_TIMEOUT_VARIABLE, Bus, BusError, Endpoints, Mailbox
 from nearsub.common.runtime.lifecycle import ORDER
@@ -152,13 +153,19 @@ class Summary:
         return "\n".join(lines)
 
 
-def spawn_router(folder: Path, timeout: float, interrupted=lambda: False) -> tuple[subprocess.Popen, list[str]]:
-    """Start a router on loopback port 0 (output in `folder`/router.out) and wait, up to `timeout`
+def spawn_router(
+    folder: Path, timeout: float, credentials: Path, interrupted=lambda: False
+) -> tuple[subprocess.Popen, list[str]]:
+    """Start a router on loopback port 0 (output in `folder`/router.out) that admits only the
+    holders of fresh random `credentials` (written there, mode 0600), and wait, up to `timeout`
     wall seconds, for the ready file in which it names the endpoints it listens on. A router that
     exits first, or stays silent, is a LaunchError naming it; `interrupted()` ends the wait."""
     ready, output = folder / "router.json", folder / "router.out"
+    mission_credentials.create(credentials)
+    argv = ["--listen", "tcp/127.0.0.1:0", "--ready-file", str(ready), "--with-parent"]
+    argv += ["--credentials", str(credentials)]
     with open(output, "wb") as out:
-        router = spawn_app("router", ["--listen", "tcp/127.0.0.1:0", "--ready-file", str(ready), "--with-parent"], out)
+        router = spawn_app("router", argv, out)
     deadline = time.monotonic() + timeout
     try:
         while not ready.exists():
@@ -200,6 +207,7 @@ class Launcher:
         self.stop_requested: int | None = None
         self.instance_counter = Counter()
         self.router: subprocess.Popen | None = None
+        self.credentials: str | None = None  # the file the mission's router requires
         self.stopping = False
         self.clock_started = time.monotonic()
 
@@ -278,7 +286,10 @@ class Launcher:
                 self.say(f"started router (pid {self.router.pid}) on {', '.join(connect)}")
             RunConfig(mission=self.mission, connect=connect, log_dir=str(self.run_dir)).save(self.run_file)
             log_path = self.run_dir / f"{self.community}.mcap"
-            with Bus(Endpoints("client", tuple(connect), timeout=self.mission.startup_timeout)) as bus:
+            endpoints = Endpoints(
+                "client", tuple(connect), timeout=self.mission.startup_timeout, credentials=self.credentials
+            )
+            with Bus(endpoints) as bus:
                 self.bus = bus
                 self.mailbox = Mailbox()
                 c = self.community
@@ -298,7 +309,7 @@ class Launcher:
                         f"mission {c} running: {len(self.children) + (self.router is not None)} processes up "
                         f"in {self.summary.startup_time:.2f} s"
                     )
-                    registry.register(self.community, connect, str(log_path))  # tools can find it now
+                    registry.register(self.community, connect, str(log_path), self.credentials)  # tools find it
                     self.companion_processes += [start(self.run_file) for start in self.companions]
                     if self.status_line:
                         self.latest_state = bus.stream(
@@ -326,6 +337,8 @@ class Launcher:
             if self.router is not None:
                 stop([self.router], grace=0.0)
             (registry.runtime_dir() / f"{self.community}.json").unlink(missing_ok=True)
+            if not self.mission.network.connect:  # ours: the next launch of the name makes new ones
+                registry.credentials_path(self.community).unlink(missing_ok=True)
             if not self.children:  # nothing ran: leave no half-empty log folder behind
                 shutil.rmtree(self.run_dir, ignore_errors=True)
         self.clear_status()
@@ -342,15 +355,23 @@ class Launcher:
             raise KeyboardInterrupt
 
     def start_router(self) -> list[str]:
-        """The endpoints of the mission's router: `network.connect`, or a router of our own on
-        loopback port 0, which writes the endpoint it listens on to a ready file once listening."""
+        """The endpoints of the mission's router: `network.connect` (with the credentials named
+        by `network.credentials`, if any), or a router of our own on loopback port 0, which
+        writes the endpoint it listens on to a ready file once listening and admits only the
+        holders of the mission's fresh credentials. Every process started from here reads them."""
         network = self.mission.network
         if network.connect:
-            return list(network.connect)
-        self.router, endpoints = spawn_router(
-            self.run_dir, self.mission.startup_timeout, lambda: self.stop_requested is not None
-        )
-        return endpoints
+            if network.credentials:
+                self.credentials = str(Path(network.credentials).resolve())
+        else:
+            path = registry.credentials_path(self.community)
+            self.credentials = str(path)
+            self.router, endpoints = spawn_router(
+                self.run_dir, self.mission.startup_timeout, path, lambda: self.stop_requested is not None
+            )
+        if self.credentials:
+            os.environ[mission_credentials.VARIABLE] = self.credentials
+        return list(network.connect) if network.connect else endpoints
 
     def claim_on_bus(self, bus: Bus, connect: list[str]) -> None:
         """Refuse a name another launcher uses on this bus (missions sharing a router, maybe from

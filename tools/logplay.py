@@ -123,16 +123,18 @@ def play_command(args) -> int:
 
             from .launcher import LaunchError, spawn_router
 
+            credentials = None  # with --connect: $NEARSUB_CREDENTIALS, if the router needs any
             try:
                 if args.connect:
                     connect = list(args.connect)
                 else:
-                    router, connect = spawn_router(folder, selection.startup_timeout)
+                    credentials = str(folder / "credentials")
+                    router, connect = spawn_router(folder, selection.startup_timeout, Path(credentials))
             except LaunchError as exc:
                 print(f"nearsub log play: {exc}", file=sys.stderr)
                 return 1
             try:
-                return _play(args, selection, connect, router is not None)
+                return _play(args, selection, connect, router is not None, credentials)
             except KeyboardInterrupt:
                 return 130
             finally:
@@ -143,18 +145,19 @@ def play_command(args) -> int:
         shutil.rmtree(folder, ignore_errors=True)
 
 
-def _play(args, selection: Selection, connect: list[str], own_router: bool) -> int:
+def _play(args, selection: Selection, connect: list[str], own_router: bool, credentials: str | None) -> int:
     from nearsub.common.runtime.bus import Bus, BusError, Endpoints
 
     try:
-        with Bus(Endpoints("client", tuple(connect), timeout=selection.startup_timeout)) as bus:
-            return _publish(args, selection, bus, connect, own_router)
+        endpoints = Endpoints("client", tuple(connect), timeout=selection.startup_timeout, credentials=credentials)
+        with Bus(endpoints) as bus:
+            return _publish(args, selection, bus, connect, own_router, credentials)
     except BusError as exc:
         print(f"nearsub log play: {exc}", file=sys.stderr)
         return 1
 
 
-def _publish(args, selection: Selection, bus, connect: list[str], own_router: bool) -> int:
+def _publish(args, selection: Selection, bus, connect: list[str], own_router: bool, credentials: str | None) -> int:
     from nearsub.common.runtime import keys
 
     c = selection.community
@@ -163,7 +166,7 @@ def _publish(args, selection: Selection, bus, connect: list[str], own_router: bo
         if key not in publishers:
             publishers[key] = bus.publisher(key)
     bus.token(keys.alive(c, "player", "player"))
-    registry.register(c, connect, str(Path(args.log).resolve()))
+    registry.register(c, connect, str(Path(args.log).resolve()), credentials)
     first, last = selection.items[0][0] / 1e9, selection.items[-1][0] / 1e9
     router = "started" if own_router else "given"
     print(f"router {connect[0]} ({router})", flush=True)

@@ -1,8 +1,9 @@
 """Where running missions can be found: one small JSON file per community in a runtime folder.
 
-The launcher writes `<community>.json` (router endpoint, launcher pid, log path) when it starts and
-removes it when it stops; `tap` and `swap` read it so that users can name a community instead of
-an endpoint. Set NEARSUB_RUNTIME_DIR to move the folder (the tests do, to stay isolated).
+The launcher writes `<community>.json` (router endpoint, launcher pid, log path, the path of the
+mission's credentials file) when it starts and removes it when it stops; `tap` and `swap` read it
+so that users can name a community instead of an endpoint. Set NEARSUB_RUNTIME_DIR to move the
+folder (the tests do, to stay isolated).
 
 A launcher first claims its name (`claim`): an exclusive `flock` on `<community>.lock`, taken
 without waiting and held until the launcher exits. The kernel drops the lock when the process
@@ -62,9 +63,13 @@ def claim(community: str) -> Claim:
 
 
 def runtime_dir() -> Path:
+    """The folder, private to this user (mode 0700): it holds the missions' credentials. One in
+    the shared temporary folder that another user owns is refused (they made it to read ours)."""
     default = Path(tempfile.gettempdir()) / f"nearsub-{os.getuid()}"
     path = Path(os.environ.get("NEARSUB_RUNTIME_DIR", default))
-    path.mkdir(parents=True, exist_ok=True)
+    path.mkdir(mode=0o700, parents=True, exist_ok=True)
+    if path.stat().st_uid != os.getuid():
+        raise LookupError(f"runtime folder {path} belongs to another user; set NEARSUB_RUNTIME_DIR")
     return path
 
 
@@ -78,9 +83,16 @@ def _pid_alive(pid: int) -> bool:
     return True
 
 
-def register(community: str, endpoint: list[str], log: str) -> Path:
+def credentials_path(community: str) -> Path:
+    """Where a launcher that starts its own router keeps the mission's credentials."""
+    return runtime_dir() / f"{community}.credentials"
+
+
+def register(community: str, endpoint: list[str], log: str, credentials: str | None = None) -> Path:
+    """Make the mission findable; `credentials` is the file its router requires (None: open)."""
     path = runtime_dir() / f"{community}.json"
-    path.write_text(json.dumps({"community": community, "connect": endpoint, "pid": os.getpid(), "log": log}))
+    entry = {"community": community, "connect": endpoint, "pid": os.getpid(), "log": log, "credentials": credentials}
+    path.write_text(json.dumps(entry))
     return path
 
 

@@ -147,10 +147,12 @@ def _replay(path: Path, port: int) -> int:
 
 
 def mission_endpoints(community: str, connect: list[str] | None, run_file: str | None):
-    """(endpoints, mission or None, log path or None) of a running mission: from the launcher's
-    run file, from --connect, or from the registry (LookupError when it is not running)."""
+    """(endpoints, mission or None, log path or None, credentials file or None) of a running
+    mission: from the launcher's run file, from --connect, or from the registry (LookupError when
+    it is not running)."""
     from . import registry
 
+    # Credentials from the registry; None falls back to $NEARSUB_CREDENTIALS (the launcher's children).
     if run_file:
         from nearsub.common.mission.schema import RunConfig
 
@@ -159,11 +161,12 @@ def mission_endpoints(community: str, connect: list[str] | None, run_file: str |
         except (OSError, ValueError) as exc:
             raise InputError(f"--run {run_file}: not a readable run file ({exc.__class__.__name__})") from None
         log = Path(run.log_dir) / f"{run.mission.name}.mcap"  # where the launcher's logger writes
-        return tuple(connect or run.connect), run.mission, log
+        credentials = registry.running().get(run.mission.name, {}).get("credentials")
+        return tuple(connect or run.connect), run.mission, log, credentials
     if connect:
-        return tuple(connect), None, None
+        return tuple(connect), None, None, None
     entry = registry.lookup(community)
-    return tuple(entry["connect"]), mission_of_run(entry), entry.get("log")
+    return tuple(entry["connect"]), mission_of_run(entry), entry.get("log"), entry.get("credentials")
 
 
 def _live(community: str, connect: list[str] | None, run_file: str | None, port: int) -> int:
@@ -171,10 +174,10 @@ def _live(community: str, connect: list[str] | None, run_file: str | None, port:
 
     from .view_server import LiveSource, serve_viewer
 
-    endpoints, mission, log = mission_endpoints(community, connect, run_file)
+    endpoints, mission, log, credentials = mission_endpoints(community, connect, run_file)
 
     async def main() -> None:
-        with Bus(Endpoints("client", endpoints)) as bus:
+        with Bus(Endpoints("client", endpoints, credentials=credentials)) as bus:
             await serve_viewer(LiveSource(bus, community, mission, log), port, _ready)
 
     return _serve(main(), port)

@@ -44,9 +44,12 @@ class Network(Strict):
     free loopback port and every app connects to it as a client. `connect` points the apps, the
     logger and the tools at existing Zenoh endpoints instead: a `nearsub router` (or zenohd) on
     this or another host, or a Zenoh peer that routes for clients. Multicast scouting stays off;
-    endpoints are always explicit (docs/design.md, "Transport")."""
+    endpoints are always explicit (docs/design.md, "Transport"). `credentials` names the
+    `user:password` file such a router requires (mode 0600; relative to the working directory);
+    the launcher's own router gets fresh random credentials instead."""
 
     connect: list[str] = Field(default_factory=list)
+    credentials: str | None = None
 
     @field_validator("connect")
     @classmethod

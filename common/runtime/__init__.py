@@ -1,6 +1,7 @@
 """Runtime: transport, messages and the lock-step protocol; knows nothing of physics.
 
 - bus: the only Zenoh code (sessions, publishers, FIFO mailboxes, queries).
+- credentials: the mission's user:password file for Zenoh's authentication (create, load).
 - keys: build and parse every key expression.
 - messages: wire messages (pydantic models, msgpack codec, topic -> model registry).
 - lifecycle: the app core protocol (start-up, new mail, iterate), schedule, step runner and in-process runner.

@@ -24,6 +24,7 @@ append to a `queue.SimpleQueue`, which allows timeouts and mixes samples, querie
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import queue
@@ -36,6 +37,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import zenoh
+
+from . import credentials as mission_credentials
 
 ENCODING = "application/msgpack"
 
@@ -73,9 +76,12 @@ def make_config(
     multicast_scouting: bool = False,
     admin_space: bool = False,
     timeout: float | None = None,
+    credentials: str | os.PathLike | None = None,
 ) -> zenoh.Config:
     """A session configuration; a client or peer waits up to `timeout` seconds (default
-    `connect_timeout()`) for its `connect` endpoints, retrying, then fails."""
+    `connect_timeout()`) for its `connect` endpoints, retrying, then fails. With a `credentials`
+    file the session authenticates with its user and password, and a router also admits only
+    sessions that present them (the file is its dictionary)."""
     conf = zenoh.Config()
     conf.insert_json5("mode", json.dumps(mode))
     conf.insert_json5("scouting/multicast/enabled", json.dumps(multicast_scouting))
@@ -86,6 +92,15 @@ def make_config(
         seconds = connect_timeout() if timeout is None else timeout
         conf.insert_json5("connect/timeout_ms", json.dumps(int(seconds * 1000)))
         conf.insert_json5("connect/exit_on_failure", json.dumps(True))
+    if credentials is not None:
+        try:
+            found = mission_credentials.load(credentials)
+        except mission_credentials.CredentialsError as exc:
+            raise BusError(str(exc)) from None
+        auth = {"user": found.user, "password": found.password}
+        if mode == "router":
+            auth["dictionary_file"] = str(found.path)
+        conf.insert_json5("transport/auth/usrpwd", json.dumps(auth))
     if admin_space:
         conf.insert_json5("adminspace", json.dumps({"enabled": True, "permissions": {"read": True, "write": False}}))
     return conf
@@ -100,10 +115,14 @@ class Endpoints:
     listen: tuple[str, ...] = ()
     multicast_scouting: bool = False
     timeout: float | None = None  # seconds to keep trying `connect`; None: connect_timeout()
+    credentials: str | None = None  # the mission's credentials file; None: $NEARSUB_CREDENTIALS
 
     def config(self) -> zenoh.Config:
         listen = self.listen if self.mode == "peer" else ()
-        return make_config(self.mode, self.connect, listen, self.multicast_scouting, timeout=self.timeout)
+        credentials = self.credentials or mission_credentials.from_environment()
+        return make_config(
+            self.mode, self.connect, listen, self.multicast_scouting, timeout=self.timeout, credentials=credentials
+        )
 
 
 @dataclass
@@ -277,9 +296,14 @@ class Publisher:
         self._publisher.put(payload)
 
 
+def _reason(exc: Exception) -> str:
+    """Zenoh's first line, without the Rust source location it appends ("... at /root/...rs:388.")."""
+    reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+    return reason.split(" at /", 1)[0].rstrip(".")
+
+
 def open_error(config: zenoh.Config, exc: Exception) -> str:
-    """One line for a session that did not open: the endpoints and Zenoh's reason, without the
-    Rust source location Zenoh appends ("... Timeout! at /root/.cargo/...rs:388.")."""
+    """One line for a session that did not open: the endpoints and Zenoh's reason."""
 
     def read(key: str):
         try:
@@ -290,15 +314,31 @@ def open_error(config: zenoh.Config, exc: Exception) -> str:
     connect = read("connect/endpoints") or []
     if isinstance(connect, dict):  # per-mode form {"router": [...], "peer": [...], "client": [...]}
         connect = [e for v in connect.values() for e in v]
-    reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-    reason = reason.split(" at /", 1)[0].rstrip(".")
+    reason = _reason(exc)
     if "Timeout" in reason and connect:
         timeout_ms = read("connect/timeout_ms")
         within = f" within {timeout_ms / 1000:g} s" if isinstance(timeout_ms, int | float) else ""
-        return f"cannot reach {', '.join(connect)}{within} (is the router running there?)"
+        # A router refusing the credentials (or their absence) looks the same as no router.
+        user = read("transport/auth/usrpwd/user")
+        hint = f"does it accept user {user}?" if user else "does it require credentials?"
+        return f"cannot reach {', '.join(connect)}{within} (is the router running there, and {hint})"
     listen = read("listen/endpoints") or []
     where = ", ".join(connect) or (", ".join(listen) if isinstance(listen, list) else str(listen))
     return f"cannot open a Zenoh session on {where or 'no endpoint'}: {reason}"
+
+
+def _router_lost(method):
+    """A Zenoh error inside `method` (the router vanished mid-command) as a BusError naming the
+    endpoints, which the command line prints as one line."""
+
+    @functools.wraps(method)
+    def wrapper(self, *args, **kwargs):
+        try:
+            return method(self, *args, **kwargs)
+        except zenoh.ZError as exc:
+            raise BusError(f"lost the bus at {self.where()}: {_reason(exc)}") from None
+
+    return wrapper
 
 
 class Bus:
@@ -334,16 +374,26 @@ class Bus:
     def session(self) -> zenoh.Session:
         return self._session
 
+    def where(self) -> str:
+        """The endpoints this session connects to, for messages."""
+        try:
+            connect = json.loads(self._config.get_json("connect/endpoints"))
+        except Exception:  # a config this Zenoh cannot read back: say less
+            connect = []
+        return ", ".join(connect) if isinstance(connect, list) and connect else "its endpoint"
+
     def publisher(self, key: str, lossless: bool = True) -> Publisher:
         congestion = zenoh.CongestionControl.BLOCK if lossless else zenoh.CongestionControl.DROP
         pub = self._session.declare_publisher(key, encoding=ENCODING, congestion_control=congestion, express=True)
         self._keep.append(pub)
         return Publisher(pub)
 
+    @_router_lost
     def put(self, key: str, payload: bytes) -> None:
         """One-off lossless publication (tools, rare events)."""
         self._session.put(key, payload, encoding=ENCODING, congestion_control=zenoh.CongestionControl.BLOCK)
 
+    @_router_lost
     def put_when_matched(self, key: str, payload: bytes, wait: float = 2.0) -> bool:
         """Publish once some subscriber matches `key` (a fresh session may not yet know the
         subscribers, and data put before that is not delivered). Returns whether a match was seen;
@@ -351,13 +401,20 @@ class Bus:
         pub = self._session.declare_publisher(key, encoding=ENCODING, congestion_control=zenoh.CongestionControl.BLOCK)
         try:
             end = time.monotonic() + wait
-            while not pub.matching_status and time.monotonic() < end:
+            # `matching_status` is an object (always truthy); its answer is `.matching`.
+            while not (matched := pub.matching_status.matching) and time.monotonic() < end:
                 time.sleep(0.005)
-            matched = pub.matching_status
             pub.put(payload)
             return matched
         finally:
             pub.undeclare()
+
+    def put_reply(self, key: str, payload: bytes) -> None:
+        """Answer a request on the requester's reply key at once, never waiting for a match: the
+        requester subscribed to that key before it sent the request, and a client's every put
+        goes to the router, which took the subscription before the request (one link, in order)
+        and so routes the answer. A requester that left meanwhile costs nothing."""
+        self.put(key, payload)
 
     def stream(self, key: str, capacity: int = 8192, lossy: bool = False) -> Stream:
         """One FIFO-channel subscription (the logger's view of everything). Lossless
@@ -381,6 +438,7 @@ class Bus:
         sub = self._session.liveliness().declare_subscriber(key, _direct(callback), history=False)
         self._keep.append(sub)
 
+    @_router_lost
     def subscribe(self, key: str, mailbox: Mailbox) -> None:
         self._keep.append(self._session.declare_subscriber(key, _direct(mailbox.on_sample)))
 
@@ -408,11 +466,13 @@ class Bus:
         sub = self._session.liveliness().declare_subscriber(key, _direct(mailbox.on_liveliness), history=history)
         self._keep.append(sub)
 
+    @_router_lost
     def alive(self, key: str, timeout: float = 1.0) -> list[str]:
         """Keys of the liveliness tokens alive now under `key`."""
         replies = self._session.liveliness().get(key, timeout=timeout)
         return sorted(str(r.ok.key_expr) for r in replies if r.ok is not None)
 
+    @_router_lost
     def request(self, key: str, payload: bytes = b"", timeout: float = 5.0) -> list[tuple[bool, bytes]]:
         """Query `key`; each reply is (ok, payload). No replier gives an empty list."""
         replies = self._session.get(key, payload=payload, timeout=timeout)
@@ -433,6 +493,7 @@ class Bus:
                 return list(json.loads(reply.ok.payload.to_bytes()).get("locators", []))
         return []
 
+    @_router_lost
     def admin_keys(self, what: str, timeout: float = 1.0) -> list[str]:
         """Declared entities known to routers (`what` = publisher, subscriber or queryable)."""
         keys = set()

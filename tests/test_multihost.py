@@ -1,0 +1,114 @@
+"""Two hosts, with credentials: the router in one Linux network namespace, listening on its veth
+address, and the launcher with every app in another, connecting across the veth pair
+(README, "Connecting apps on several hosts"). The trajectory equals the in-process run, which
+the single-host tests show equal to a single-host launch."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from conftest import ALPHA
+from helpers import per_topic
+from nearsub.common.mission.cores import build_cores
+from nearsub.common.mission.schema import load_mission
+from nearsub.common.runtime.lifecycle import Schedule, run_inprocess
+from nearsub.common.runtime.messages import encode
+
+pytestmark = [pytest.mark.reliability, pytest.mark.timeout(600)]
+
+PORT = 7447
+
+
+def _ip(*args: str) -> None:
+    subprocess.run(["ip", *args], check=True, capture_output=True, text=True)
+
+
+@pytest.fixture
+def two_hosts():
+    """(router namespace, apps namespace, router address): two namespaces joined by a veth pair."""
+    if shutil.which("ip") is None:
+        pytest.skip("needs the `ip` command (iproute2) to make network namespaces")
+    if os.geteuid() != 0:
+        pytest.skip("needs root to make network namespaces")
+    tag = f"{os.getpid() % 100000}"
+    hosts = (f"nsrouter{tag}", f"nsapps{tag}")
+    subnet = f"10.{200 + os.getpid() % 50}.{os.getpid() % 250}"
+    try:
+        for host in hosts:
+            _ip("netns", "add", host)
+            _ip("-n", host, "link", "set", "lo", "up")
+        _ip("link", "add", f"vr{tag}", "netns", hosts[0], "type", "veth", "peer", "name", f"va{tag}", "netns", hosts[1])
+        for host, link, address in ((hosts[0], f"vr{tag}", 1), (hosts[1], f"va{tag}", 2)):
+            _ip("-n", host, "addr", "add", f"{subnet}.{address}/24", "dev", link)
+            _ip("-n", host, "link", "set", link, "up")
+        yield hosts[0], hosts[1], f"{subnet}.1"
+    finally:
+        for host in hosts:
+            subprocess.run(["ip", "netns", "del", host], capture_output=True)  # takes the veth pair with it
+
+
+def test_router_on_one_host_and_apps_on_another_with_credentials(two_hosts, tmp_path, community):
+    router_host, apps_host, address = two_hosts
+    endpoint = f"tcp/{address}:{PORT}"
+    secret = tmp_path / "mission.credentials"  # what the user copies to the other host
+    env = dict(os.environ, NEARSUB_RUNTIME_DIR=str(tmp_path / "runtime"))
+    env.pop("NEARSUB_CREDENTIALS", None)
+    nearsub = [sys.executable, "-m", "nearsub"]
+    settings = [f"name={community}", "time_limit=20", f"network.connect={json.dumps([endpoint])}"]
+    mission = load_mission(ALPHA, settings)
+    router = subprocess.Popen(
+        ["ip", "netns", "exec", router_host, *nearsub, "router", "--listen", endpoint, "--credentials", str(secret)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env=env,
+        process_group=0,
+    )
+    try:
+        end = time.monotonic() + mission.startup_timeout
+        lines = []
+        while not any("router listening on" in line for line in lines):
+            assert time.monotonic() < end and router.poll() is None, lines
+            lines.append(router.stdout.readline())
+        assert f"router listening on {endpoint}" in lines[-1] and str(secret) in lines[-1], lines
+
+        on_apps_host = ["ip", "netns", "exec", apps_host, *nearsub]
+        stranger = subprocess.run(
+            [*on_apps_host, "launch", str(ALPHA), "--log", str(tmp_path / "stranger"), "--set", "startup_timeout=2"]
+            + [a for s in settings for a in ("--set", s)],
+            capture_output=True,
+            text=True,
+            env=env,
+            timeout=10 * mission.startup_timeout,
+        )
+        assert stranger.returncode == 1 and f"cannot reach {endpoint}" in stranger.stderr, stranger.stderr
+
+        given = [*settings, f'network.credentials="{secret}"']
+        launch = subprocess.run(
+            [*on_apps_host, "launch", str(ALPHA), "--log", str(tmp_path / "logs"), "--json"]
+            + [a for s in given for a in ("--set", s)],
+            capture_output=True,
+            text=True,
+            env=env,
+            timeout=5 * mission.startup_timeout + mission.time_limit * 10,
+        )
+        assert launch.returncode == 0, launch.stderr
+        summary = json.loads(launch.stdout.strip().splitlines()[-1])
+        assert summary["outcome"] == "time_limit" and summary["steps"] == mission.max_steps
+    finally:
+        os.killpg(router.pid, signal.SIGTERM)
+        router.wait(timeout=30)
+
+    reference = run_inprocess(build_cores(mission), Schedule(mission.periods()), mission.dt, mission.max_steps)
+    logged = per_topic(Path(summary["log"]))
+    for leaf in ("state", "desired", "input"):
+        assert logged[f"remus100/{leaf}"] == [encode(m) for m in reference.topic(leaf)], leaf
