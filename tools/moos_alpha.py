@@ -5,9 +5,9 @@ temporary folder and made headless: pMarineViewer and pRealm (which serves the v
 Antler block, MOOSTimeWarp is set, and alpha.bhv initialises DEPLOY=true and
 MOOS_MANUAL_OVERRIDE=false, the two variables pMarineViewer's DEPLOY button posts. pAntler
 launches the community, `uQueryDB --condition=MISSION=complete --wait=T` waits for the endflag of
-the mission's return behaviour, and SIGINT to pAntler makes it stop and reap its apps (Benjamin et
-al., "MOOS-IvP 24.8 Tools and Utilities": pAntler, uQueryDB; "Helm Autonomy": initialize,
-endflag). The run phase is read from pLogger's alog, whose times are MOOSTime, i.e. wall time times
+the mission's return behaviour, and SIGINT to pAntler makes it stop and reap its apps (the
+MOOS-IvP documentation, Benjamin et al.: pAntler, uQueryDB, and the helm's initialize and endflag).
+The run phase is read from pLogger's alog, whose times are MOOSTime, i.e. wall time times
 the warp: from the helm's first IVPHELM_STATE=DRIVE to MISSION=complete.
 
 MOOSDB listens on every interface, so the community runs in a network namespace of its own
@@ -271,10 +271,13 @@ def compare(mission_path: Path, repeats: int, verbose: bool) -> dict:
     runs: dict[str, list[dict]] = {f"{side}@{warp:g}": [] for side, warp in plan}
     for index in range(repeats):
         for side, warp in plan:
-            if side == "moos":
-                run = run_moos(folder, warp, mission.time_limit)
-            else:
-                run = run_nearsub(mission_path, warp, f"{os.getpid()}_{index}w{warp:g}", mission.time_limit)
+            try:
+                if side == "moos":
+                    run = run_moos(folder, warp, mission.time_limit)
+                else:
+                    run = run_nearsub(mission_path, warp, f"{os.getpid()}_{index}w{warp:g}", mission.time_limit)
+            except RuntimeError as exc:
+                return {"ran": False, "reason": f"{exc}: comparison stopped"}
             runs[f"{side}@{warp:g}"].append(run)
             if verbose:
                 print(f"  {side} alpha at warp {warp:g}, run {index + 1}: {run_line(run)}", file=sys.stderr)
