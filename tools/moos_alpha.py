@@ -280,7 +280,8 @@ def compare(mission_path: Path, repeats: int, verbose: bool) -> dict:
                 return {"ran": False, "reason": f"{exc}: comparison stopped"}
             runs[f"{side}@{warp:g}"].append(run)
             if verbose:
-                print(f"  {side} alpha at warp {warp:g}, run {index + 1}: {run_line(run)}", file=sys.stderr)
+                who = "MOOS-IvP" if side == "moos" else side
+                print(f"  {who} alpha at warp {warp:g}, run {index + 1}: {run_line(run)}", file=sys.stderr)
     summary = {}
     for name, r in runs.items():
         summary[name] = {
@@ -347,5 +348,6 @@ def print_comparison(result: dict) -> None:
     gap = math.dist(ours["final"], theirs["final"])
     print(
         f"  they differ in the vehicle (nearsub: the REMUS 100 model; MOOS-IvP: uSimMarineV22's kinematic model): "
-        f"simulated {ours['sim_s']:.1f} s against {theirs['sim_s']:.1f} s at warp 25, final positions {gap:.1f} m apart"
+        f"simulated {ours['sim_s']:.1f} s against {theirs['sim_s']:.1f} s at warp 25, "
+        f"final positions (last runs) {gap:.1f} m apart"
     )
