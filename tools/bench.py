@@ -2,7 +2,8 @@
 
 `pipeline` runs missions (alpha and overtake_stern_nuv by default) at warp 0 through the
 multi-process launcher and in one process, and reports lock-stepped steps per second, the CPU per
-step of each process, start-up and shutdown times, and whether MOOS-IvP could be compared.
+step of each process and start-up and shutdown times, then flies alpha beside MOOS-IvP's own alpha
+at warp 25 and 50 where MOOS-IvP is installed (tools/moos_alpha.py).
 
 `envelope` times one operating envelope in the batch engine (vehicle-steps per second), the same
 cells flown one by one in-process (a sample, extrapolated) and the whole `--thesis-figures` set.
@@ -19,6 +20,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from . import moos_alpha
 from .envelope import grid_size
 
 DEFAULT_MISSION = Path(__file__).resolve().parents[1] / "missions" / "alpha.toml"
@@ -113,20 +115,6 @@ def bench_mission(mission_path: Path, log_dir: str, repeats: int, verbose: bool)
     }
 
 
-# The MOOS-IvP apps the alpha comparison needs (README, "Benchmarks").
-MOOS_APPS = ("pAntler", "MOOSDB", "pHelmIvP", "uSimMarineV22", "pMarinePIDV22")
-
-
-def moos_comparison() -> dict:
-    """Whether MOOS-IvP's alpha mission can be run beside nearsub's (its apps on PATH)."""
-    import shutil
-
-    missing = [app for app in MOOS_APPS if shutil.which(app) is None]
-    if missing:
-        return {"ran": False, "reason": f"MOOS-IvP not on PATH (missing {', '.join(missing)}): comparison skipped"}
-    return {"ran": False, "reason": "MOOS-IvP found, but its alpha run at warp 25 and 50 is not implemented yet"}
-
-
 def bench_pipeline(args) -> int:
     import os
 
@@ -139,7 +127,10 @@ def bench_pipeline(args) -> int:
             if measured is None:
                 return 1
             result[path.stem] = measured
-    result["moos_ivp"] = moos_comparison()
+    if DEFAULT_MISSION in [path.resolve() for path in missions]:
+        result["moos_ivp"] = moos_alpha.compare(DEFAULT_MISSION, args.repeats, not args.json)
+    else:
+        result["moos_ivp"] = {"ran": False, "reason": "it runs beside the alpha mission only: comparison skipped"}
     result["load_average"] = {"before": round(load_before, 2), "after": round(os.getloadavg()[0], 2)}
     if args.json:
         print(json.dumps(result))
@@ -158,7 +149,7 @@ def bench_pipeline(args) -> int:
             f"  start-up {up['median']:.2f} s (min {up['min']:.2f}), shutdown {down['median']:.2f} s "
             f"(min {down['min']:.2f})   (target: >= 1000 steps/s, start-up + shutdown <= 2 s)"
         )
-    print(f"MOOS-IvP alpha at warp 25 and 50: {result['moos_ivp']['reason']}")
+    moos_alpha.print_comparison(result["moos_ivp"])
     load = result["load_average"]
     print(f"load average {load['before']} before, {load['after']} after (1 min)")
     return 0
