@@ -1,5 +1,6 @@
-"""Screenshots of `nearsub view` for docs/viewer: a live overtake near the submarine's stern, and
-the replay of its log at the collision. Run from the repository: `.venv/bin/python tests/viewer_shots.py`.
+"""Screenshots of `nearsub view` for docs/viewer: a live overtake near the submarine's stern, the
+replay of its log at the collision, and the replay of one envelope cell (its mission written by
+`nearsub envelope --cell-mission`). Run from the repository: `.venv/bin/python tests/viewer_shots.py`.
 
 The mission pauses itself just before the collision (pause_at_step), so the live picture is the
 same on every run; the page's Resume button then lets it finish and the log is replayed.
@@ -21,7 +22,9 @@ from browser import Browser
 
 ROOT = Path(__file__).resolve().parents[1]
 MISSION = ROOT / "missions" / "overtake_stern_standard.toml"
-PAUSE_STEP = 2700  # t = 135 s, 4.5 s before the collision with standard waypoints
+PAUSE_STEP = 1915  # t = 95.75 s, 4.5 s before the collision with standard waypoints (t = 100.25 s)
+# The envelope cell: the SDV of figure 5-10 with the standard helm, starting beside the afterbody.
+CELL = ("--vehicle", "sdv", "--behaviour", "waypoints", "--cell-mission=-0.3,0.065")
 
 
 def nearsub(*args: str) -> subprocess.Popen:
@@ -42,6 +45,31 @@ def clock_paused(community: str) -> bool:
         [sys.executable, "-m", "nearsub", "clock", community, "status"], capture_output=True, text=True
     )
     return done.returncode == 0 and json.loads(done.stdout)["paused"]
+
+
+def replay_shot(browser: Browser, log: str, path: Path, viewers: list) -> None:
+    """Open the replay of `log`, scrub to its last state and capture it."""
+    replay = nearsub("view", log)
+    viewers.append(replay)
+    browser.open(url_of(replay))
+    browser.wait_for("window.nearsub.drawn", 30)
+    t = browser.evaluate("window.nearsub.scene.range[1]")
+    browser.evaluate(f"const s = document.getElementById('scrub'); s.value = {t}; s.oninput()")
+    browser.wait_for(f"window.nearsub.drawn.t >= {t} - 1e-6", 30)  # t is a float from the page
+    time.sleep(0.3)
+    print(browser.screenshot(path))
+
+
+def envelope_cell_log(work: Path) -> str:
+    """Write the envelope cell's mission, fly it through the launcher, return its log."""
+    cell = work / "cell.toml"
+    subprocess.run([sys.executable, "-m", "nearsub", "envelope", *CELL, "-o", str(cell)], check=True)
+    done = subprocess.run(
+        [sys.executable, "-m", "nearsub", "launch", str(cell), "--json", "--log", str(work / "logs")],
+        capture_output=True,
+        text=True,
+    )
+    return json.loads(done.stdout.strip().splitlines()[-1])["log"]
 
 
 def main() -> int:
@@ -82,19 +110,14 @@ def main() -> int:
             print(browser.screenshot(out / "live-overtake-follow.png"))
             browser.evaluate("document.getElementById('resume').click()")
         summary = json.loads(launch.communicate(timeout=120)[0].strip().splitlines()[-1])
-        replay = nearsub("view", summary["log"])
-        viewers.append(replay)
         with Browser(width=1400, height=800) as browser:
-            browser.open(url_of(replay))
-            browser.wait_for("window.nearsub.drawn", 30)
-            t = browser.evaluate("window.nearsub.scene.range[1]")  # the last state: the collision
-            browser.evaluate(f"const s = document.getElementById('scrub'); s.value = {t}; s.oninput()")
-            browser.wait_for(f"window.nearsub.drawn.t >= {t}", 30)
-            time.sleep(0.3)
-            print(browser.screenshot(out / "replay-overtake.png"))
+            replay_shot(browser, summary["log"], out / "replay-overtake.png", viewers)  # the collision
             browser.evaluate("document.getElementById('follow').click()")
             time.sleep(0.5)
             print(browser.screenshot(out / "replay-overtake-follow.png"))
+        cell_log = envelope_cell_log(work)
+        with Browser(width=1400, height=800) as browser:
+            replay_shot(browser, cell_log, out / "replay-envelope-cell.png", viewers)
     finally:
         for process in [launch, *viewers]:
             if process.poll() is None:
