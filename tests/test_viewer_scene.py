@@ -116,6 +116,16 @@ def test_frame_at_a_time_shows_the_past_for_replay(overtake):
     assert model.frame(-1.0)["vehicle"] is None
 
 
+def test_a_decimal_time_reaches_the_state_of_its_binary_step(overtake):
+    """A page scrubbed to 11.7 s must draw the state at 117 x 0.1 = 11.700000000000001 s."""
+    model = SceneModel.for_mission(overtake)
+    for step in range(118):
+        model.feed(state(step, -60.0 + 0.1 * step, 5.89, dt=0.1))
+    assert model.time_range()[1] == 117 * 0.1 > 11.7
+    assert model.frame(11.7)["vehicle"]["step"] == 117
+    assert model.frame(11.65)["vehicle"]["step"] == 116
+
+
 def test_applied_force_arrow_is_weighted_rotated_and_scaled(overtake):
     model = SceneModel.for_mission(overtake)
     model.feed(state(10, -20.0, 6.0, math.pi / 2))

@@ -380,13 +380,17 @@ def _has_time(times: list[float], t: float) -> bool:
     return index < len(times) and times[index] == t
 
 
+TIME_SLACK = 1e-6  # [s], far below any step
+
+
 def _latest(times: list[float], items: list, t: float | None):
-    """The newest item at or before t (the newest of all when t is None)."""
+    """The newest item at or before t (the newest of all when t is None). Times are k dt in
+    binary and a page's t is decimal (11.7 against 11.700000000000001): 1 us of slack."""
     if not items:
         return None
     if t is None:
         return items[-1]
-    index = bisect.bisect_right(times, t)
+    index = bisect.bisect_right(times, t + TIME_SLACK)
     return items[index - 1] if index else None
 
 
