@@ -122,8 +122,12 @@ def test_a_decimal_time_reaches_the_state_of_its_binary_step(overtake):
     for step in range(118):
         model.feed(state(step, -60.0 + 0.1 * step, 5.89, dt=0.1))
     assert model.time_range()[1] == 117 * 0.1 > 11.7
-    assert model.frame(11.7)["vehicle"]["step"] == 117
-    assert model.frame(11.65)["vehicle"]["step"] == 116
+    model.feed(Event(step=117, t=117 * 0.1, source="sim", kind="collision", detail="hull", data={}))
+    model.feed(MissionEnd(step=118, t=118 * 0.1, source="clock", outcome="collision"))
+    end = model.frame(11.7)
+    assert end["vehicle"]["step"] == 117 and [e["kind"] for e in end["events"]] == ["collision"]
+    assert end["status"]["outcome"] == "collision"
+    assert model.frame(11.65)["vehicle"]["step"] == 116 and model.frame(11.65)["events"] == []
 
 
 def test_applied_force_arrow_is_weighted_rotated_and_scaled(overtake):

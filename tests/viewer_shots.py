@@ -118,6 +118,9 @@ def main() -> int:
         cell_log = envelope_cell_log(work)
         with Browser(width=1400, height=800) as browser:
             replay_shot(browser, cell_log, out / "replay-envelope-cell.png", viewers)
+            browser.evaluate("document.getElementById('follow').click()")
+            time.sleep(0.5)
+            print(browser.screenshot(out / "replay-envelope-cell-follow.png"))
     finally:
         for process in [launch, *viewers]:
             if process.poll() is None:

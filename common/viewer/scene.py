@@ -281,7 +281,7 @@ class SceneModel:
         """The picture at simulated time t (None: the newest). `now` (monotonic wall time) lets
         a live view report a warp of 0 once the states stop (paused, ended)."""
         pose = self.pose_at(t)
-        until = t if t is not None else math.inf
+        until = t + TIME_SLACK if t is not None else math.inf
         trail_end = bisect.bisect_right(self.trail_times, until)
         trail = [[round(x, 3), round(y, 3)] for _, x, y in self.trail[:trail_end]]
         vehicle = None
@@ -307,7 +307,7 @@ class SceneModel:
         if self.end is not None:
             # The end is labelled with the step after the last state: show it from that state on.
             last_pose = self.pose_times[-1] if self.pose_times else math.inf
-            if t is None or t >= min(self.end.t, last_pose):
+            if t is None or until >= min(self.end.t, last_pose):
                 end = self.end
         warp = self.achieved_warp() if t is None else None
         if warp is not None and now is not None and self._wall and now - self._wall[-1][0] > 1.0:
