@@ -157,11 +157,12 @@ def test_compensated_heading_is_what_the_helm_publishes(model_file):
         assert (progress.delta_psi != 0.0) == (progress.n_s != 0.0)  # zero outside the domain only
 
 
-def test_a_hull_outside_the_shape_constraints_is_reported_as_getting_no_interaction():
-    """The NPS AUV II (L/D 5.31 at D_sub/D_uuv 24.7) fails (4.6), "not too short": no interaction."""
+def test_a_hull_outside_the_shape_constraints_is_reported_as_getting_no_surrogate_share():
+    """The NPS AUV II (L/D 5.31 at D_sub/D_uuv 24.7) fails (4.6), "not too short": no surrogate
+    share (the LF increment alone in increment mode)."""
     from nearsub.common.physics.vehicles import NPS_AUV_II
     from nearsub.common.surrogate.interaction import geometry_outside
 
     reason = geometry_outside(NPS_AUV_II)
-    assert reason is not None and "(4.6)" in reason and "zero everywhere" in reason
+    assert reason is not None and "(4.6)" in reason and "zero everywhere" in reason and "LF increment" in reason
     assert geometry_outside(SDV) is None

@@ -206,7 +206,7 @@ HULL_SHAPE_CONSTRAINTS = [2, 3]  # (4.6) and (4.7): functions of the hull ratios
 
 def geometry_outside(vehicle: Vehicle) -> str | None:
     """Why the vehicle's hull is outside the surrogate's trained hulls (table 4.2, or the hull-shape
-    constraints (4.6)/(4.7), which switch the interaction off everywhere), or None."""
+    constraints (4.6)/(4.7), which switch the surrogate's share off everywhere), or None."""
     inputs, _ = domain.to_inputs(0.0, 0.0, 0.0, 0.0, vehicle.length, vehicle.diameter)
     lower, upper = domain.BOUNDS[GEOMETRY, 0], domain.BOUNDS[GEOMETRY, 1]
     inputs[:, GEOMETRY] = np.clip(inputs[:, GEOMETRY], lower, upper)  # as interaction_at evaluates it
@@ -215,8 +215,9 @@ def geometry_outside(vehicle: Vehicle) -> str | None:
         names = [domain.CONSTRAINT_NAMES[i] for i in HULL_SHAPE_CONSTRAINTS]
         failed = ", ".join(f"{n} = {v:.3g} < 0" for n, v in zip(names, shape, strict=True) if v < 0)
         return (
-            f"vehicle {vehicle.name}: hull outside the surrogate's constraints ({failed}); the interaction "
-            "forces are zero everywhere for this vehicle"
+            f"vehicle {vehicle.name}: hull outside the surrogate's constraints ({failed}); the surrogate's "
+            "share is zero everywhere for this vehicle (with the LF in the loop in increment mode the LF "
+            "increment still acts; in replace and thesis modes there is no interaction)"
         )
     inputs, _ = domain.to_inputs(0.0, 0.0, 0.0, 0.0, vehicle.length, vehicle.diameter)
     values = inputs[0, GEOMETRY]
