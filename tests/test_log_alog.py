@@ -4,6 +4,8 @@ conventions"). The checks follow the parsing rules of moos-ivp's `lib_logutils/L
 `TIME VARIABLE SOURCE VALUE` with a numeric time and a non-empty value."""
 
 import math
+import shutil
+import subprocess
 
 import pytest
 from logsample import STARTED_UNIX, write_sample_log
@@ -109,3 +111,23 @@ def test_events_and_controls_are_text_variables(exported):
     assert postings(body, "INVALID_MESSAGE") == [(10.0, "logger", "nearsub/alpha/remus100/state")]
     db_time = postings(body, "DB_TIME")
     assert [t for t, _, _ in db_time] == [float(s) for s in range(11)] and db_time[0][1] == "MOOSDB_alpha"
+
+
+@pytest.mark.skipif(
+    shutil.which("alogsort") is None or shutil.which("aloggrep") is None,
+    reason="MOOS-IvP's alogsort and aloggrep are not on PATH (see the README's MOOS-IvP build)",
+)
+def test_moos_ivps_own_tools_read_it(exported, tmp_path):
+    """Where MOOS-IvP is installed: alogsort finds nothing to re-sort and aloggrep keeps the NAV_*
+    track that alogview draws."""
+    source = tmp_path / "alpha.alog"
+    source.write_text("\n".join(exported[1]) + "\n")
+    sorted_alog = tmp_path / "sorted.alog"
+    subprocess.run(["alogsort", str(source), str(sorted_alog)], check=True, capture_output=True)
+    assert sorted_alog.read_text() == source.read_text()
+    nav = tmp_path / "nav.alog"
+    subprocess.run(
+        ["aloggrep", str(source), "NAV_X", "NAV_Y", "NAV_HEADING", str(nav)], check=True, capture_output=True
+    )
+    kept = {line.split()[1] for line in nav.read_text().splitlines() if line and not line.startswith("%")}
+    assert kept == {"NAV_X", "NAV_Y", "NAV_HEADING"}
