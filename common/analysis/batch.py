@@ -117,9 +117,8 @@ def run_batch(
 
     def ask(x: np.ndarray, sampled: bool):  # one query for the whole batch; sweeps need no std
         own = (lambda X, rows: delta(X, flying[rows])) if sampled else None  # rows of the UUVs flying now
-        return interaction_at(
-            surrogate, x, vehicle, mission.environment.rho, sim.interaction, False, True, delta=own
-        )
+        rho, mode = mission.environment.rho, sim.interaction
+        return interaction_at(surrogate, x, vehicle, rho, mode, with_std=False, weighted_only=True, delta=own)
 
     for step in range(mission.max_steps):
         if flying.size == 0:
@@ -142,7 +141,9 @@ def run_batch(
                 cross_flow,
             )
             if compensate:
-                commanded = behaviours.nuv_heading_offset(believed.applied[:, 2], speed, vehicle.compensation_N_uv, gamma)
+                commanded = behaviours.nuv_heading_offset(
+                    believed.applied[:, 2], speed, vehicle.compensation_N_uv, gamma
+                )
                 delta_psi = behaviours.guard_heading_offset(
                     x[:, dynamics.X],
                     x[:, dynamics.Y],

@@ -351,6 +351,8 @@ class Sampling:
     def __post_init__(self):
         if self.samples < 1:
             raise ValueError(f"--samples wants at least 1, got {self.samples}")
+        if self.seed < 0:
+            raise ValueError(f"--sample-seed wants 0 or more, got {self.seed}")
         if self.wave_phase not in ("fixed", "random"):
             raise ValueError(f"--wave-phase wants fixed or random, got {self.wave_phase!r}")
 
@@ -501,7 +503,9 @@ def sampled_envelope(
         parts: list[SampledEnvelope | None] = [None] * len(chunks)
         for index, part in completed(client, sampled_task, [(config, sampling, c) for c in chunks]):
             parts[index] = part
-    joined = BatchResult(*(np.concatenate([getattr(p.result, f) for p in parts]) for f in BatchResult.__dataclass_fields__))
+    joined = BatchResult(
+        *(np.concatenate([getattr(p.result, f) for p in parts]) for f in BatchResult.__dataclass_fields__)
+    )
     first = parts[0]
     return SampledEnvelope(
         config, sampling, first.r_long, first.r_lat, np.arange(sampling.samples), joined, time.perf_counter() - started
