@@ -145,8 +145,8 @@ def draw_samples(model: Any, k: int, seed: Any = 0, n_features: int = DEFAULT_FE
     """K posterior function samples of the residual GP of `model` (a `Surrogate` or an
     `LFInLoopModel` of kind "lf_in_loop"); the same seed gives the same samples.
 
-    For a batch engine: draw once per run, then per step call `samples.delta(X)` with the K x
-    cells inputs (K, n, 6) and use sample i's rows where the mean delta would be used."""
+    For a batch engine: draw once per run, then per step call `samples.rows(X, sample)` with the
+    inputs of the UUVs flying and the sample of each, where the mean delta would be used."""
     inner = getattr(model, "model", model)
     if getattr(inner, "kind", None) != "lf_in_loop":
         raise TypeError(f"posterior samples need a model of kind 'lf_in_loop', got {getattr(inner, 'kind', None)!r}")
