@@ -5,6 +5,7 @@
     nearsub envelope --compare A.json B.json -o compare.png
     nearsub envelope --vehicle sdv --cell-mission=-0.3,0.065 -o cell.toml   # replay one cell
     nearsub envelope --thesis-figures [--scheduler tcp://HOST:8786]
+    nearsub envelope --vehicle sdv --samples 32 [--sample-seed 0] [--wave-phase random]   # P(outcome)
 
 Every option that describes the conditions takes several values; their combinations make a sweep,
 one Dask task per configuration with `--workers N` (a local cluster on loopback) or `--scheduler`
@@ -69,6 +70,16 @@ def add_parser(sub) -> None:
     p.add_argument("--scheduler", metavar="ADDRESS", help="run the sweep on this Dask scheduler (tcp://host:8786)")
     p.add_argument("--workers", type=int, metavar="N", help="run the sweep on a local Dask cluster of N processes")
     p.add_argument("--json", action="store_true", help="print the summaries (fractions) as JSON lines")
+    p.add_argument(
+        "--samples",
+        type=int,
+        metavar="K",
+        help="fly every cell under K posterior samples of the surrogate's residual: P(outcome) per cell",
+    )
+    p.add_argument("--sample-seed", type=int, default=0, metavar="S", help="seed of the samples (default 0)")
+    p.add_argument(
+        "--wave-phase", default="fixed", metavar="fixed|random", help="with --samples: a random wave phase per sample"
+    )
     p.set_defaults(func=envelope_command)
 
 
@@ -304,6 +315,8 @@ def envelope_command(args) -> int:
     configs = configs_from_args(args)
     if args.cell_mission:
         return cell_mission_command(configs, args)
+    if args.samples is not None or args.wave_phase != "fixed":
+        return sampled_command(configs, args)
     out = Path(args.out or "envelopes")
     single_file = len(configs) == 1 and out.suffix.lower() in (".png", ".json", ".csv")
     started = time.perf_counter()
@@ -354,6 +367,120 @@ def compare_command(args) -> int:
     print(fractions_line(first))
     print(fractions_line(second))
     print(f"wrote {out}")
+    return 0
+
+
+# --------------------------------------------------------------------------------- sampled envelopes
+def draw_collision_probability(summary: dict, path: Path) -> Path:
+    """P(collision) per cell over the submarine's outline, with contours, the cells marked safe
+    (P(collision) < safe_below) dotted and infeasible cells grey."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+    from matplotlib.colors import ListedColormap
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    from nearsub.common.physics.hull import L_SUB, submarine_outline
+
+    r_long, r_lat = np.asarray(summary["r_long"]), np.asarray(summary["r_lat"])
+    p = summary["probability"]
+    collision = np.asarray(p["collision"], dtype=float)
+    infeasible = np.asarray(p["infeasible"]) == 1.0
+    fig, ax = plt.subplots(figsize=(7.5, 3.9))
+    mesh = ax.pcolormesh(
+        _edges(r_long),
+        _edges(r_lat),
+        np.ma.masked_where(infeasible, collision).T,
+        cmap="Reds",
+        vmin=0.0,
+        vmax=1.0,
+        edgecolors="white",
+        linewidth=0.3,
+    )
+    grey = ListedColormap([COLOURS[-1]])
+    ax.pcolormesh(_edges(r_long), _edges(r_lat), np.ma.masked_where(~infeasible, collision).T, cmap=grey)
+    if len(r_long) > 1 and len(r_lat) > 1:
+        lines = ax.contour(r_long, r_lat, collision.T, levels=[0.05, 0.5, 0.95], colors="black", linewidths=0.8)
+        ax.clabel(lines, fmt=lambda v: f"{100 * v:.0f}%", fontsize=7)
+    safe = np.asarray(summary["marked_safe"], dtype=bool)
+    i, j = np.nonzero(safe)
+    ax.plot(r_long[i], r_lat[j], "o", color="#1a9850", markersize=2.5, zorder=4)
+    hx, hy = submarine_outline()
+    ax.fill(hx / L_SUB, hy / L_SUB, color=HULL_COLOUR, zorder=3)
+    ax.set_xlim(_edges(r_long)[[0, -1]])
+    ax.set_ylim(_edges(r_lat)[[0, -1]])
+    ax.set_xlabel("R_long = x / L_sub  (bow to the right)")
+    ax.set_ylabel("R_lat = y / L_sub")
+    fig.colorbar(mesh, ax=ax, label="P(collision)")
+    sampling = summary["sampling"]
+    waves = ", random wave phase" if sampling["wave_phase"] == "random" else ""
+    f = summary["expected_fractions"]
+    ax.set_title(
+        f"{summary['label']}\nK = {sampling['samples']} posterior samples{waves}; expected collision "
+        f"{100 * f['collision']:.1f}%, close call {100 * f['close_call']:.1f}%; "
+        f"{int(safe.sum())} of {summary['feasible_cells']} cells P(collision) < {100 * summary['safe_below']:g}%",
+        fontsize=8,
+    )
+    handles = [
+        Line2D([], [], marker="o", linestyle="", color="#1a9850", markersize=4, label="P(collision) < 1 %"),
+        Line2D([], [], color="black", linewidth=0.8, label="P(collision) contours 5, 50, 95 %"),
+        Patch(facecolor=HULL_COLOUR, label="submarine"),
+        Patch(facecolor=COLOURS[-1], label=LABELS[-1]),
+    ]
+    ax.legend(handles=handles, loc="upper right", fontsize=7, framealpha=0.9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def sampled_command(configs: list, args) -> int:
+    """One uncertainty-aware envelope per configuration: STEM.png (P(collision)), STEM.csv and
+    STEM.json (per cell: P(outcome), closest-approach quantiles)."""
+    from nearsub.common.analysis import envelope as env
+
+    if args.samples is None:
+        raise LookupError("--wave-phase random needs --samples K")
+    try:
+        sampling = env.Sampling(args.samples, args.sample_seed, args.wave_phase)
+    except ValueError as exc:
+        raise LookupError(str(exc)) from None
+    out = Path(args.out or "envelopes")
+    single_file = len(configs) == 1 and out.suffix.lower() in (".png", ".json", ".csv")
+    for config in configs:
+        with _progress() as progress:
+            task = progress.add_task(f"{sampling.samples} x {config.grid[0] * config.grid[1]} cells, steps", total=None)
+            envelope = env.sampled_envelope(
+                config,
+                sampling,
+                args.scheduler,
+                args.workers,
+                on_step=lambda done, total, task=task: progress.update(task, completed=done, total=total),
+            )
+        stem = out.with_suffix("") if single_file else out / f"{config.slug()}_samples{sampling.samples}"
+        stem.parent.mkdir(parents=True, exist_ok=True)
+        summary = envelope.summary()
+        paths = [
+            draw_collision_probability(summary, stem.with_suffix(".png")),
+            write_cells_csv(envelope, stem.with_suffix(".csv")),
+            env.save_summary(summary, stem.with_suffix(".json")),
+        ]
+        f = summary["expected_fractions"]
+        if args.json:
+            print(
+                json.dumps({k: summary[k] for k in ("config", "label", "sampling", "expected_fractions", "wall_time")})
+            )
+        else:
+            print(
+                f"{summary['label']}, K = {sampling.samples}: expected safe {100 * f['safe']:.1f}%, large stray "
+                f"{100 * f['large_stray']:.1f}%, close call {100 * f['close_call']:.1f}%, collision "
+                f"{100 * f['collision']:.1f}%; {sum(map(sum, summary['marked_safe']))} cells P(collision) < 1% "
+                f"({summary['feasible_cells']} feasible cells, {summary['wall_time']:.1f} s)"
+            )
+            print("  wrote " + ", ".join(str(p) for p in paths))
     return 0
 
 

@@ -58,6 +58,8 @@ def run_batch(
     surrogate: ForceModel | None = None,
     active: np.ndarray | None = None,
     on_step: Callable[[int, int], None] | None = None,
+    delta: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
+    time_offset: np.ndarray | None = None,
 ) -> BatchResult:
     """Fly N UUVs of `mission` (its vehicle, environment, helm, pid and sim settings and the speed
     and lead of its first leg) from `starts` (N, 6 state) along the track-lines from their start
@@ -70,7 +72,12 @@ def run_batch(
 
     Only the UUVs still flying are computed: the arrays shrink when some collide. Every function
     works row by row (the surrogate's `predict_rows` too), so a UUV's numbers do not depend on
-    which others fly with it."""
+    which others fly with it.
+
+    `delta(x_c, uuvs)` replaces the surrogate's mean residual for the sim at those UUVs (indices
+    into `starts`): a posterior sample per UUV (`interaction_at`). The helm's N_uv compensation
+    keeps the mean: a vehicle carries the surrogate, not the field it flies in. `time_offset`
+    (N,) [s] shifts each UUV's clock in the waves, which is a shift of the wave phase it meets."""
     vehicle = mission.vehicle_model
     helm, pid, sim = mission.apps.helm, mission.apps.pid, mission.apps.sim
     leg = helm.legs[0] if helm.legs else None
@@ -108,16 +115,23 @@ def run_batch(
     psi_d = np.zeros(len(flying))
     delta_psi = np.zeros(len(flying))  # the guarded N_uv offsets of the last helm step
     command = np.zeros((len(flying), 2))
+    offsets = None if time_offset is None else np.asarray(time_offset, dtype=float)
+
+    def ask(x: np.ndarray, sampled: bool):  # one query for the whole batch; sweeps need no std
+        own = (lambda X, rows: delta(X, flying[rows])) if sampled else None  # rows of the UUVs flying now
+        rho, mode = mission.environment.rho, sim.interaction
+        return interaction_at(surrogate, x, vehicle, rho, mode, with_std=False, weighted_only=True, delta=own)
+
     for step in range(mission.max_steps):
         if flying.size == 0:
             break
-        t = step * dt
+        t = step * dt if offsets is None else step * dt + offsets[flying]
         helm_runs = step % helm.period == 0
-        seen = None
-        if interact or (compensate and helm_runs):  # one query for the whole batch; sweeps need no std
-            seen = interaction_at(
-                surrogate, x, vehicle, mission.environment.rho, sim.interaction, with_std=False, weighted_only=True
-            )
+        seen = believed = None
+        if interact or (compensate and helm_runs):
+            seen = believed = ask(x, delta is not None)
+        if compensate and helm_runs and delta is not None:
+            believed = ask(x, False)
         if helm_runs:  # helm(x_k)
             if helms is not None:  # a behaviour list: each UUV's own helm
                 speed, heading = _arbitrated(helms, x, t, seen)
@@ -127,7 +141,9 @@ def run_batch(
                     track_start, track_end, xy, leg.speed, leg.lead, leg.lead_damper, cross_flow
                 )
             if compensate:
-                commanded = behaviours.nuv_heading_offset(seen.applied[:, 2], speed, vehicle.compensation_N_uv, gamma)
+                commanded = behaviours.nuv_heading_offset(
+                    believed.applied[:, 2], speed, vehicle.compensation_N_uv, gamma
+                )
                 delta_psi = behaviours.guard_heading_offset(
                     x[:, dynamics.X],
                     x[:, dynamics.Y],

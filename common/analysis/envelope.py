@@ -16,6 +16,11 @@ The outline is symmetric and so are the waves (section 5.8), so one side is enou
 
 A sweep over many configurations runs one configuration per task, in this process or on a Dask
 cluster (`sweep`).
+
+An uncertainty-aware envelope (`sampled_envelope`) flies every cell under K posterior function
+samples of the surrogate's residual (`surrogate.sampling`), each one force field for the whole run,
+as one batch of cells x K, and gives per cell the probability of each outcome and quantiles of the
+closest approach.
 """
 
 from __future__ import annotations
@@ -35,12 +40,14 @@ from pydantic import BaseModel, ConfigDict, Field
 from nearsub.common.analysis.batch import OUTCOMES, BatchResult, run_batch
 from nearsub.common.mission.schema import BEHAVIOURS, Mission, mission_from_dict
 from nearsub.common.physics import proximity as events
+from nearsub.common.physics import waves
 from nearsub.common.physics.hull import D_SUB, L_SUB
 from nearsub.common.physics.vehicles import get_vehicle
 from nearsub.common.runtime.processes import completed, task_client
 from nearsub.common.surrogate import domain
 from nearsub.common.surrogate.maps import r_lat_window
 from nearsub.common.surrogate.model import Surrogate, load_surrogate
+from nearsub.common.surrogate.sampling import DEFAULT_FEATURES, draw_samples
 
 # The track-line runs this far ahead of the start: the lead point never reaches its end in a sweep.
 TRACK_AHEAD = 1000.0  # [m]
@@ -324,6 +331,185 @@ def load_summary(path: str | Path) -> dict:
     if "outcome" not in summary or "config" not in summary:
         raise ValueError(f"{path}: not an envelope summary (no config or outcome grid)")
     return summary
+
+
+# --- Uncertainty-aware envelopes --------------------------------------------------------------
+CLOSEST_QUANTILES = (0.05, 0.5, 0.95)
+SAFE_BELOW = 0.01  # P(collision) under which a cell is marked safe on the map
+
+
+@dataclass(frozen=True)
+class Sampling:
+    """K posterior samples of the surrogate's residual delta, drawn from `seed`; with `wave_phase`
+    "random" sample k also meets the waves at its own random phase."""
+
+    samples: int
+    seed: int = 0
+    wave_phase: Literal["fixed", "random"] = "fixed"
+    features: int = DEFAULT_FEATURES
+
+    def __post_init__(self):
+        if self.samples < 1:
+            raise ValueError(f"--samples wants at least 1, got {self.samples}")
+        if self.seed < 0:
+            raise ValueError(f"--sample-seed wants 0 or more, got {self.seed}")
+        if self.wave_phase not in ("fixed", "random"):
+            raise ValueError(f"--wave-phase wants fixed or random, got {self.wave_phase!r}")
+
+
+def wave_time_offsets(config: EnvelopeConfig, sampling: Sampling) -> np.ndarray | None:
+    """(K,) clock offsets [s] that give each sample a uniform random wave phase, or None (fixed
+    phase, or calm water). The phase a UUV meets is k xi - omega t with xi = x + U_sub t along the
+    waves' heading (0 in an envelope), so a clock offset t0 shifts it by (k U_sub - omega) t0."""
+    state = waves.sea_state(config.sea_state)
+    if sampling.wave_phase == "fixed" or state.amplitude == 0.0:
+        return None
+    rate = state.omega - state.wavenumber * config.u_sub
+    phase = np.random.default_rng([sampling.seed, 1]).uniform(0.0, 2.0 * math.pi, sampling.samples)
+    return phase / rate
+
+
+@dataclass
+class SampledEnvelope:
+    """Every cell flown under samples `members` of `sampling`; `result` holds one row per
+    (sample, cell), sample-major (row m * cells + cell)."""
+
+    config: EnvelopeConfig
+    sampling: Sampling
+    r_long: np.ndarray
+    r_lat: np.ndarray
+    members: np.ndarray
+    result: BatchResult
+    wall_time: float
+
+    def probabilities(self) -> np.ndarray:
+        """(cells, 5) share of the samples ending in each outcome (OUTCOMES order)."""
+        outcome = self.result.outcome.reshape(len(self.members), -1)
+        return np.stack([(outcome == code).mean(axis=0) for code in range(len(OUTCOMES))], axis=-1)
+
+    def closest_quantiles(self) -> np.ndarray:
+        """(cells, 3) CLOSEST_QUANTILES of the closest approach [m] over the samples (inf: infeasible)."""
+        closest = self.result.closest.reshape(len(self.members), -1)
+        with np.errstate(invalid="ignore"):
+            return np.quantile(closest, CLOSEST_QUANTILES, axis=0).T
+
+    def summary(self) -> dict:
+        """JSON-able: configuration, sampling, grid, per-cell outcome probabilities, closest-approach
+        quantiles, the cells marked safe (P(collision) < SAFE_BELOW) and the expected fractions of
+        the feasible cells."""
+        n_long, n_lat = len(self.r_long), len(self.r_lat)
+        p = self.probabilities()
+        feasible = p[:, OUTCOMES.index("infeasible")] < 1.0
+        quantiles = self.closest_quantiles()
+        grid = lambda values: values.reshape(n_long, n_lat).tolist()  # noqa: E731
+        return {
+            "config": self.config.model_dump(mode="json"),
+            "label": self.config.label(),
+            "sampling": {
+                "samples": self.sampling.samples,
+                "seed": self.sampling.seed,
+                "wave_phase": self.sampling.wave_phase,
+                "features": self.sampling.features,
+            },
+            "cells": len(p),
+            "feasible_cells": int(feasible.sum()),
+            "r_long": self.r_long.tolist(),
+            "r_lat": self.r_lat.tolist(),
+            "outcome_names": list(OUTCOMES),
+            "probability": {name: grid(p[:, code]) for code, name in enumerate(OUTCOMES)},
+            "expected_fractions": {
+                name: float(p[feasible, code].mean()) if feasible.any() else 0.0
+                for code, name in enumerate(OUTCOMES[:-1])
+            },
+            "safe_below": SAFE_BELOW,
+            "marked_safe": grid(feasible & (p[:, OUTCOMES.index("collision")] < SAFE_BELOW)),
+            "closest_quantiles": list(CLOSEST_QUANTILES),
+            "closest": [grid(np.where(np.isfinite(q), q, np.nan)) for q in quantiles.T],
+            "wall_time": round(self.wall_time, 3),
+            "vehicle_steps": int(self.result.steps.sum()),
+        }
+
+    def cell_rows(self) -> list[dict]:
+        """One row per cell: indices, start, the probability of each outcome and the closest-approach
+        quantiles (empty for an infeasible cell)."""
+        x, y = cell_positions(self.config)
+        p, quantiles = self.probabilities(), self.closest_quantiles()
+        rows = []
+        for k in range(len(x)):
+            i, j = divmod(k, len(self.r_lat))
+            row = {"i": i, "j": j, "r_long": float(self.r_long[i]), "r_lat": float(self.r_lat[j])}
+            row |= {"x": float(x[k]), "y": float(y[k])}
+            row |= {f"p_{name}": float(p[k, code]) for code, name in enumerate(OUTCOMES)}
+            for q, value in zip(CLOSEST_QUANTILES, quantiles[k], strict=True):
+                row[f"closest_q{round(100 * q):02d}"] = float(value) if math.isfinite(value) else None
+            rows.append(row)
+        return rows
+
+
+def sampled_task(item: tuple[EnvelopeConfig, Sampling, np.ndarray]) -> SampledEnvelope:
+    """Some samples of one configuration (a Dask task of `sampled_envelope`)."""
+    config, sampling, members = item
+    return compute_sampled(config, sampling, members)
+
+
+def compute_sampled(
+    config: EnvelopeConfig,
+    sampling: Sampling,
+    members: np.ndarray | None = None,
+    surrogate: Surrogate | None = None,
+    on_step: Callable[[int, int], None] | None = None,
+) -> SampledEnvelope:
+    """Every cell under the samples `members` (default: all) as one batch in the batch engine: the
+    UUV of (sample k, cell) sees sample k's delta wherever the mean envelope uses the mean. All K
+    samples are drawn (from the seed) whatever `members` is, so a split over workers flies the
+    same fields."""
+    surrogate = surrogate or cached_surrogate(config.model)
+    started = time.perf_counter()
+    members = np.arange(sampling.samples) if members is None else np.asarray(members, dtype=int)
+    samples = draw_samples(surrogate, sampling.samples, sampling.seed, sampling.features)
+    x, y = cell_positions(config)
+    starts, ends, feasible = starts_and_tracks(config, x, y)
+    member = np.repeat(members, len(x))  # the sample of each batch row
+    offsets = wave_time_offsets(config, sampling)
+    result = run_batch(
+        cell_mission(config, 0.0, 0.0),
+        np.tile(starts, (len(members), 1)),
+        np.tile(ends, (len(members), 1)),
+        surrogate,
+        np.tile(feasible, len(members)),
+        on_step,
+        delta=lambda X, uuvs: samples.rows(X, member[uuvs]),
+        time_offset=None if offsets is None else offsets[member],
+    )
+    r_long, r_lat = grid_axes(config)
+    return SampledEnvelope(config, sampling, r_long, r_lat, members, result, time.perf_counter() - started)
+
+
+def sampled_envelope(
+    config: EnvelopeConfig,
+    sampling: Sampling,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    on_step: Callable[[int, int], None] | None = None,
+) -> SampledEnvelope:
+    """The uncertainty-aware envelope of one configuration: in this process (`on_step` follows the
+    steps), or with the samples split into one task per worker on a Dask cluster (`scheduler`, or
+    a local one of `workers` processes). Row-by-row arithmetic makes the two agree bit for bit."""
+    started = time.perf_counter()
+    with task_client(workers, scheduler) as client:
+        if client is None:
+            return compute_sampled(config, sampling, on_step=on_step)
+        chunks = np.array_split(np.arange(sampling.samples), min(sampling.samples, len(client.nthreads())))
+        parts: list[SampledEnvelope | None] = [None] * len(chunks)
+        for index, part in completed(client, sampled_task, [(config, sampling, c) for c in chunks]):
+            parts[index] = part
+    joined = BatchResult(
+        *(np.concatenate([getattr(p.result, f) for p in parts]) for f in BatchResult.__dataclass_fields__)
+    )
+    first = parts[0]
+    return SampledEnvelope(
+        config, sampling, first.r_long, first.r_lat, np.arange(sampling.samples), joined, time.perf_counter() - started
+    )
 
 
 # --- The thesis's envelope figures -------------------------------------------------------------

@@ -27,6 +27,7 @@ same numbers.
 from __future__ import annotations
 
 import weakref
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -286,6 +287,7 @@ def interaction_at(
     with_std: bool = True,
     weighted_only: bool = False,
     free_stream: fs.FreeStreamTable | None = None,
+    delta: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
 ) -> InteractionAt:
     """Ask the force model about the state(s) (6,) or (n, 6) and build the dynamics' input. The
     fields are (n, 3) and (n,) arrays; `interaction` has the shape of `state` ((3,) and () for one
@@ -302,7 +304,9 @@ def interaction_at(
     "increment" with a model of kind "lf_in_loop": `lf_in_loop_increment`, with the HF free stream
     from `free_stream` or the table made for the model (`increment_table`). "increment" with another
     model: the prediction minus that free-stream value at the same clipped inputs, with the blend
-    weight; "replace" and "thesis": the prediction with the blend weight."""
+    weight; "replace" and "thesis": the prediction with the blend weight. `delta(x_c, rows)`, for
+    the LF-in-the-loop increment only, replaces the model's mean of delta at the rows `rows` of
+    `state` (a posterior function sample, `sampling.PosteriorSamples.rows`); its std is NaN."""
     single = np.ndim(state) == 1
     state = np.atleast_2d(state)
     u, x, y, psi = state[:, U], state[:, X], state[:, Y], state[:, PSI]
@@ -315,8 +319,10 @@ def interaction_at(
         table = free_stream if free_stream is not None else increment_table(model)
     if mode == "increment" and getattr(model, "kind", None) == "lf_in_loop":
         coefficients, weight, model_mean, spread, lf, delta_free, delta_weight, held = lf_in_loop_increment(
-            model, inputs, x, y, vehicle, table, with_std, weighted_only
+            model, inputs, x, y, vehicle, table, with_std, weighted_only, delta
         )
+    elif delta is not None:
+        raise ValueError(f'a sampled delta needs the "increment" mode and a model of kind "lf_in_loop", got {mode!r}')
     else:
         weight = blend_weight(inputs)
         asked = weight > 0.0 if weighted_only else np.ones(n, dtype=bool)
@@ -365,6 +371,7 @@ def lf_in_loop_increment(
     free_stream: fs.FreeStreamTable,
     with_std: bool = True,
     weighted_only: bool = False,
+    delta: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
 ):
     """The increment [LF(x) - LF_free(x)] + w(x) [delta(x_c) - (HF_free(x_c) - LF_free(x_c))] in
     coefficients (n, 3) at inputs (n, 6) (hull ratios clipped) of UUVs at CB positions x, y, with
@@ -379,7 +386,8 @@ def lf_in_loop_increment(
     w ignores the heading, so the LF alone carries it beyond +/-2 deg, continuously. LF_free is the
     same model's lone UUV at the same hull, speed and heading, so the increment tends to zero away
     from the submarine. Without `weighted_only` delta is asked about every state (the sim
-    publishes it); with it only where both weights are above zero (a sweep)."""
+    publishes it); with it only where both weights are above zero (a sweep). `delta`: as in
+    `interaction_at`."""
     if vehicle.length > LF_MAX_LENGTH:
         raise ValueError(
             f"vehicle {vehicle.name}: {vehicle.length:g} m long, longer than the {LF_MAX_LENGTH:.2f} m the LF's "
@@ -398,7 +406,10 @@ def lf_in_loop_increment(
     mean, spread, free = np.zeros((n, 3)), np.full((n, 3), np.nan), np.zeros((n, 3))
     if asked.any():
         clamped = discrepancy_inputs(inputs[asked])
-        mean[asked], std = model.discrepancy(clamped, return_std=with_std)
+        if delta is None:
+            mean[asked], std = model.discrepancy(clamped, return_std=with_std)
+        else:  # a sample of delta in place of its mean (`interaction_at`); a sample has no std
+            mean[asked], std = delta(clamped, np.flatnonzero(asked)), np.nan
         free[asked] = free_stream.coefficients(clamped) - hydro_lf.lf_free_stream(clamped)
         if with_std:
             spread[asked] = std

@@ -35,8 +35,8 @@ from scipy.linalg import cho_factor, cho_solve
 
 __all__ = ["DEFAULT_FEATURES", "PosteriorSamples", "draw_samples"]
 
-DEFAULT_FEATURES = 1024  # random Fourier features per sample and output
-_BLOCK = 1 << 22  # (samples x points x features) elements per block: bounds the temporaries
+DEFAULT_FEATURES = 256  # random Fourier features per sample and output (the moments are exact at any count)
+_BLOCK = 1 << 20  # (points x features) elements per block: bounds the temporaries
 
 
 class _OutputSamples:
@@ -51,46 +51,54 @@ class _OutputSamples:
         self.y_mean, self.y_std = gp.y_mean_, gp.y_std_
         self.U = (gp.X_train_ - gp.lower_) / gp.width_
         n = len(self.U)
-        K = self._kernel(self.U[None], self.U)[0] + (sn2 + getattr(gp, "jitter_", 0.0)) * np.eye(n)
+        K = self._kernel(self.U, self.U) + (sn2 + getattr(gp, "jitter_", 0.0)) * np.eye(n)
         omega = rng.standard_normal((k, n_features, d)) / self.length  # spectral density draws
         self.omega_t = np.ascontiguousarray(omega.transpose(0, 2, 1))  # (k, d, f)
-        self.phase = rng.uniform(0.0, 2.0 * math.pi, (k, 1, n_features))
+        self.phase = rng.uniform(0.0, 2.0 * math.pi, (k, n_features))
         self.weights = rng.standard_normal((k, n_features))
         ys = (gp.y_train_ - gp.y_mean_) / gp.y_std_
         eps = math.sqrt(sn2) * rng.standard_normal((k, n))
-        residual = ys[None, :] - self._prior(np.broadcast_to(self.U, (k, n, d))) - eps
+        residual = ys[None, :] - np.stack([self._prior(i, self.U) for i in range(k)]) - eps
         self.v = cho_solve(cho_factor(K, lower=True), residual.T).T  # (k, n): K^-1 (y - f(U) - eps)
 
     def _kernel(self, Z: np.ndarray, U: np.ndarray) -> np.ndarray:
-        """s2 exp(-|z - u_i|^2_l / 2) for Z (k or 1, n, d) against the training inputs: (., n, n_train)."""
-        sq = np.zeros(Z.shape[:2] + (len(U),))
+        """s2 exp(-|z - u_i|^2_l / 2) for Z (n, d) against the training inputs U: (n, n_train)."""
+        sq = np.zeros((len(Z), len(U)))
         for j in range(U.shape[1]):
-            diff = (Z[..., j, None] - U[None, None, :, j]) / self.length[j]
+            diff = (Z[:, j, None] - U[None, :, j]) / self.length[j]
             sq += diff * diff
         return self.s2 * np.exp(-0.5 * sq)
 
-    def _prior(self, Z: np.ndarray) -> np.ndarray:
-        """The K prior samples at Z (k, n, d), sample i at its own rows Z[i]: (k, n)."""
-        k, n, _ = Z.shape
-        out = np.empty((k, n))
-        rows = max(1, _BLOCK // (k * self.weights.shape[1]))
-        scale = math.sqrt(2.0 * self.s2 / self.weights.shape[1])
-        for start in range(0, n, rows):
-            proj = np.matmul(Z[:, start : start + rows], self.omega_t)  # (k, rows, f), batched BLAS
-            proj += self.phase
-            out[:, start : start + rows] = scale * np.matmul(np.cos(proj, out=proj), self.weights[:, :, None])[..., 0]
+    def _prior(self, i: int, Z: np.ndarray) -> np.ndarray:
+        """Prior sample i at Z (n, d): (n,). Element-wise products and last-axis sums only, so a
+        row's value does not depend on which other rows are asked with it (a batch split over
+        workers gets the same bits)."""
+        n_features = self.weights.shape[1]
+        out = np.empty(len(Z))
+        rows = max(1, _BLOCK // n_features)
+        scale = math.sqrt(2.0 * self.s2 / n_features)
+        for start in range(0, len(Z), rows):
+            block = Z[start : start + rows]
+            proj = self.phase[i] + block[:, 0, None] * self.omega_t[i, 0]
+            for j in range(1, block.shape[1]):
+                proj += block[:, j, None] * self.omega_t[i, j]
+            np.cos(proj, out=proj)
+            proj *= self.weights[i]
+            out[start : start + rows] = scale * proj.sum(axis=-1)
         return out
 
-    def __call__(self, W: np.ndarray) -> np.ndarray:
-        """Samples (k, n) in output units at warped inputs W (n, d) or (k, n, d)."""
-        k = self.weights.shape[0]
+    def __call__(self, W: np.ndarray, sample: np.ndarray | None = None) -> np.ndarray:
+        """Warped inputs W (n, d), in output units: every sample at every row (k, n) without
+        `sample`, else sample `sample[r]` at row r (n,)."""
         Z = (W - self.lower) / self.width
-        if Z.ndim == 2:  # every sample at the same points: one kernel matrix serves them all
-            update = (self._kernel(Z[None], self.U)[0] @ self.v.T).T
-            Z = np.broadcast_to(Z, (k,) + Z.shape)
+        kernel = self._kernel(Z, self.U)  # one kernel matrix serves every sample
+        if sample is None:
+            f = np.stack([self._prior(i, Z) for i in range(len(self.v))]) + (kernel @ self.v.T).T
         else:
-            update = np.einsum("knt,kt->kn", self._kernel(Z, self.U), self.v)
-        f = self._prior(Z) + update
+            f = np.sum(kernel * self.v[sample], axis=-1)
+            for i in np.unique(sample):
+                rows = sample == i
+                f[rows] += self._prior(i, Z[rows])
         return self.y_mean + self.y_std * f
 
 
@@ -118,16 +126,27 @@ class PosteriorSamples:
         X = np.asarray(X, dtype=float)
         if X.ndim not in (2, 3) or X.shape[-1] != 6 or (X.ndim == 3 and X.shape[0] != self.k):
             raise ValueError(f"inputs must be (n, 6) or ({self.k}, n, 6), got {X.shape}")
-        W = self.model.warping.forward(X.reshape(-1, 6)).reshape(X.shape)
-        return np.stack([f(W) for f in self._outputs], axis=-1)
+        W = self.model.warping.forward(X.reshape(-1, 6))
+        if X.ndim == 2:
+            return np.stack([f(W) for f in self._outputs], axis=-1)
+        sample = np.repeat(np.arange(self.k), X.shape[1])
+        return self.rows(X.reshape(-1, 6), sample).reshape(X.shape[:2] + (3,))
+
+    def rows(self, X: Any, sample: Any) -> np.ndarray:
+        """delta [X', Y', N'] (n, 3) of sample `sample[r]` at raw input row X[r] (n, 6): a batch of
+        UUVs, each flying in its own sampled field (the batch engine's `delta`). A row's value
+        does not depend on the other rows."""
+        X, sample = np.asarray(X, dtype=float), np.asarray(sample, dtype=int)
+        W = self.model.warping.forward(X)
+        return np.stack([f(W, sample) for f in self._outputs], axis=-1)
 
 
 def draw_samples(model: Any, k: int, seed: Any = 0, n_features: int = DEFAULT_FEATURES) -> PosteriorSamples:
     """K posterior function samples of the residual GP of `model` (a `Surrogate` or an
     `LFInLoopModel` of kind "lf_in_loop"); the same seed gives the same samples.
 
-    For a batch engine: draw once per run, then per step call `samples.delta(X)` with the K x
-    cells inputs (K, n, 6) and use sample i's rows where the mean delta would be used."""
+    For a batch engine: draw once per run, then per step call `samples.rows(X, sample)` with the
+    inputs of the UUVs flying and the sample of each, where the mean delta would be used."""
     inner = getattr(model, "model", model)
     if getattr(inner, "kind", None) != "lf_in_loop":
         raise TypeError(f"posterior samples need a model of kind 'lf_in_loop', got {getattr(inner, 'kind', None)!r}")
