@@ -67,6 +67,7 @@ def run(args) -> int:
         raw_hex=None,
         no_validate=False,
         connect=args.connect,
+        credentials=args.credentials,
         community=community,
     )
     return tap.tap_pub(pub)
