@@ -58,9 +58,7 @@ class _Spec(BaseModel):
     @field_validator("condition")
     @classmethod
     def _parsable(cls, value: list[str]) -> list[str]:
-        for text in value:
-            logic.parse_condition(text)
-        return value
+        return logic.check_conditions(value)
 
 
 class WaypointsSpec(_Spec):

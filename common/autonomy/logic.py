@@ -76,6 +76,13 @@ class Condition:
         return {atom.name for conj in self.alternatives for atom in conj}
 
 
+def check_conditions(texts: list[str]) -> list[str]:
+    """The texts unchanged once each parses (a pydantic validator of every `condition` list)."""
+    for text in texts:
+        parse_condition(text)
+    return texts
+
+
 def parse_condition(text: str) -> Condition:
     """Parse a condition; ValueError naming the part that is not `NAME op VALUE`."""
     alternatives = []

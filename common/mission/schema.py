@@ -106,9 +106,7 @@ class ModeSettings(Strict):
     @field_validator("condition")
     @classmethod
     def _parsable(cls, value: list[str]) -> list[str]:
-        for text in value:
-            logic.parse_condition(text)
-        return value
+        return logic.check_conditions(value)
 
     def rule(self) -> logic.ModeRule:
         conditions = tuple(logic.parse_condition(c) for c in self.condition)
