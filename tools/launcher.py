@@ -231,11 +231,11 @@ class Launcher:
         self.instance_counter[role] += 1
         return f"{role}-{self.instance_counter[role]}"
 
-    def ended_clock(self, instance: str) -> bool:
-        """A clock that exited with code 0 has published the mission end (an app can end the
-        mission at step 0, before the clock's token is seen): supervise() reads it."""
+    def ended(self, instance: str) -> bool:
+        """A process that exited with code 0 left after the mission end (an app can end the
+        mission at step 0, before the launcher has seen every token): supervise() reads the end."""
         child = self.children.get(instance)
-        return child is not None and child.role == "clock" and child.process.poll() == 0
+        return child is not None and child.process.poll() == 0
 
     def wait_alive(self, bus: Bus, wanted: list[tuple[str, str]], timeout: float) -> None:
         """Wait for the liveliness tokens of (role, instance) pairs; fail naming the missing ones."""
@@ -245,7 +245,7 @@ class Launcher:
             missing = [
                 inst
                 for role, inst in wanted
-                if keys.alive(self.community, role, inst) not in alive and not self.ended_clock(inst)
+                if keys.alive(self.community, role, inst) not in alive and not self.ended(inst)
             ]
             if not missing:
                 return
@@ -492,7 +492,7 @@ class Launcher:
             raise LaunchError(f"app router exited with code {code}: the apps lost their bus", "router")
         for child in list(self.children.values()):
             code = child.process.poll()
-            if code is None or child.retiring or self.ended_clock(child.instance):
+            if code is None or child.retiring or (child.role == "clock" and self.ended(child.instance)):
                 continue
             # Apps leave when the mission ends; the end may still be on its way to us.
             if self.mission_end_within(EXIT_GRACE if code == 0 else 0.2):
