@@ -78,7 +78,7 @@ def train_command(args) -> int:
     began = time.perf_counter()
     model = tr.fit_model(X, Y, seed=args.seed)
     fit_seconds = time.perf_counter() - began
-    out = Path(args.out or sg.default_model_path())
+    out = Path(args.out or "surrogate.npz")  # never over the shipped model unless asked
     out.parent.mkdir(parents=True, exist_ok=True)
     hf_seconds = sum(store.rows[store._key(x)][1] for x in X)
     provenance = tr.provenance(
@@ -193,7 +193,7 @@ def fit_from_data(path: Path, out: Path, seed: int = 0, n_restarts: int = FINAL_
 def data_command(args) -> int:
     if args.out is None:
         print(
-            "nearsub train: --data needs --out MODEL.npz (the default would replace the shipped model)", file=sys.stderr
+            "nearsub train: --data needs --out MODEL.npz", file=sys.stderr
         )
         return 2
     try:
@@ -216,7 +216,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--scheduler", metavar="ADDRESS", help="run the HF on this Dask scheduler (tcp://host:8786)")
     p.add_argument("--state", default=str(DEFAULT_STATE), help="HF runs CSV, appended as each run finishes")
     p.add_argument("--restart", action="store_true", help="discard the HF runs in --state")
-    p.add_argument("--out", help="model file to write (default: the shipped one; required with --data)")
+    p.add_argument("--out", help="model file to write (default: ./surrogate.npz; required with --data)")
     p.add_argument(
         "--data",
         metavar="FILE.csv",
