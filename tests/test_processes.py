@@ -62,9 +62,17 @@ def test_stop_escalates_to_sigkill_for_a_process_ignoring_sigint_and_sigterm():
     assert 1.0 <= elapsed < 5.0  # two ignored rungs of 0.5 s each, then the kill
 
 
+# Python's own SIGINT handler, even when the test runs as a background job of a non-interactive
+# shell (which starts it, and so every child, with SIGINT ignored).
+SLEEPER = (
+    "import signal, time; signal.signal(signal.SIGINT, signal.default_int_handler); "
+    "print('ready', flush=True); time.sleep(60)"
+)
+
+
 def test_stop_returns_at_once_when_the_first_rung_is_heeded():
     process = subprocess.Popen(
-        [sys.executable, "-c", "import time; print('ready', flush=True); time.sleep(60)"],
+        [sys.executable, "-c", SLEEPER],
         stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, process_group=0,
     )
     # A SIGINT that lands while the interpreter is still starting may be lost; wait until it runs.
@@ -79,3 +87,17 @@ def test_stop_waits_out_the_grace_for_a_process_that_leaves_on_its_own():
     process = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(0.3)"], process_group=0)
     processes.stop([process], grace=10.0, wait=0.1)
     assert process.returncode == 0
+
+
+def test_an_app_heeds_sigint_though_its_launcher_started_it_with_sigint_ignored():
+    app = (
+        "import signal, time; signal.signal(signal.SIGINT, signal.SIG_IGN); "
+        "from nearsub.common.runtime.processes import prepare_process; prepare_process(); "
+        "print('ready', flush=True); time.sleep(60)"
+    )
+    process = subprocess.Popen(
+        [sys.executable, "-c", app], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, process_group=0
+    )
+    assert process.stdout.readline().strip() == "ready"
+    processes.stop([process], wait=10.0)
+    assert process.returncode == -signal.SIGINT

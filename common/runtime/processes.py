@@ -37,12 +37,15 @@ def single_blas_thread(environ: MutableMapping[str, str] = os.environ) -> Mutabl
 
 def prepare_process() -> None:
     """Exit cleanly on SIGTERM (so `with` blocks close the session and files), and ask Linux to
-    send SIGTERM when the launcher dies, so no app outlives it."""
+    send SIGTERM when the launcher dies, so no app outlives it. SIGINT, the ladder's first rung,
+    raises KeyboardInterrupt even when the launcher was started as a background job of a script,
+    which starts every child with SIGINT ignored."""
 
     def handler(signum, frame):
         raise SystemExit(128 + signum)
 
     signal.signal(signal.SIGTERM, handler)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
     except (OSError, AttributeError):
