@@ -1,0 +1,64 @@
+"""`nearsub poke MISSION=complete` ends the mission through the clock's normal end request, at the
+step the helm applies the poke (MOOS-IvP: uPokeDB posting the variable uQueryDB waits for)."""
+
+from conftest import nearsub
+from helpers import finish, log_path, wait_paused, wait_registered
+from nearsub.common.mission.cores import build_cores
+from nearsub.common.mission.schema import load_mission
+from nearsub.common.runtime.lifecycle import Schedule, run_inprocess
+from nearsub.common.runtime.logfile import read_log
+from nearsub.common.runtime.messages import Poke
+
+MISSION = """
+name = "pokeend"
+time_limit = 60.0
+pause_at_step = 100
+[start]
+speed = 1.0
+[environment]
+submarine = false
+[[apps.helm.behaviours]]
+type = "constant_heading"
+name = "east"
+heading_deg = 0.0
+"""
+
+
+def test_a_poke_of_mission_complete_ends_the_mission_at_the_helm_step_in_process(tmp_path):
+    path = tmp_path / "pokeend.toml"
+    path.write_text(MISSION)
+    mission = load_mission(path)
+    poke = Poke(step=0, t=0.0, source="operator", values={"MISSION": "complete"})
+    result = run_inprocess(
+        build_cores(mission),
+        Schedule(mission.periods()),
+        mission.dt,
+        mission.max_steps,
+        operator=[("helm", "poke", 101, poke)],
+    )
+    # The helm runs every 5 steps: the poke due at 101 is applied at 105, the last step run.
+    assert (result.outcome, result.steps) == ("completed", 106)
+    assert "MISSION = complete (poked)" in result.reason
+
+
+def test_nearsub_poke_mission_complete_ends_a_running_mission(launches, community, tmp_path):
+    path = tmp_path / "pokeend.toml"
+    path.write_text(MISSION)
+    mission = load_mission(path, [f"name={community}"])
+    process = launches.start(str(path), "--set", f"name={community}")
+    wait_registered(community, timeout=mission.startup_timeout)
+    wait_paused(community, timeout=mission.startup_timeout)
+    poked = nearsub("poke", community, "MISSION=complete", "--vehicle", "remus100")
+    assert poked.returncode == 0, poked.stderr
+    assert "helm: operator poke from step 100" in poked.stdout
+    assert nearsub("clock", community, "resume").returncode == 0
+    # Ending takes at most a few steps, each within step_timeout, then the apps' shutdown.
+    code, summary, err = finish(process, timeout=mission.startup_timeout + 10 * mission.step_timeout)
+    assert code == 0, err
+    assert (summary["outcome"], summary["steps"]) == ("completed", 101), summary
+    assert "MISSION = complete (poked)" in summary["reason"]
+    records = read_log(log_path(summary)).records
+    [request] = [r.value() for r in records if r.topic.endswith("/clock/ack/helm") and r.value()["end"]]
+    assert (request["step"], request["end"]) == (100, "completed")
+    [end] = [r.value() for r in records if r.topic.endswith("/clock/end")]
+    assert (end["step"], end["outcome"]) == (101, "completed")  # MissionEnd carries the steps run
