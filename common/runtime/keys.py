@@ -71,3 +71,16 @@ def launcher_control(community: str) -> str:
 def everything(community: str) -> str:
     """The whole community: only the logger subscribes to it."""
     return f"{ROOT}/{community}/**"
+
+
+# The chunks after the community that are mission-wide, not a vehicle's name.
+SERVICES = frozenset({"clock", "events", "status", "alive", "control", "reply", "launcher", "surrogate"})
+
+
+def vehicle_of(key: str) -> tuple[str, str] | None:
+    """(vehicle, leaf) of a vehicle key nearsub/<c>/<vehicle>/<leaf>[/...] (the leaf is the first
+    chunk after the vehicle); None for a mission-wide key. Readers find a mission's vehicles this way."""
+    parts = key.split("/")
+    if len(parts) < 4 or parts[0] != ROOT or parts[2] in SERVICES:
+        return None
+    return parts[2], parts[3]
