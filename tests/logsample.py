@@ -10,7 +10,7 @@ from conftest import ALPHA
 from nearsub.common.mission.cores import run_mission
 from nearsub.common.mission.schema import load_mission
 from nearsub.common.runtime.logfile import LogWriter
-from nearsub.common.runtime.messages import Control, MissionEnd, State, encode
+from nearsub.common.runtime.messages import Control, Event, MissionEnd, State, encode
 
 STARTED_UNIX = 1_800_000_000.25  # the logger's start time written as run metadata
 
@@ -61,6 +61,8 @@ def write_fleet_log(path: Path, seconds: float = 10.0):
                 key = f"nearsub/alpha/{name}/{leaf}"
             if isinstance(message, State):
                 message = message.model_copy(update={"y": message.y + dy})
+            elif isinstance(message, Event) and "y" in message.data:
+                message = message.model_copy(update={"data": message.data | {"y": message.data["y"] + dy}})
             writer.write(key, encode(message), message.t)
     end = MissionEnd(step=result.steps, t=seconds, source="clock", outcome=result.outcome, reason=result.reason)
     writer.write("nearsub/alpha/clock/end", encode(end), seconds)

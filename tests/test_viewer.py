@@ -226,3 +226,37 @@ def test_start_viewer_serves_the_mission_of_a_launcher_run_file(launches, commun
     finally:
         os.killpg(process.pid, signal.SIGTERM)
         process.wait(timeout=STEP)
+
+
+def seek(chromium, t: float) -> None:
+    """Move the replay's timeline to t (a block: each evaluation shares the page's global scope)."""
+    chromium.evaluate(f"{{ const s = document.getElementById('scrub'); s.value = {t}; s.oninput(); }}")
+
+
+def test_replay_of_two_vehicles_draws_both_and_selects_either(chromium, viewers, tmp_path):
+    from logsample import write_fleet_log
+
+    path = tmp_path / "fleet.mcap"
+    write_fleet_log(path)
+    states = {}
+    for r in read_log(path).records:
+        if r.topic.endswith("/state"):
+            states[(r.topic.split("/")[2], r.value()["step"])] = r.value()
+    viewer = viewers(str(path))
+    chromium.open(viewer.url)
+    chromium.wait_for("window.nearsub.drawn !== null", timeout=STARTUP)
+    assert chromium.evaluate("document.getElementById('vehicle-row').hidden") is False
+    assert chromium.evaluate("[...document.getElementById('vehicle').options].map(o => o.value)") == ["alfa", "bravo"]
+    seek(chromium, 4)
+    chromium.wait_for("window.nearsub.drawnAll.alfa.t === 4 && window.nearsub.drawnAll.bravo.t === 4", timeout=STEP)
+    drawn = chromium.evaluate("window.nearsub.drawnAll")
+    for name in ("alfa", "bravo"):
+        logged = states[(name, drawn[name]["step"])]
+        assert (drawn[name]["x"], drawn[name]["y"], drawn[name]["psi"]) == (logged["x"], logged["y"], logged["psi"])
+    assert chromium.evaluate("window.nearsub.drawn.y") == drawn["alfa"]["y"]  # the first is selected
+    chromium.evaluate("{ const v = document.getElementById('vehicle'); v.value = 'bravo'; v.onchange(); }")
+    assert chromium.evaluate("window.nearsub.drawn.y") == drawn["bravo"]["y"]
+    # bravo's log ends at 5 s: past it, bravo stays at its last state while alfa moves on.
+    seek(chromium, 8)
+    chromium.wait_for("window.nearsub.drawnAll.alfa.t === 8", timeout=STEP)
+    assert chromium.evaluate("window.nearsub.drawnAll.bravo.t") == 5
