@@ -112,3 +112,29 @@ def test_plot_draws_one_labelled_track_and_time_series_per_vehicle(fleet, tmp_pa
     assert start_y["bravo"] - start_y["alfa"] == pytest.approx(FLEET["bravo"])
     labels = {line.get_label() for line in heading.lines}
     assert {"alfa actual", "alfa desired", "bravo actual", "bravo desired"} <= labels
+
+
+def test_foxglove_gives_each_vehicle_its_frame_entity_label_and_events(fleet, tmp_path):
+    from mcap.reader import make_reader
+
+    path, _ = fleet
+    target = tmp_path / "fleet-foxglove.mcap"
+    out = nearsub("log", "export", str(path), "--format", "foxglove", "-o", str(target))
+    assert out.returncode == 0, out.stderr
+    with open(target, "rb") as f:
+        messages = [(ch.topic, json.loads(m.data)) for _, ch, m in make_reader(f).iter_messages()]
+    transforms = [m for topic, m in messages if topic == "/tf"]
+    frames = [m["child_frame_id"] for m in transforms]
+    assert frames.count("alfa") == len(read_states(path, "alfa"))
+    assert frames.count("bravo") == len(read_states(path, "bravo"))
+    bravo_y = [m["translation"]["y"] for m in transforms if m["child_frame_id"] == "bravo"]
+    assert bravo_y == [s["y"] for s in read_states(path, "bravo")]
+    entities = {e["id"]: e for topic, m in messages if topic == "/scene/uuv" for e in m["entities"]}
+    assert sorted(entities) == ["alfa", "bravo"]
+    assert [entities[name]["frame_id"] for name in ("alfa", "bravo")] == ["alfa", "bravo"]
+    assert [entities[name]["texts"][0]["text"] for name in ("alfa", "bravo")] == ["alfa", "bravo"]
+    assert entities["alfa"]["lines"][0]["color"] != entities["bravo"]["lines"][0]["color"]
+    names = {m["name"] for topic, m in messages if topic == "/events"}
+    assert {"helm", "bravo/helm"} <= names
+    topics = {topic for topic, _ in messages}
+    assert {"nearsub/alpha/alfa/state", "nearsub/alpha/bravo/state"} <= topics
