@@ -189,12 +189,10 @@ def export_command(args) -> int:
     contents = read_log(args.log)
     records = list(_select(contents, args.topic))
     if args.vehicle is not None:
-        from nearsub.common.runtime.alog import vehicle_records
-
         if args.vehicle not in contents.vehicles():
             known = ", ".join(contents.vehicles()) or "none"
             raise InputError(f"--vehicle {args.vehicle}: not a vehicle of {args.log} (its vehicles: {known})")
-        records = vehicle_records(contents, args.vehicle, records)
+        records = contents.vehicle_records(args.vehicle, records)
     out = open(args.output, "w", newline="") if args.output and args.format != "csv" else sys.stdout
     try:
         if args.format == "json":

@@ -40,7 +40,6 @@ import time
 from collections.abc import Iterable
 from typing import TYPE_CHECKING, TextIO
 
-from nearsub.common.runtime.keys import vehicle_of
 from nearsub.common.runtime.logfile import INVALID_SUFFIX, vehicle_spec
 
 if TYPE_CHECKING:
@@ -127,24 +126,16 @@ class _Lines:
         self.entries.append((log_time, len(self.entries), variable, source, value))
 
 
-def vehicle_records(contents: LogContents, vehicle: str, records: Iterable[LogRecord] | None = None) -> list[LogRecord]:
-    """One vehicle's alog, as that vehicle's pLogger writes it in a MOOS-IvP fleet: its own
-    records and the mission-wide ones (clock, mission events, control requests)."""
-    records = contents.records if records is None else records
-    owners = ((r, vehicle_of(r.topic.removesuffix(INVALID_SUFFIX))) for r in records)
-    return [r for r, owner in owners if owner is None or owner[0] == vehicle]
-
-
 def alog_lines(
     contents: LogContents, records: Iterable[LogRecord] | None = None, vehicle: str | None = None
 ) -> list[str]:
     """The alog's lines (banner included, no newlines) for `records` (default: every record).
     With several vehicles, each NODE_REPORT names its vehicle (NAME=<vehicle>, as a shoreside's
-    alog); `vehicle` writes that vehicle's own alog (`vehicle_records`), whose MOOSDB is named
+    alog); `vehicle` writes that vehicle's own alog (`LogContents.vehicle_records`), whose MOOSDB is named
     after it, as alogview reads one alog per vehicle."""
     records = contents.records if records is None else list(records)
     if vehicle is not None:
-        records = vehicle_records(contents, vehicle, records)
+        records = contents.vehicle_records(vehicle, records)
     start = log_start(contents)
     mission = _community(contents)
     community = mission if vehicle is None else vehicle  # a vehicle's own alog: its own MOOS community

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -121,6 +122,14 @@ class LogContents:
 
     def topics(self) -> list[str]:
         return sorted({r.topic for r in self.records})
+
+    def vehicle_records(self, vehicle: str, records: Iterable[LogRecord] | None = None) -> list[LogRecord]:
+        """One vehicle's part of the log (of `records`, default all), as that vehicle's pLogger
+        would write it in a MOOS-IvP fleet: its own records and the mission-wide ones (clock,
+        mission events, control requests)."""
+        records = self.records if records is None else records
+        owners = ((r, vehicle_of(r.topic.removesuffix(INVALID_SUFFIX))) for r in records)
+        return [r for r, owner in owners if owner is None or owner[0] == vehicle]
 
     def vehicles(self) -> dict[str, dict]:
         """The vehicles named by the log's keys (nearsub/<c>/<vehicle>/...), sorted by name, each
