@@ -25,9 +25,7 @@ heading_deg = 0.0
 
 
 def test_a_poke_of_mission_complete_ends_the_mission_at_the_helm_step_in_process(tmp_path):
-    path = tmp_path / "pokeend.toml"
-    path.write_text(MISSION)
-    mission = load_mission(path)
+    mission = load_mission_text(tmp_path)
     poke = Poke(step=0, t=0.0, source="operator", values={"MISSION": "complete"})
     result = run_inprocess(
         build_cores(mission),
@@ -42,8 +40,7 @@ def test_a_poke_of_mission_complete_ends_the_mission_at_the_helm_step_in_process
 
 
 def test_nearsub_poke_mission_complete_ends_a_running_mission(launches, community, tmp_path):
-    path = tmp_path / "pokeend.toml"
-    path.write_text(MISSION)
+    path = write_mission(tmp_path)
     mission = load_mission(path, [f"name={community}"])
     process = launches.start(str(path), "--set", f"name={community}")
     wait_registered(community, timeout=mission.startup_timeout)
@@ -62,3 +59,34 @@ def test_nearsub_poke_mission_complete_ends_a_running_mission(launches, communit
     assert (request["step"], request["end"]) == (100, "completed")
     [end] = [r.value() for r in records if r.topic.endswith("/clock/end")]
     assert (end["step"], end["outcome"]) == (101, "completed")  # MissionEnd carries the steps run
+
+
+def test_a_poke_of_a_fleet_mission_file_must_name_one_of_its_vehicles(monkeypatch, capsys, tmp_path):
+    """A mission file with `[[vehicles]]` (its entries as the schema dumps them) has no single
+    vehicle to poke by default."""
+    import argparse
+
+    from nearsub.common.mission import schema
+    from nearsub.tools import poke
+
+    mission = load_mission_text(tmp_path)
+    dumped = mission.model_dump() | {"vehicles": [{"name": "alfa"}, {"name": "bravo"}]}
+    fleet = type("Fleet", (), {"name": mission.name, "vehicle_name": "remus100", "model_dump": lambda self: dumped})
+    monkeypatch.setattr(schema, "load_mission", lambda path: fleet())
+    for vehicle, text in ((None, "give --vehicle NAME"), ("zulu", "--vehicle zulu: not a vehicle of")):
+        args = argparse.Namespace(
+            mission=str(tmp_path / "pokeend.toml"), assignments=["X=1"], vehicle=vehicle, connect=None, credentials=None
+        )
+        assert poke.run(args) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f"nearsub poke: {text}") and "(its vehicles: alfa, bravo)" in err, err
+
+
+def write_mission(folder):
+    path = folder / "pokeend.toml"
+    path.write_text(MISSION)
+    return path
+
+
+def load_mission_text(folder):
+    return load_mission(write_mission(folder))
