@@ -1,8 +1,7 @@
 """`nearsub poke MISSION=complete` ends the mission through the clock's normal end request, at the
 step the helm applies the poke (MOOS-IvP: uPokeDB posting the variable uQueryDB waits for)."""
 
-from conftest import nearsub
-from helpers import finish, log_path, wait_paused, wait_registered
+from helpers import finish, log_path, poke_while_paused
 from nearsub.common.mission.cores import build_cores
 from nearsub.common.mission.schema import load_mission
 from nearsub.common.runtime.lifecycle import Schedule, run_inprocess
@@ -40,15 +39,7 @@ def test_a_poke_of_mission_complete_ends_the_mission_at_the_helm_step_in_process
 
 
 def test_nearsub_poke_mission_complete_ends_a_running_mission(launches, community, tmp_path):
-    path = write_mission(tmp_path)
-    mission = load_mission(path, [f"name={community}"])
-    process = launches.start(str(path), "--set", f"name={community}")
-    wait_registered(community, timeout=mission.startup_timeout)
-    wait_paused(community, timeout=mission.startup_timeout)
-    poked = nearsub("poke", community, "MISSION=complete", "--vehicle", "remus100")
-    assert poked.returncode == 0, poked.stderr
-    assert "helm: operator poke from step 100" in poked.stdout
-    assert nearsub("clock", community, "resume").returncode == 0
+    mission, process = poke_while_paused(launches, write_mission(tmp_path), community, "MISSION=complete")
     # Ending takes at most a few steps, each within step_timeout, then the apps' shutdown.
     code, summary, err = finish(process, timeout=mission.startup_timeout + 10 * mission.step_timeout)
     assert code == 0, err
