@@ -52,9 +52,9 @@ def chromium():
 class Viewer:
     """A `nearsub view TARGET` subprocess and the URL it prints."""
 
-    def __init__(self, target: str):
+    def __init__(self, target: str, *args: str):
         self.process = subprocess.Popen(
-            [sys.executable, "-m", "nearsub", "view", target],
+            [sys.executable, "-m", "nearsub", "view", target, *args],
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
             text=True,
@@ -79,7 +79,7 @@ class Viewer:
 @pytest.fixture
 def viewers():
     started: list[Viewer] = []
-    yield lambda target: started.append(Viewer(target)) or started[-1]
+    yield lambda target, *args: started.append(Viewer(target, *args)) or started[-1]
     for viewer in started:
         viewer.stop()
 
@@ -260,3 +260,34 @@ def test_replay_of_two_vehicles_draws_both_and_selects_either(chromium, viewers,
     seek(chromium, 8)
     chromium.wait_for("window.nearsub.drawnAll.alfa.t === 8", timeout=STEP)
     assert chromium.evaluate("window.nearsub.drawnAll.bravo.t") == 5
+
+
+def test_live_view_follows_every_vehicle_of_a_running_mission(runtime_dir, community, viewers, monkeypatch, tmp_path):
+    """Live, through the bus alone (--connect: no log to read first): a replay of the two-vehicle
+    log at warp 1 stands for a running mission of two vehicles."""
+    from logsample import write_fleet_log
+    from test_log_play import start_player
+    from test_log_play import wait_registered as wait_replay
+
+    from nearsub.common.runtime.processes import stop
+
+    path = tmp_path / "fleet.mcap"
+    write_fleet_log(path, seconds=60.0)
+    player = start_player(path, "--warp", 1, "--community", community, "--wait", STARTUP)
+    try:
+        entry = wait_replay(community, player)
+        monkeypatch.setenv("NEARSUB_CREDENTIALS", entry["credentials"])
+        viewer = viewers(community, "--connect", entry["connect"][0])
+        with connect(viewer.url.replace("http://", "ws://") + "ws", open_timeout=STEP) as socket:
+            assert json.loads(socket.recv(timeout=STEP))["type"] == "scene"
+            deadline = time.monotonic() + STARTUP
+            while True:
+                frame = json.loads(socket.recv(timeout=STEP))
+                drawn = {v["name"]: v["vehicle"] for v in frame["vehicles"] if v["vehicle"] is not None}
+                if len(drawn) == 2 and any(e["vehicle"] == "bravo" for e in frame["events"]):
+                    break
+                assert time.monotonic() < deadline, f"the viewer drew {sorted(drawn)} only"
+    finally:
+        stop([player])
+    assert sorted(drawn) == ["alfa", "bravo"]
+    assert drawn["bravo"]["y"] - drawn["alfa"]["y"] == pytest.approx(30.0, abs=2.0)  # 30 m apart, near in time
