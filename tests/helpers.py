@@ -107,6 +107,6 @@ def poke_while_paused(launches, path: Path, community: str, assignment: str):
     wait_paused(community, timeout=mission.startup_timeout)
     poked = nearsub("poke", community, assignment, "--vehicle", "remus100")
     assert poked.returncode == 0, poked.stderr
-    assert "helm: operator poke from step 100" in poked.stdout
+    assert "remus100/helm: operator poke from step 100" in poked.stdout  # the vehicle, the app, the step
     assert nearsub("clock", community, "resume").returncode == 0
     return mission, process

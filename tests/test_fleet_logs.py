@@ -138,3 +138,12 @@ def test_foxglove_gives_each_vehicle_its_frame_entity_label_and_events(fleet, tm
     assert {"helm", "bravo/helm"} <= names
     topics = {topic for topic, _ in messages}
     assert {"nearsub/alpha/alfa/state", "nearsub/alpha/bravo/state"} <= topics
+
+
+def test_json_export_of_one_vehicle_keeps_its_topics_and_the_mission_wide_ones(fleet):
+    path, _ = fleet
+    out = nearsub("log", "export", str(path), "--format", "json", "--vehicle", "alfa")
+    assert out.returncode == 0, out.stderr
+    topics = {json.loads(line)["topic"] for line in out.stdout.splitlines()}
+    assert "nearsub/alpha/alfa/state" in topics and "nearsub/alpha/clock/end" in topics
+    assert not any("/bravo/" in topic for topic in topics)

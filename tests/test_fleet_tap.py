@@ -29,6 +29,10 @@ def test_tap_lists_the_vehicles_and_echoes_one_of_them(fleet_log, runtime_dir, c
             "--count", "5", "--json", timeout=STARTUP + STEP,
         )  # fmt: skip
         listed = nearsub("tap", "list", "--community", community, "--json", timeout=STARTUP + STEP)
+        hz = nearsub(
+            "tap", "hz", f"nearsub/{community}/**", "--vehicle", "alfa", "--community", community, "--duration", "2",
+            "--json", timeout=STARTUP + STEP,
+        )  # fmt: skip
         only = nearsub("tap", "list", "--community", community, "--vehicle", "alfa", "--json", timeout=STARTUP + STEP)
         unknown = nearsub("tap", "list", "--community", community, "--vehicle", "zulu", timeout=STARTUP + STEP)
     finally:
@@ -37,6 +41,8 @@ def test_tap_lists_the_vehicles_and_echoes_one_of_them(fleet_log, runtime_dir, c
     lines = [json.loads(line) for line in echo.stdout.splitlines()]
     assert len(lines) == 5 and all(line["key"] == f"nearsub/{community}/bravo/state" for line in lines)
     assert all(line["vehicle"] == "bravo" for line in lines)
+    assert hz.returncode == 0, hz.stderr
+    assert {json.loads(line)["key"].split("/")[2] for line in hz.stdout.splitlines()} == {"alfa"}
     assert listed.returncode == 0, listed.stderr
     listing = json.loads(listed.stdout)
     assert listing["vehicles"] == ["alfa", "bravo"]

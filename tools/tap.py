@@ -31,6 +31,7 @@ def add_parser(subparsers) -> None:
     t = tap.add_parser("hz", help="message rates per key, in simulated time")
     t.add_argument("key")
     t.add_argument("--window", type=int, default=100, help="samples per rate estimate")
+    t.add_argument("--vehicle", metavar="NAME", help="only the keys of this vehicle (nearsub/<c>/NAME/...)")
     t.add_argument("--duration", type=float, default=5.0, help="wall seconds to listen")
     t.add_argument("--json", action="store_true")
     add_connect_arguments(t)
@@ -79,6 +80,11 @@ def vehicle_name(key: str) -> str | None:
     return owner[0] if owner else None
 
 
+def other_vehicle(args, key: str) -> bool:
+    """A key that `--vehicle` leaves out."""
+    return args.vehicle is not None and vehicle_name(key) != args.vehicle
+
+
 def tap_list(args) -> int:
     from nearsub.common.runtime import keys
 
@@ -104,7 +110,7 @@ def tap_list(args) -> int:
     topics = sorted(set(publishers) | set(times))
     vehicles = sorted({name for key in topics if (name := vehicle_name(key))})
     if args.vehicle is not None:
-        topics = [key for key in topics if vehicle_name(key) == args.vehicle]
+        topics = [key for key in topics if not other_vehicle(args, key)]
     rows = [
         {
             "key": key,
@@ -168,7 +174,7 @@ def tap_echo(args) -> int:
             if remaining is not None and remaining <= 0:
                 break
             mail = mailbox.get(timeout=0.5 if remaining is None else min(0.5, remaining))
-            if mail is None or (args.vehicle is not None and vehicle_name(mail.key) != args.vehicle):
+            if mail is None or other_vehicle(args, mail.key):
                 continue
             value, error = _decode_any(mail.key, mail.payload)
             if error:
@@ -205,7 +211,7 @@ def tap_hz(args) -> int:
         bus.subscribe(args.key, mailbox)
         while time.monotonic() < deadline:
             mail = mailbox.get(timeout=0.1)
-            if mail is not None:
+            if mail is not None and not other_vehicle(args, mail.key):
                 value, error = _decode_any(mail.key, mail.payload)
                 if not error and isinstance(value, dict) and "t" in value:
                     times[mail.key].append(float(value["t"]))
