@@ -44,7 +44,8 @@ FLEET = {"alfa": 0.0, "bravo": 30.0}  # vehicle name -> its offset in y [m] from
 def write_fleet_log(path: Path, seconds: float = 10.0):
     """A two-vehicle log: the alpha run of `write_sample_log` flown by "alfa" and, 30 m to its
     +y side, by "bravo", each under its own vehicle keys nearsub/alpha/<name>/<leaf>; the
-    events of "bravo" are under its vehicle key, those of "alfa" under the mission's events key.
+    events of "bravo" come from its apps (nearsub/alpha/events/bravo/<role>-1), those of "alfa"
+    from mission-wide instances (nearsub/alpha/events/<role>).
     "bravo" stops half-way (a shorter time span). Returns the in-process result."""
     mission = load_mission(ALPHA, [f"time_limit={seconds:g}"])
     result = run_mission(mission)
@@ -56,7 +57,7 @@ def write_fleet_log(path: Path, seconds: float = 10.0):
             if name == "bravo" and message.t > seconds / 2:
                 continue
             if leaf == "events":
-                key = f"nearsub/alpha/events/{role}" if name == "alfa" else f"nearsub/alpha/{name}/events/{role}"
+                key = f"nearsub/alpha/events/{role}" if name == "alfa" else f"nearsub/alpha/events/{name}/{role}-1"
             else:
                 key = f"nearsub/alpha/{name}/{leaf}"
             if isinstance(message, State):

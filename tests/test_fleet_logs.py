@@ -21,7 +21,7 @@ def fleet(tmp_path_factory):
 
 def test_vehicle_of_tells_vehicle_keys_from_mission_wide_ones():
     assert vehicle_of("nearsub/alpha/bravo/state") == ("bravo", "state")
-    assert vehicle_of("nearsub/alpha/bravo/events/helm") == ("bravo", "events")
+    assert vehicle_of("nearsub/alpha/events/bravo/helm-1") == ("bravo", "events")
     for key in ("nearsub/alpha/clock/end", "nearsub/alpha/events/helm", "nearsub/alpha/status/sim", "other/a/b/c"):
         assert vehicle_of(key) is None, key
 

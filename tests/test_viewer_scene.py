@@ -232,7 +232,7 @@ def test_every_vehicle_of_the_keys_gets_its_own_track_and_the_first_leads(overta
         feed_payload(model, f"{community}/bravo/state", encode(state(step, -40.0 + step, 20.0)))
         feed_payload(model, f"{community}/alfa/state", encode(state(step, -60.0 + step, 5.89)))
     stray = Event(step=3, t=0.15, source="helm", kind="large_stray", detail="off the track", data={})
-    assert feed_payload(model, f"{community}/bravo/events/helm", encode(stray))
+    assert feed_payload(model, f"{community}/events/bravo/helm-1", encode(stray))
     frame = model.frame()
     assert [v["name"] for v in frame["vehicles"]] == ["alfa", "bravo"]
     assert frame["vehicle"]["name"] == "alfa" and frame["vehicle"]["x"] == -56.0

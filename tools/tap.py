@@ -288,12 +288,13 @@ def tap_pub(args) -> int:
     from nearsub.common.runtime.bus import Mailbox
 
     vehicle = vehicle_name(args.key) if leaf is not None else None
+    from nearsub.common.runtime import keys
+
     with bus:
         mailbox = Mailbox()
         if operator:
-            # The consumer's event: on the mission's events, or under the vehicle's own key.
-            bus.subscribe(f"{'/'.join(parts[:2])}/events/*", mailbox)
-            bus.subscribe(f"{'/'.join(parts[:3])}/events/**", mailbox)
+            # The consumer's event: from a mission-wide app instance, or one of the vehicle's.
+            bus.subscribe(keys.all_events(parts[1]), mailbox)
         # A fresh session drops data put before it knows a subscriber (docs/design.md, "Transport").
         if not bus.put_when_matched(args.key, payload, wait=5.0):
             if operator:
@@ -327,7 +328,8 @@ def _confirm_override(mailbox, leaf: str, vehicle: str, timeout: float = 10.0) -
             event = decode(mail.payload, Event, mail.key)
         except MessageError:
             continue
-        if event.kind == "info" and event.data.get("leaf") == leaf and event.detail.startswith("operator"):
+        mine = vehicle_name(mail.key) in (None, vehicle)  # another vehicle's app confirms another override
+        if mine and event.kind == "info" and event.data.get("leaf") == leaf and event.detail.startswith("operator"):
             print(f"{vehicle}/{event.source}: {event.detail}")
             return 0
     print(f"nearsub tap pub: no app confirmed the {leaf} override within {timeout:g} s", file=sys.stderr)

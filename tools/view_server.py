@@ -64,7 +64,6 @@ class LiveSource:
         for leaf in ("state", "forces", "helm"):
             bus.subscribe(keys.vehicle_topic(c, "*", leaf), self.mailbox)
         bus.subscribe(keys.all_events(c), self.mailbox)
-        bus.subscribe(keys.vehicle_topic(c, "*", "events/**"), self.mailbox)  # a vehicle's own events
         bus.subscribe(keys.mission_end(c), self.mailbox)
         if history is not None and Path(history).is_file():
             # What happened before the viewer joined: the log the mission is writing (complete

@@ -21,7 +21,7 @@ What each topic becomes (MOOS units: compass degrees, 0 = north = +y, clockwise,
 - helm    -> WPT_INDEX, IVPHELM_BHV_ACTIVE (the behaviour);
 - forces  -> INTERACTION_X, INTERACTION_Y [N], INTERACTION_N [N m], what the dynamics applied;
 - events  -> EVENT_<KIND> (EVENT_WAYPOINT, EVENT_COLLISION, ...), the event's text (the mission's
-  events and a vehicle's, nearsub/<c>/<vehicle>/events/...);
+  events and a vehicle's apps', nearsub/<c>/events/<vehicle>/<instance>);
 - clock/end -> MISSION (the outcome) and MISSION_REASON; control requests -> CONTROL_REQUEST;
 - DB_TIME from `MOOSDB_<community>` once per simulated second: alogview names the vehicle after
   that source, as a MOOSDB names itself MOOSDB_<community>. One vehicle's alog (`vehicle`) is
@@ -193,9 +193,9 @@ def _translate(r: LogRecord, lines: _Lines, start: float, community: str, vehicl
     value = r.value()
     if not isinstance(value, dict):
         return
-    source = str(value.get("source") or (parts[-1] if "events" in parts[2:4] else parts[2]))
+    source = str(value.get("source") or (parts[-1] if parts[2] == "events" else parts[2]))
     rest = parts[2:]
-    if rest[0] == "events" or rest[1:2] == ["events"]:  # the mission's events, or a vehicle's
+    if rest[0] == "events":
         kind = str(value.get("kind", "info")).upper()
         lines.post(t, f"EVENT_{kind}", source, str(value.get("detail") or value.get("kind", "")))
     elif rest[0] == "clock":

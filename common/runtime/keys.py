@@ -79,8 +79,12 @@ SERVICES = frozenset({"clock", "events", "status", "alive", "control", "reply", 
 
 def vehicle_of(key: str) -> tuple[str, str] | None:
     """(vehicle, leaf) of a vehicle key nearsub/<c>/<vehicle>/<leaf>[/...] (the leaf is the first
-    chunk after the vehicle); None for a mission-wide key. Readers find a mission's vehicles this way."""
+    chunk after the vehicle), or (vehicle, "events") for the events of a vehicle's app, whose
+    instance name `<vehicle>/<app>` adds a chunk (nearsub/<c>/events/<vehicle>/<instance>); None
+    for a mission-wide key. Readers find a mission's vehicles this way."""
     parts = key.split("/")
-    if len(parts) < 4 or parts[0] != ROOT or parts[2] in SERVICES:
+    if len(parts) < 4 or parts[0] != ROOT:
         return None
-    return parts[2], parts[3]
+    if parts[2] == "events" and len(parts) >= 5:
+        return parts[3], "events"
+    return None if parts[2] in SERVICES else (parts[2], parts[3])

@@ -200,7 +200,7 @@ class FoxgloveScene:
         owner = vehicle_of(key)
         if owner is not None and owner[1] == "state" and len(parts) == 4:
             out += self._pose_messages(owner[0], fields, ns)
-        elif (len(parts) >= 4 and parts[2] == "events") or (owner is not None and owner[1] == "events"):
+        elif len(parts) >= 4 and parts[2] == "events":
             kind = str(fields.get("kind", "info"))
             text = f"t={float(fields.get('t', sim_time)):.2f} s {kind}: {fields.get('detail', '')}"
             name = str(fields.get("source", parts[-1]))

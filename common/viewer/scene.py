@@ -484,7 +484,7 @@ def feed_payload(model: SceneModel, key: str, payload: bytes, wall: float | None
     from nearsub.common.runtime.messages import MessageError, decode, model_for_key
 
     owner = vehicle_of(key)
-    message_type = Event if owner is not None and owner[1] == "events" else model_for_key(key)
+    message_type = model_for_key(key)
     if message_type not in (State, Forces, HelmProgress, Event, MissionEnd):
         return False
     try:
