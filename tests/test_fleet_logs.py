@@ -147,3 +147,18 @@ def test_json_export_of_one_vehicle_keeps_its_topics_and_the_mission_wide_ones(f
     topics = {json.loads(line)["topic"] for line in out.stdout.splitlines()}
     assert "nearsub/alpha/alfa/state" in topics and "nearsub/alpha/clock/end" in topics
     assert not any("/bravo/" in topic for topic in topics)
+
+
+def test_foxglove_export_of_a_mission_this_version_cannot_read_is_one_line(fleet, tmp_path):
+    """A log written by another version (a mission field unknown here) is bad input, not a traceback."""
+    from nearsub.common.runtime.logfile import LogWriter
+
+    path, _ = fleet
+    resolved = json.loads(read_log(path).metadata["mission"]["resolved"]) | {"convoy": [{"name": "alfa"}]}
+    other = tmp_path / "other.mcap"
+    writer = LogWriter(other)
+    writer.metadata("mission", {"name": "alpha", "resolved": json.dumps(resolved)})
+    writer.finish()
+    out = nearsub("log", "export", str(other), "--format", "foxglove", "-o", str(tmp_path / "fox.mcap"))
+    assert out.returncode == 2 and len(out.stderr.strip().splitlines()) == 1, out.stderr
+    assert "field 'convoy'" in out.stderr

@@ -220,7 +220,12 @@ def _export_foxglove(args) -> int:
     output = Path(args.output or f"{Path(args.log).stem}-foxglove.mcap")
     if output.resolve() == Path(args.log).resolve():
         raise InputError(f"-o {output}: is the log being exported")
-    count = export_foxglove(args.log, output)
+    from nearsub.common.mission.schema import MissionError
+
+    try:
+        count = export_foxglove(args.log, output)
+    except MissionError as exc:  # a mission this version cannot read: one line, as `nearsub view` says it
+        raise InputError(str(exc)) from None
     print(f"{output}: {count} messages", file=sys.stderr)
     return 0
 
