@@ -93,6 +93,15 @@ def _select(contents: LogContents, topic: str | None):
             yield record
 
 
+def vehicle_records(contents: LogContents, args, records=None, error=InputError) -> list:
+    """The records of `--vehicle` (`LogContents.vehicle_records`); a vehicle the log does not
+    have is bad input (`error`), naming the ones it has."""
+    if args.vehicle not in contents.vehicles():
+        known = ", ".join(contents.vehicles()) or "none"
+        raise error(f"--vehicle {args.vehicle}: not a vehicle of {args.log} (its vehicles: {known})")
+    return contents.vehicle_records(args.vehicle, records)
+
+
 def topic_filter(pattern: str | None):
     """`nearsub.logs.topic_filter` for a `--topic` option: a bad pattern is bad input."""
     from nearsub.logs import topic_filter as logs_topic_filter
@@ -189,10 +198,7 @@ def export_command(args) -> int:
     contents = read_log(args.log)
     records = list(_select(contents, args.topic))
     if args.vehicle is not None:
-        if args.vehicle not in contents.vehicles():
-            known = ", ".join(contents.vehicles()) or "none"
-            raise InputError(f"--vehicle {args.vehicle}: not a vehicle of {args.log} (its vehicles: {known})")
-        records = contents.vehicle_records(args.vehicle, records)
+        records = vehicle_records(contents, args, records)
     out = open(args.output, "w", newline="") if args.output and args.format != "csv" else sys.stdout
     try:
         if args.format == "json":

@@ -63,7 +63,7 @@ def select(args) -> Selection:
     from nearsub.common.mission.schema import COMMUNITY_PATTERN
     from nearsub.common.runtime.logfile import INVALID_SUFFIX, read_log
 
-    from .log import topic_filter
+    from .log import topic_filter, vehicle_records
 
     for name, value in (("--warp", args.warp), ("--wait", args.wait), ("--linger", args.linger)):
         if not (value >= 0 and value < float("inf")):
@@ -76,10 +76,7 @@ def select(args) -> Selection:
     contents = read_log(args.log)
     records = contents.records
     if args.vehicle is not None:
-        if args.vehicle not in contents.vehicles():
-            known = ", ".join(contents.vehicles()) or "none"
-            raise PlayInputError(f"--vehicle {args.vehicle}: not a vehicle of {args.log} (its vehicles: {known})")
-        records = contents.vehicle_records(args.vehicle)
+        records = vehicle_records(contents, args, error=PlayInputError)
     logged = contents.metadata.get("mission", {}).get("name") or next(
         (r.topic.split("/")[1] for r in contents.records if r.topic.count("/") >= 2), "nearsub"
     )
