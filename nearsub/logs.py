@@ -10,6 +10,9 @@ messages" and "Transport"). This module decodes them, so nobody has to write a d
     state.plot(x="y", y="x")
     frames = read_frames(path, topics="nearsub/alpha/*/state")           # a Zenoh key expression
 
+Each vehicle of a mission has its own topics (nearsub/<community>/<vehicle>/<leaf>), so its own
+frames: `read_frames(path, "nearsub/alpha/*/state")` gives one state frame per vehicle.
+
 Each frame has one row per message in log-time order: `log_time` (simulated seconds, the MCAP log
 time) and then the message's fields (`schema_version`, `step`, `t`, `source`, then the model's
 own; angles in radians, SI units). Nested maps are flattened with dots (an event's `data.x`).

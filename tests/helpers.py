@@ -93,3 +93,20 @@ def wait_paused(community: str, timeout: float = 30.0) -> dict:
             return status
         time.sleep(0.2)
     raise AssertionError(f"the clock of {community} did not pause")
+
+
+def poke_while_paused(launches, path: Path, community: str, assignment: str):
+    """Launch the mission at `path` (it pauses itself at step 100), poke `assignment` into its
+    remus100's helm, check the helm confirms it from step 100, resume; returns (mission, process)."""
+    from conftest import nearsub
+    from nearsub.common.mission.schema import load_mission
+
+    mission = load_mission(path, [f"name={community}"])
+    process = launches.start(str(path), "--set", f"name={community}")
+    wait_registered(community, timeout=mission.startup_timeout)
+    wait_paused(community, timeout=mission.startup_timeout)
+    poked = nearsub("poke", community, assignment, "--vehicle", "remus100")
+    assert poked.returncode == 0, poked.stderr
+    assert "remus100/helm: operator poke from step 100" in poked.stdout  # the vehicle, the app, the step
+    assert nearsub("clock", community, "resume").returncode == 0
+    return mission, process

@@ -10,7 +10,7 @@ from conftest import ALPHA
 from nearsub.common.mission.cores import run_mission
 from nearsub.common.mission.schema import load_mission
 from nearsub.common.runtime.logfile import LogWriter
-from nearsub.common.runtime.messages import Control, encode
+from nearsub.common.runtime.messages import Control, Event, MissionEnd, State, encode
 
 STARTED_UNIX = 1_800_000_000.25  # the logger's start time written as run metadata
 
@@ -34,5 +34,38 @@ def write_sample_log(path: Path, seconds: float = 10.0, shuffle: bool = False):
     for key, data, t in entries:
         writer.write(key, data, t)
     writer.write("nearsub/alpha/remus100/state", b"\xc1", seconds, valid=False)
+    writer.finish()
+    return result
+
+
+FLEET = {"alfa": 0.0, "bravo": 30.0}  # vehicle name -> its offset in y [m] from the alpha run
+
+
+def write_fleet_log(path: Path, seconds: float = 10.0):
+    """A two-vehicle log: the alpha run of `write_sample_log` flown by "alfa" and, 30 m to its
+    +y side, by "bravo", each under its own vehicle keys nearsub/alpha/<name>/<leaf>; the
+    events of "bravo" come from its apps (nearsub/alpha/events/bravo/<role>-1), those of "alfa"
+    from mission-wide instances (nearsub/alpha/events/<role>).
+    "bravo" stops half-way (a shorter time span). Returns the in-process result."""
+    mission = load_mission(ALPHA, [f"time_limit={seconds:g}"])
+    result = run_mission(mission)
+    writer = LogWriter(path)
+    writer.metadata("mission", {"name": "alpha", "resolved": mission.model_dump_json()})
+    writer.metadata("run", {"started_unix": f"{STARTED_UNIX:.3f}"})
+    for name, dy in FLEET.items():
+        for role, leaf, message in result.messages:
+            if name == "bravo" and message.t > seconds / 2:
+                continue
+            if leaf == "events":
+                key = f"nearsub/alpha/events/{role}" if name == "alfa" else f"nearsub/alpha/events/{name}/{role}-1"
+            else:
+                key = f"nearsub/alpha/{name}/{leaf}"
+            if isinstance(message, State):
+                message = message.model_copy(update={"y": message.y + dy})
+            elif isinstance(message, Event) and "y" in message.data:
+                message = message.model_copy(update={"data": message.data | {"y": message.data["y"] + dy}})
+            writer.write(key, encode(message), message.t)
+    end = MissionEnd(step=result.steps, t=seconds, source="clock", outcome=result.outcome, reason=result.reason)
+    writer.write("nearsub/alpha/clock/end", encode(end), seconds)
     writer.finish()
     return result

@@ -7,10 +7,9 @@ import math
 
 import numpy as np
 import pytest
-from test_live import wait_paused
 
 from conftest import ROOT, nearsub
-from helpers import finish, log_path, per_topic, wait_registered
+from helpers import finish, log_path, per_topic, poke_while_paused
 from nearsub.common.autonomy import helm, ivp, logic
 from nearsub.common.mission.cores import build_cores, run_mission
 from nearsub.common.mission.schema import MissionError, load_mission, mission_from_dict
@@ -272,14 +271,7 @@ def test_nearsub_poke_switches_a_running_helm_and_the_log_replays_it(launches, c
 
     path = tmp_path / "pokes.toml"
     path.write_text(POKE_MISSION)
-    mission = load_mission(path, [f"name={community}"])
-    process = launches.start(str(path), "--set", f"name={community}")
-    wait_registered(community, timeout=mission.startup_timeout)
-    wait_paused(community, timeout=mission.startup_timeout)
-    poked = nearsub("poke", community, "DIRECTION=north", "--vehicle", "remus100")
-    assert poked.returncode == 0, poked.stderr
-    assert "helm: operator poke from step 100" in poked.stdout
-    assert nearsub("clock", community, "resume").returncode == 0
+    mission, process = poke_while_paused(launches, path, community, "DIRECTION=north")
     code, summary, err = finish(process)
     assert code == 0 and summary["outcome"] == "time_limit", err
 

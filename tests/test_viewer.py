@@ -52,9 +52,9 @@ def chromium():
 class Viewer:
     """A `nearsub view TARGET` subprocess and the URL it prints."""
 
-    def __init__(self, target: str):
+    def __init__(self, target: str, *args: str):
         self.process = subprocess.Popen(
-            [sys.executable, "-m", "nearsub", "view", target],
+            [sys.executable, "-m", "nearsub", "view", target, *args],
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
             text=True,
@@ -79,7 +79,7 @@ class Viewer:
 @pytest.fixture
 def viewers():
     started: list[Viewer] = []
-    yield lambda target: started.append(Viewer(target)) or started[-1]
+    yield lambda target, *args: started.append(Viewer(target, *args)) or started[-1]
     for viewer in started:
         viewer.stop()
 
@@ -226,3 +226,68 @@ def test_start_viewer_serves_the_mission_of_a_launcher_run_file(launches, commun
     finally:
         os.killpg(process.pid, signal.SIGTERM)
         process.wait(timeout=STEP)
+
+
+def seek(chromium, t: float) -> None:
+    """Move the replay's timeline to t (a block: each evaluation shares the page's global scope)."""
+    chromium.evaluate(f"{{ const s = document.getElementById('scrub'); s.value = {t}; s.oninput(); }}")
+
+
+def test_replay_of_two_vehicles_draws_both_and_selects_either(chromium, viewers, tmp_path):
+    from logsample import write_fleet_log
+
+    path = tmp_path / "fleet.mcap"
+    write_fleet_log(path)
+    states = {}
+    for r in read_log(path).records:
+        if r.topic.endswith("/state"):
+            states[(r.topic.split("/")[2], r.value()["step"])] = r.value()
+    viewer = viewers(str(path))
+    chromium.open(viewer.url)
+    chromium.wait_for("window.nearsub.drawn !== null", timeout=STARTUP)
+    assert chromium.evaluate("document.getElementById('vehicle-row').hidden") is False
+    assert chromium.evaluate("[...document.getElementById('vehicle').options].map(o => o.value)") == ["alfa", "bravo"]
+    seek(chromium, 4)
+    chromium.wait_for("window.nearsub.drawnAll.alfa.t === 4 && window.nearsub.drawnAll.bravo.t === 4", timeout=STEP)
+    drawn = chromium.evaluate("window.nearsub.drawnAll")
+    for name in ("alfa", "bravo"):
+        logged = states[(name, drawn[name]["step"])]
+        assert (drawn[name]["x"], drawn[name]["y"], drawn[name]["psi"]) == (logged["x"], logged["y"], logged["psi"])
+    assert chromium.evaluate("window.nearsub.drawn.y") == drawn["alfa"]["y"]  # the first is selected
+    chromium.evaluate("{ const v = document.getElementById('vehicle'); v.value = 'bravo'; v.onchange(); }")
+    assert chromium.evaluate("window.nearsub.drawn.y") == drawn["bravo"]["y"]
+    # bravo's log ends at 5 s: past it, bravo stays at its last state while alfa moves on.
+    seek(chromium, 8)
+    chromium.wait_for("window.nearsub.drawnAll.alfa.t === 8", timeout=STEP)
+    assert chromium.evaluate("window.nearsub.drawnAll.bravo.t") == 5
+
+
+def test_live_view_follows_every_vehicle_of_a_running_mission(runtime_dir, community, viewers, monkeypatch, tmp_path):
+    """Live, through the bus alone (--connect: no log to read first): a replay of the two-vehicle
+    log at warp 1 stands for a running mission of two vehicles."""
+    from logsample import write_fleet_log
+    from test_log_play import start_player
+    from test_log_play import wait_registered as wait_replay
+
+    from nearsub.common.runtime.processes import stop
+
+    path = tmp_path / "fleet.mcap"
+    write_fleet_log(path, seconds=60.0)
+    player = start_player(path, "--warp", 1, "--community", community, "--wait", STARTUP)
+    try:
+        entry = wait_replay(community, player)
+        monkeypatch.setenv("NEARSUB_CREDENTIALS", entry["credentials"])
+        viewer = viewers(community, "--connect", entry["connect"][0])
+        with connect(viewer.url.replace("http://", "ws://") + "ws", open_timeout=STEP) as socket:
+            assert json.loads(socket.recv(timeout=STEP))["type"] == "scene"
+            deadline = time.monotonic() + STARTUP
+            while True:
+                frame = json.loads(socket.recv(timeout=STEP))
+                drawn = {v["name"]: v["vehicle"] for v in frame["vehicles"] if v["vehicle"] is not None}
+                if len(drawn) == 2 and any(e["vehicle"] == "bravo" for e in frame["events"]):
+                    break
+                assert time.monotonic() < deadline, f"the viewer drew {sorted(drawn)} only"
+    finally:
+        stop([player])
+    assert sorted(drawn) == ["alfa", "bravo"]
+    assert drawn["bravo"]["y"] - drawn["alfa"]["y"] == pytest.approx(30.0, abs=2.0)  # 30 m apart, near in time

@@ -223,3 +223,21 @@ def test_page_assets_ship_with_the_package_and_fetch_nothing_else():
     for body, _ in files.values():
         text = body.decode()
         assert "http://" not in text and "https://" not in text  # no network fetches
+
+
+def test_every_vehicle_of_the_keys_gets_its_own_track_and_the_first_leads(overtake):
+    model = SceneModel.for_mission(overtake)
+    community = "nearsub/overtake_stern_standard"
+    for step in range(5):
+        feed_payload(model, f"{community}/bravo/state", encode(state(step, -40.0 + step, 20.0)))
+        feed_payload(model, f"{community}/alfa/state", encode(state(step, -60.0 + step, 5.89)))
+    stray = Event(step=3, t=0.15, source="helm", kind="large_stray", detail="off the track", data={})
+    assert feed_payload(model, f"{community}/events/bravo/helm-1", encode(stray))
+    frame = model.frame()
+    assert [v["name"] for v in frame["vehicles"]] == ["alfa", "bravo"]
+    assert frame["vehicle"]["name"] == "alfa" and frame["vehicle"]["x"] == -56.0
+    bravo = frame["vehicles"][1]
+    assert bravo["vehicle"]["x"] == -36.0 and bravo["trail"][0] == [-40.0, 20.0]
+    assert bravo["vehicle"]["length"] == overtake.vehicle_model.length  # not a library name: the mission's vehicle
+    [event] = frame["events"]
+    assert event["vehicle"] == "bravo" and (event["x"], event["y"]) == (-37.0, 20.0)  # bravo's pose at 0.15 s

@@ -1,6 +1,7 @@
 """Screenshots of `nearsub view` for docs/viewer: a live overtake near the submarine's stern, the
-replay of its log at the collision, and the replay of one envelope cell (its mission written by
-`nearsub envelope --cell-mission`). Run from the repository: `.venv/bin/python tests/viewer_shots.py`.
+replay of its log at the collision, the replay of one envelope cell (its mission written by
+`nearsub envelope --cell-mission`), and the replay of a log of two vehicles (`--fleet` makes only
+that one). Run from the repository: `.venv/bin/python tests/viewer_shots.py [--fleet]`.
 
 The mission pauses itself just before the collision (pause_at_step), so the live picture is the
 same on every run; the page's Resume button then lets it finish and the log is replayed.
@@ -54,7 +55,7 @@ def replay_shot(browser: Browser, log: str, path: Path, viewers: list) -> None:
     browser.open(url_of(replay))
     browser.wait_for("window.nearsub.drawn", 30)
     t = browser.evaluate("window.nearsub.scene.range[1]")
-    browser.evaluate(f"const s = document.getElementById('scrub'); s.value = {t}; s.oninput()")
+    browser.evaluate(f"{{ const s = document.getElementById('scrub'); s.value = {t}; s.oninput(); }}")
     browser.wait_for(f"window.nearsub.drawn.t >= {t} - 1e-6", 30)  # t is a float from the page
     time.sleep(0.3)
     print(browser.screenshot(path))
@@ -72,13 +73,35 @@ def envelope_cell_log(work: Path) -> str:
     return json.loads(done.stdout.strip().splitlines()[-1])["log"]
 
 
+def fleet_shot(out: Path, work: Path) -> None:
+    """The replay of the two-vehicle log of the tests (`logsample.write_fleet_log`: alpha flown by
+    "alfa" and, 30 m to its side, by "bravo", whose log stops half-way) at its end, 120 s."""
+    from logsample import write_fleet_log
+
+    log = work / "fleet.mcap"
+    write_fleet_log(log, seconds=120.0)
+    viewers = []
+    try:
+        with Browser(width=1400, height=800) as browser:
+            replay_shot(browser, str(log), out / "replay-fleet.png", viewers)
+    finally:
+        for process in viewers:
+            os.killpg(process.pid, signal.SIGTERM)
+            process.wait(timeout=30)
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default=str(ROOT / "docs" / "viewer"))
+    parser.add_argument("--fleet", action="store_true", help="only the replay of two vehicles")
     args = parser.parse_args()
     out = Path(args.out)
     work = Path(tempfile.mkdtemp(prefix="nearsub-shots-"))
     os.environ["NEARSUB_RUNTIME_DIR"] = str(work / "runtime")
+    sys.path.insert(0, str(ROOT / "tests"))
+    if args.fleet:
+        fleet_shot(out, work)
+        return 0
     launch = subprocess.Popen(
         [sys.executable, "-m", "nearsub", "launch", str(MISSION), "--warp", "0", "--json"]
         + ["--set", f"pause_at_step={PAUSE_STEP}", "--log", str(work / "logs")],
@@ -88,7 +111,6 @@ def main() -> int:
     )
     viewers = []
     try:
-        sys.path.insert(0, str(ROOT / "tests"))
         from helpers import wait_registered
 
         wait_registered("overtake_stern_standard", timeout=300)
@@ -121,6 +143,7 @@ def main() -> int:
             browser.evaluate("document.getElementById('follow').click()")
             time.sleep(0.5)
             print(browser.screenshot(out / "replay-envelope-cell-follow.png"))
+        fleet_shot(out, work)
     finally:
         for process in [launch, *viewers]:
             if process.poll() is None:

@@ -29,6 +29,11 @@ def add_parser(subparsers) -> None:
     t.add_argument("log")
     t.add_argument("--format", choices=("csv", "json", "alog", "foxglove"), default="json")
     t.add_argument("--topic", help="key expression to select (wildcards allowed)")
+    t.add_argument(
+        "--vehicle",
+        metavar="NAME",
+        help="one vehicle's topics and the mission-wide ones (alog: that vehicle's own alog)",
+    )
     t.add_argument("-o", "--output", help="output file (json, alog, foxglove) or folder (csv)")
     t.set_defaults(func=export_command)
     t = lg.add_parser("play", help="republish a log onto the bus (uPlayBack, ros2 bag play)")
@@ -88,6 +93,15 @@ def _select(contents: LogContents, topic: str | None):
             yield record
 
 
+def vehicle_records(contents: LogContents, args, records=None, error=InputError) -> list:
+    """The records of `--vehicle` (`LogContents.vehicle_records`); a vehicle the log does not
+    have is bad input (`error`), naming the ones it has."""
+    if args.vehicle not in contents.vehicles():
+        known = ", ".join(contents.vehicles()) or "none"
+        raise error(f"--vehicle {args.vehicle}: not a vehicle of {args.log} (its vehicles: {known})")
+    return contents.vehicle_records(args.vehicle, records)
+
+
 def topic_filter(pattern: str | None):
     """`nearsub.logs.topic_filter` for a `--topic` option: a bad pattern is bad input."""
     from nearsub.logs import topic_filter as logs_topic_filter
@@ -126,6 +140,7 @@ def log_summary(path: Path) -> dict:
         "sim_start": min((r.sim_time for r in contents.records), default=0.0),
         "sim_end": max((r.sim_time for r in contents.records), default=0.0),
         "outcome": contents.metadata.get("outcome", {}),
+        "vehicles": contents.vehicles(),
         "topics": {
             topic: {
                 "count": n,
@@ -159,7 +174,19 @@ def print_summary(summary: dict) -> None:
     for topic, item in summary["topics"].items():
         model = model_for_key(topic)
         table.add_row(topic, model.__name__ if model else "", str(item["count"]), f"{item['hz']:.2f}")
-    tables.console().print(table)
+    console = tables.console()
+    console.print(table)
+    vehicles = Table("vehicle", title="vehicles", title_justify="left")
+    for name in ("states", "steps", "simulated time (s)"):
+        vehicles.add_column(name, justify="right")
+    for name, item in summary["vehicles"].items():
+        if item["states"]:
+            steps = f"{item['first_step']} .. {item['last_step']}"
+            span = f"{item['t_start']:.2f} .. {item['t_end']:.2f}"
+        else:
+            steps = span = "-"
+        vehicles.add_row(name, str(item["states"]), steps, span)
+    console.print(vehicles)
 
 
 def export_command(args) -> int:
@@ -170,6 +197,8 @@ def export_command(args) -> int:
         return _export_foxglove(args)
     contents = read_log(args.log)
     records = list(_select(contents, args.topic))
+    if args.vehicle is not None:
+        records = vehicle_records(contents, args, records)
     out = open(args.output, "w", newline="") if args.output and args.format != "csv" else sys.stdout
     try:
         if args.format == "json":
@@ -178,7 +207,7 @@ def export_command(args) -> int:
         elif args.format == "alog":
             from nearsub.common.runtime.alog import write_alog
 
-            write_alog(contents, out, records)
+            write_alog(contents, out, records, args.vehicle)
         else:
             return _write_csv(records, args.output)
     finally:
@@ -191,12 +220,18 @@ def _export_foxglove(args) -> int:
     """An MCAP that Foxglove opens as is (tools/foxglove.py); by default beside cwd, never over the log."""
     from .foxglove import export_foxglove
 
-    if args.topic:
-        raise InputError("--topic: the Foxglove export keeps every topic (the scene needs the states and events)")
+    if args.topic or args.vehicle:
+        option = "--topic" if args.topic else "--vehicle"
+        raise InputError(f"{option}: the Foxglove export keeps every topic (the scene needs the states and events)")
     output = Path(args.output or f"{Path(args.log).stem}-foxglove.mcap")
     if output.resolve() == Path(args.log).resolve():
         raise InputError(f"-o {output}: is the log being exported")
-    count = export_foxglove(args.log, output)
+    from nearsub.common.mission.schema import MissionError
+
+    try:
+        count = export_foxglove(args.log, output)
+    except MissionError as exc:  # a mission this version cannot read: one line, as `nearsub view` says it
+        raise InputError(str(exc)) from None
     print(f"{output}: {count} messages", file=sys.stderr)
     return 0
 

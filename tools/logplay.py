@@ -47,6 +47,7 @@ def add_arguments(t) -> None:
     t.add_argument("--from", dest="start", type=float, metavar="T", help="first simulated second to replay")
     t.add_argument("--to", dest="end", type=float, metavar="T", help="last simulated second to replay")
     t.add_argument("--topic", help="key expression of the logged keys to replay (wildcards * and **)")
+    t.add_argument("--vehicle", metavar="NAME", help="replay one vehicle's keys and the mission-wide ones")
     t.add_argument("--community", help="publish under this community name (default: the logged one)")
     t.add_argument("--connect", action="append", metavar="ENDPOINT", help="use this router instead of starting one")
     t.add_argument(
@@ -62,7 +63,7 @@ def select(args) -> Selection:
     from nearsub.common.mission.schema import COMMUNITY_PATTERN
     from nearsub.common.runtime.logfile import INVALID_SUFFIX, read_log
 
-    from .log import topic_filter
+    from .log import topic_filter, vehicle_records
 
     for name, value in (("--warp", args.warp), ("--wait", args.wait), ("--linger", args.linger)):
         if not (value >= 0 and value < float("inf")):
@@ -73,6 +74,9 @@ def select(args) -> Selection:
         raise PlayInputError(f"--community {args.community!r}: use {COMMUNITY_CHARS}")
     wanted = topic_filter(args.topic)
     contents = read_log(args.log)
+    records = contents.records
+    if args.vehicle is not None:
+        records = vehicle_records(contents, args, error=PlayInputError)
     logged = contents.metadata.get("mission", {}).get("name") or next(
         (r.topic.split("/")[1] for r in contents.records if r.topic.count("/") >= 2), "nearsub"
     )
@@ -86,7 +90,7 @@ def select(args) -> Selection:
     end_ns = None if args.end is None else int(round(args.end * 1e9))
     old_prefix, new_prefix = f"nearsub/{logged}/", f"nearsub/{community}/"
     items = []
-    for r in sorted(contents.records, key=lambda r: r.log_time):  # stable: equal times keep file order
+    for r in sorted(records, key=lambda r: r.log_time):  # stable: equal times keep file order
         key = r.topic.removesuffix(INVALID_SUFFIX)  # undecodable payloads replay on their own key
         if not wanted(key):
             continue

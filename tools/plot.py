@@ -20,6 +20,7 @@ import numpy as np  # noqa: E402
 
 from nearsub.common.mission.schema import mission_from_dict  # noqa: E402
 from nearsub.common.physics.hull import submarine_outline  # noqa: E402
+from nearsub.common.runtime.keys import vehicle_of  # noqa: E402
 from nearsub.common.runtime.logfile import read_log  # noqa: E402
 from nearsub.common.viewer.scene import frame_description  # noqa: E402
 
@@ -42,6 +43,16 @@ def series(records, leaf: str) -> dict[str, np.ndarray]:
     return {name: np.asarray(values) for name, values in columns.items()}
 
 
+def by_vehicle(records) -> dict[str, list]:
+    """The records of each vehicle named in the keys, vehicles sorted by name."""
+    grouped = defaultdict(list)
+    for record in records:
+        owner = vehicle_of(record.topic)
+        if owner is not None:
+            grouped[owner[0]].append(record)
+    return dict(sorted(grouped.items()))
+
+
 def _degrees(values):
     return None if values is None else np.degrees(values)
 
@@ -56,9 +67,9 @@ def _same_turn(t_desired, psi_desired, t, heading_deg):
     return desired + 360.0 * np.round((actual - desired) / 360.0)
 
 
-def draw_plan(ax, mission, state: dict[str, np.ndarray], events: list[dict]) -> None:
-    """The plan view in the submarine frame: hull outline, track-lines and waypoints, the UUV's
-    path and the events that carry a position."""
+def draw_plan(ax, mission, tracks: list[tuple[str, str, dict[str, np.ndarray]]], events: list[dict]) -> None:
+    """The plan view in the submarine frame: hull outline, track-lines and waypoints, each
+    vehicle's path (label, colour, state columns) and the events that carry a position."""
     if mission is None or mission.environment.submarine:
         sx, sy = submarine_outline()
         ax.fill(sx, sy, color="0.8", label="submarine")
@@ -70,7 +81,8 @@ def draw_plan(ax, mission, state: dict[str, np.ndarray], events: list[dict]) -> 
             ax.plot(track[:, 0], track[:, 1], "b--", lw=1, label=None if number else "track-lines")
             ax.plot(points[:, 0], points[:, 1], "bs", ms=5, label=None if number else "waypoints")
             previous = tuple(points[-1])
-    ax.plot(state["x"], state["y"], "r-", lw=1.5, label="UUV")
+    for label, colour, state in tracks:
+        ax.plot(state["x"], state["y"], "-", color=colour, lw=1.5, label=label)
     marked = set()
     for event in events:
         kind = event.get("kind")
@@ -86,68 +98,76 @@ def draw_plan(ax, mission, state: dict[str, np.ndarray], events: list[dict]) -> 
 
 
 def plot_log(path: str | Path, output: str | Path | None = None, title: str | None = None) -> Path:
+    """Draw a log: one track (own colour, labelled with its name) and one set of time series per
+    vehicle; a single vehicle keeps the look of one UUV (a red track labelled "UUV")."""
     contents = read_log(path)
     resolved = contents.metadata.get("mission", {}).get("resolved")
     mission = mission_from_dict(json.loads(resolved)) if resolved else None
-    state = series(contents.records, "state")
-    desired = series(contents.records, "desired")
-    command = series(contents.records, "input")
-    forces = series(contents.records, "forces")
-    if not state:
+    vehicles = {
+        name: {leaf: series(records, leaf) for leaf in ("state", "desired", "input", "forces")}
+        for name, records in by_vehicle(contents.records).items()
+    }
+    vehicles = {name: data for name, data in vehicles.items() if data["state"]}
+    if not vehicles:
         raise ValueError(f"{path}: no state messages to plot")
+    single = len(vehicles) == 1
+    colours = {name: ("red" if single else f"C{i % 10}") for i, name in enumerate(vehicles)}
+    tracks = [("UUV" if single else name, colours[name], data["state"]) for name, data in vehicles.items()]
 
     fig = plt.figure(figsize=(15, 10), constrained_layout=True)
     grid = fig.add_gridspec(5, 2, width_ratios=[1.2, 1])
     overview = fig.add_subplot(grid[:3, 0])
     close_up = fig.add_subplot(grid[3:, 0])
-    events = [r.value() for r in contents.records if "/events/" in r.topic]
+    events = [r.value() for r in contents.records if "/events/" in r.topic and "#" not in r.topic]
     for ax in (overview, close_up):
-        draw_plan(ax, mission, state, events)
+        draw_plan(ax, mission, tracks, events)
     overview.set_aspect("equal", adjustable="datalim")
     overview.legend(loc="best", fontsize=8)
     outcome = contents.metadata.get("outcome", {})
     overview.set_title(title or f"{Path(path).stem}: {outcome.get('outcome', '?')}")
-    # The close-up frames the UUV's path at free aspect: beside an 89 m hull, deviations of a
+    # The close-up frames the UUVs' paths at free aspect: beside an 89 m hull, deviations of a
     # few decimetres are what decides a collision, and they vanish at equal scales.
-    for axis, values in ((close_up.set_xlim, state["x"]), (close_up.set_ylim, state["y"])):
+    for axis, name in ((close_up.set_xlim, "x"), (close_up.set_ylim, "y")):
+        values = np.concatenate([data["state"][name] for data in vehicles.values()])
         margin = max(0.1 * np.ptp(values), 1.0)
         axis(values.min() - margin, values.max() + margin)
-    close_up.set_title("close-up of the path (axes not to scale)", fontsize=9)
+    close_up.set_title("close-up of the paths (axes not to scale)", fontsize=9)
 
-    t = state["t"]
-    heading = np.degrees(np.unwrap(state["psi"]))
-    panels = [
-        (
-            "heading [deg]",
-            [
-                (t, heading, "actual"),
-                (desired.get("t"), _same_turn(desired.get("t"), desired.get("psi_d"), t, heading), "desired"),
-            ],
-        ),
-        ("speed [m/s]", [(t, state["u"], "u"), (desired.get("t"), desired.get("u_d"), "desired")]),
-        ("rudder [deg]", [(command.get("t"), _degrees(command.get("delta_r")), "rudder")]),
-        ("thrust [N]", [(command.get("t"), command.get("X_prop"), "thrust")]),
-    ]
-    if forces:
-        # What entered the dynamics: the blend weight is 0 outside the surrogate's domain, where
-        # the raw prediction is published but not applied.
-        applied = {name: forces["weight"] * forces[name] for name in ("X_s", "Y_s", "N_s")}
-        panels.append(("applied X_s, Y_s [N]", [(forces["t"], applied[name], name) for name in ("X_s", "Y_s")]))
-    for row, (label, lines) in enumerate(panels):
+    panels = defaultdict(list)  # label -> [(vehicle, lines)]
+    for name, data in vehicles.items():
+        state, desired, command, forces = data["state"], data["desired"], data["input"], data["forces"]
+        t = state["t"]
+        heading = np.degrees(np.unwrap(state["psi"]))
+        desired_heading = _same_turn(desired.get("t"), desired.get("psi_d"), t, heading)
+        panels["heading [deg]"].append((name, [(t, heading, "actual"), (desired.get("t"), desired_heading, "desired")]))
+        panels["speed [m/s]"].append((name, [(t, state["u"], "u"), (desired.get("t"), desired.get("u_d"), "desired")]))
+        panels["rudder [deg]"].append((name, [(command.get("t"), _degrees(command.get("delta_r")), "rudder")]))
+        panels["thrust [N]"].append((name, [(command.get("t"), command.get("X_prop"), "thrust")]))
+        if forces:
+            # What entered the dynamics: the blend weight is 0 outside the surrogate's domain, where
+            # the raw prediction is published but not applied.
+            applied = {axis: forces["weight"] * forces[axis] for axis in ("X_s", "Y_s", "N_s")}
+            lines = [(forces["t"], applied[axis], axis) for axis in ("X_s", "Y_s", "N_s")]
+            panels["applied X_s, Y_s [N]"].append((name, lines))
+    for row, (label, items) in enumerate(panels.items()):
         panel = fig.add_subplot(grid[row, 1])
-        for x, y, name in lines:
-            if x is not None and y is not None and len(x):
-                panel.step(x, y, where="post", label=name, lw=1)
+        moment = panel.twinx() if label.startswith("applied") else None  # N_s is a moment: its own axis
+        for name, lines in items:
+            for number, (x, y, what) in enumerate(lines):
+                if x is None or y is None or not len(x):
+                    continue
+                target = moment if what == "N_s" else panel
+                style = {"color": "tab:green"} if single and what == "N_s" else {}
+                if not single:  # one colour per vehicle; its second and third lines dashed and dotted
+                    style = {"color": colours[name], "ls": ("-", "--", ":")[number]}
+                target.step(x, y, where="post", label=what if single else f"{name} {what}", lw=1, **style)
         panel.set_ylabel(label)
         panel.grid(alpha=0.3)
-        if forces and row == len(panels) - 1:
-            moment = panel.twinx()  # N_s is a moment: its own axis
-            moment.step(forces["t"], applied["N_s"], where="post", color="tab:green", lw=1, label="N_s")
+        handles = panel.get_legend_handles_labels()[0]
+        if moment is not None:
             moment.set_ylabel("N_s [N m]")
-            handles = panel.get_legend_handles_labels()[0] + moment.get_legend_handles_labels()[0]
-            panel.legend(handles=handles, loc="best", fontsize=7)
-        else:
-            panel.legend(loc="best", fontsize=7)
+            handles += moment.get_legend_handles_labels()[0]
+        panel.legend(handles=handles, loc="best", fontsize=7)
     panel.set_xlabel("simulated time [s]")
     output = Path(output) if output else Path(path).with_suffix(".png")
     fig.savefig(output, dpi=110)

@@ -17,7 +17,7 @@ def add_parser(subparsers) -> None:
     p = subparsers.add_parser("poke", help="set mission variables of a running helm (uPokeDB)")
     p.add_argument("mission", help="the mission file, or the running mission's (community) name with --vehicle")
     p.add_argument("assignments", nargs="+", metavar="NAME=VALUE", help="values are read as TOML, else as text")
-    p.add_argument("--vehicle", help="the vehicle's name in the keys (default: the mission file's)")
+    p.add_argument("--vehicle", help="the vehicle's name in the keys (default: the mission file's single vehicle)")
     add_router_argument(p)
     p.set_defaults(func=run)
 
@@ -56,6 +56,11 @@ def run(args) -> int:
             mission = load_mission(args.mission)
         except MissionError as exc:
             print(f"nearsub poke: {exc}", file=sys.stderr)
+            return 2
+        fleet = [entry["name"] for entry in mission.model_dump().get("vehicles") or []]
+        if fleet and vehicle not in fleet:  # several vehicles: the poke names whose helm it sets
+            given = f"--vehicle {vehicle}: not a vehicle of {args.mission}" if vehicle else "give --vehicle NAME"
+            print(f"nearsub poke: {given} (its vehicles: {', '.join(fleet)})", file=sys.stderr)
             return 2
         community, vehicle = mission.name, vehicle or mission.vehicle_name
     if vehicle is None:

@@ -17,6 +17,7 @@ def add_parser(subparsers) -> None:
     add_connect_arguments(t)
     t.add_argument("--sample", type=float, default=1.0, metavar="S", help="wall seconds to measure the rates over")
     t.add_argument("--json", action="store_true")
+    t.add_argument("--vehicle", metavar="NAME", help="only this vehicle's topics (and the apps)")
     t.set_defaults(func=tap_list)
     t = tap.add_parser("echo", help="print messages of a key expression (wildcards * and **)")
     t.add_argument("key")
@@ -24,11 +25,13 @@ def add_parser(subparsers) -> None:
     t.add_argument("--count", type=int, help="stop after N messages")
     t.add_argument("--timeout", type=float, help="stop after S wall seconds")
     t.add_argument("--json", action="store_true", help="JSON lines (the default when piped)")
+    t.add_argument("--vehicle", metavar="NAME", help="only the keys of this vehicle (nearsub/<c>/NAME/...)")
     add_connect_arguments(t)
     t.set_defaults(func=tap_echo)
     t = tap.add_parser("hz", help="message rates per key, in simulated time")
     t.add_argument("key")
     t.add_argument("--window", type=int, default=100, help="samples per rate estimate")
+    t.add_argument("--vehicle", metavar="NAME", help="only the keys of this vehicle (nearsub/<c>/NAME/...)")
     t.add_argument("--duration", type=float, default=5.0, help="wall seconds to listen")
     t.add_argument("--json", action="store_true")
     add_connect_arguments(t)
@@ -69,6 +72,19 @@ def _decode_any(key: str, payload: bytes) -> tuple[dict | None, str | None]:
         return None, str(exc)
 
 
+def vehicle_name(key: str) -> str | None:
+    """The vehicle a key belongs to (None: mission-wide)."""
+    from nearsub.common.runtime.keys import vehicle_of
+
+    owner = vehicle_of(key)
+    return owner[0] if owner else None
+
+
+def other_vehicle(args, key: str) -> bool:
+    """A key that `--vehicle` leaves out."""
+    return args.vehicle is not None and vehicle_name(key) != args.vehicle
+
+
 def tap_list(args) -> int:
     from nearsub.common.runtime import keys
 
@@ -92,12 +108,27 @@ def tap_list(args) -> int:
                 if not error and isinstance(value, dict) and "t" in value:
                     times[mail.key].append(float(value["t"]))
     topics = sorted(set(publishers) | set(times))
+    vehicles = sorted({name for key in topics if (name := vehicle_name(key))})
+    if args.vehicle is not None:
+        topics = [key for key in topics if not other_vehicle(args, key)]
     rows = [
-        {"key": key, "type": getattr(model_for_key(key), "__name__", ""), "hz": rate(times.get(key, []))}
+        {
+            "key": key,
+            "vehicle": vehicle_name(key),
+            "type": getattr(model_for_key(key), "__name__", ""),
+            "hz": rate(times.get(key, [])),
+        }
         for key in topics
     ]
+    if args.vehicle is not None and args.vehicle not in vehicles:
+        print(
+            f"nearsub tap list: --vehicle {args.vehicle}: no such vehicle (seen: {', '.join(vehicles) or 'none'})",
+            file=sys.stderr,
+        )
+        return 2
     if args.json or not sys.stdout.isatty():
-        print(json.dumps({"apps": apps, "topics": rows, "publishers": publishers, "subscribers": subscribers}))
+        listing = {"apps": apps, "vehicles": vehicles, "topics": rows}
+        print(json.dumps(listing | {"publishers": publishers, "subscribers": subscribers}))
         return 0
     from rich.table import Table
 
@@ -109,10 +140,11 @@ def tap_list(args) -> int:
         role, _, instance = key.split("/alive/", 1)[-1].partition("/")
         table.add_row(role, instance)
     console.print(table)
-    table = Table("topic", "message", title=f"topics (rates over {args.sample:g} s)", title_justify="left")
+    title = f"topics (rates over {args.sample:g} s); vehicles: {', '.join(vehicles) or 'none'}"
+    table = Table("vehicle", "topic", "message", title=title, title_justify="left")
     table.add_column("Hz (simulated)", justify="right")
     for row in rows:
-        table.add_row(row["key"], row["type"], f"{row['hz']:.2f}" if row["hz"] else "-")
+        table.add_row(row["vehicle"] or "-", row["key"], row["type"], f"{row['hz']:.2f}" if row["hz"] else "-")
     console.print(table)
     table = Table("subscription", title="subscriptions", title_justify="left")
     for key in subscribers:
@@ -142,15 +174,16 @@ def tap_echo(args) -> int:
             if remaining is not None and remaining <= 0:
                 break
             mail = mailbox.get(timeout=0.5 if remaining is None else min(0.5, remaining))
-            if mail is None:
+            if mail is None or other_vehicle(args, mail.key):
                 continue
             value, error = _decode_any(mail.key, mail.payload)
             if error:
-                line = {"key": mail.key, "error": error}
+                line = {"key": mail.key, "vehicle": vehicle_name(mail.key), "error": error}
             else:
                 try:
                     line = {
                         "key": mail.key,
+                        "vehicle": vehicle_name(mail.key),
                         "t": value.get("t") if isinstance(value, dict) else None,
                         "value": _project(value, args.field),
                     }
@@ -178,7 +211,7 @@ def tap_hz(args) -> int:
         bus.subscribe(args.key, mailbox)
         while time.monotonic() < deadline:
             mail = mailbox.get(timeout=0.1)
-            if mail is not None:
+            if mail is not None and not other_vehicle(args, mail.key):
                 value, error = _decode_any(mail.key, mail.payload)
                 if not error and isinstance(value, dict) and "t" in value:
                     times[mail.key].append(float(value["t"]))
@@ -254,24 +287,36 @@ def tap_pub(args) -> int:
     bus, _ = open_bus(args, args.key)
     from nearsub.common.runtime.bus import Mailbox
 
+    vehicle = vehicle_name(args.key) if leaf is not None else None
+    from nearsub.common.runtime import keys
+
     with bus:
         mailbox = Mailbox()
         if operator:
-            bus.subscribe(f"{'/'.join(parts[:2])}/events/*", mailbox)
+            # The consumer's event: from a mission-wide app instance, or one of the vehicle's.
+            bus.subscribe(keys.all_events(parts[1]), mailbox)
         # A fresh session drops data put before it knows a subscriber (docs/design.md, "Transport").
         if not bus.put_when_matched(args.key, payload, wait=5.0):
             if operator:
-                print(f"nearsub tap pub: nobody consumes {args.key} (is the mission running?)", file=sys.stderr)
+                community = "/".join(parts[:2])
+                running = sorted(
+                    {n for k in bus.admin_keys("publisher") if k.startswith(community + "/") and (n := vehicle_name(k))}
+                )
+                print(
+                    f"nearsub tap pub: nobody consumes {args.key}: is vehicle {vehicle!r} running? "
+                    f"(vehicles publishing: {', '.join(running) or 'none'})",
+                    file=sys.stderr,
+                )
                 return 1
             print(f"nearsub tap pub: nobody subscribes to {args.key}; published anyway", file=sys.stderr)
         if operator:
-            return _confirm_override(mailbox, leaf)
+            return _confirm_override(mailbox, leaf, vehicle)
         time.sleep(0.1)  # let the session flush before it closes
     return 0
 
 
-def _confirm_override(mailbox, leaf: str, timeout: float = 10.0) -> int:
-    """Wait for the consumer's event recording the override; print its step."""
+def _confirm_override(mailbox, leaf: str, vehicle: str, timeout: float = 10.0) -> int:
+    """Wait for the consumer's event recording the override; print the vehicle, the app and the step."""
     from nearsub.common.runtime.messages import Event, MessageError, decode
 
     end = time.monotonic() + timeout
@@ -283,8 +328,9 @@ def _confirm_override(mailbox, leaf: str, timeout: float = 10.0) -> int:
             event = decode(mail.payload, Event, mail.key)
         except MessageError:
             continue
-        if event.kind == "info" and event.data.get("leaf") == leaf and event.detail.startswith("operator"):
-            print(f"{event.source}: {event.detail}")
+        mine = vehicle_name(mail.key) in (None, vehicle)  # another vehicle's app confirms another override
+        if mine and event.kind == "info" and event.data.get("leaf") == leaf and event.detail.startswith("operator"):
+            print(f"{vehicle}/{event.source}: {event.detail}")
             return 0
     print(f"nearsub tap pub: no app confirmed the {leaf} override within {timeout:g} s", file=sys.stderr)
     return 1

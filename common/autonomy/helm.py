@@ -14,8 +14,9 @@ rules and every behaviour's conditions, posts the flags, and arbitrates by prior
 - the flags of one iteration are applied after every behaviour has run, in declaration order, so
   every behaviour of an iteration sees the same variables; the next iteration sees the flags;
 - the mode rules are evaluated at the start of each iteration, after the pokes;
-- a flag that sets MISSION to "complete" ends the mission ("completed"); an op-region behaviour
-  outside its region ends it with "error".
+- a flag that sets MISSION to "complete" ends the mission ("completed"), and so does a poke of
+  MISSION = complete (uQueryDB's end condition in MOOS-IvP); an op-region behaviour outside its
+  region ends it with "error".
 
 The settings are pydantic models (`BEHAVIOUR_TYPES`), validated in the mission file.
 """
@@ -471,6 +472,8 @@ class Helm:
         postings: list[tuple[str, logic.Value, str]] = []
         objectives: list[tuple[int, float, ivp.Objective]] = []
         decision = Decision(None, "", [])
+        if self.variables.get(MISSION) == "complete":  # a flag setting it ended the mission already: a poke
+            decision.end = ("completed", f"{MISSION} = complete (poked)")
 
         def post(flags: Mapping[str, Any], spec, kind: str, why: str = "") -> None:
             for name, value in flags.items():

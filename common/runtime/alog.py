@@ -11,17 +11,22 @@ What each topic becomes (MOOS units: compass degrees, 0 = north = +y, clockwise,
 
 - state   -> NAV_X, NAV_Y [m], NAV_HEADING = 90 - psi [deg], NAV_SPEED = u [m/s], NAV_YAW =
   -radians(angle180(NAV_HEADING)) as uSimMarine posts it, and NODE_REPORT_LOCAL / NODE_REPORT
-  (`NAME=..,X=..,Y=..,SPD=..,HDG=..,DEP=0,TYPE=UUV,TIME=<epoch>,LENGTH=..`, as pNodeReporter);
+  (`NAME=..,X=..,Y=..,SPD=..,HDG=..,DEP=0,TYPE=UUV,TIME=<epoch>,LENGTH=..`, as pNodeReporter;
+  NAME is the mission's name for one vehicle, each vehicle's name (its key chunk) for several,
+  as a MOOS fleet's shoreside alog holds every node's reports);
 - desired -> DESIRED_HEADING [compass deg], DESIRED_SPEED [m/s];
 - input   -> DESIRED_RUDDER = delta_r [deg] (positive turns to starboard, as MOOS's rudder: it
   raises the compass heading), DESIRED_THRUST = 100 X_prop / max_thrust, the percent of the
   vehicle's thrust limit pMarinePID posts (left out for a vehicle the log does not describe);
 - helm    -> WPT_INDEX, IVPHELM_BHV_ACTIVE (the behaviour);
 - forces  -> INTERACTION_X, INTERACTION_Y [N], INTERACTION_N [N m], what the dynamics applied;
-- events  -> EVENT_<KIND> (EVENT_WAYPOINT, EVENT_COLLISION, ...), the event's text;
+- events  -> EVENT_<KIND> (EVENT_WAYPOINT, EVENT_COLLISION, ...), the event's text (the mission's
+  events and a vehicle's apps', nearsub/<c>/events/<vehicle>/<instance>);
 - clock/end -> MISSION (the outcome) and MISSION_REASON; control requests -> CONTROL_REQUEST;
 - DB_TIME from `MOOSDB_<community>` once per simulated second: alogview names the vehicle after
-  that source, as a MOOSDB names itself MOOSDB_<community>.
+  that source, as a MOOSDB names itself MOOSDB_<community>. One vehicle's alog (`vehicle`) is
+  that vehicle's community: MOOSDB_<vehicle>, its records and the mission-wide ones, so alogview
+  given one such file per vehicle shows the fleet.
 
 The clock's ticks and acks, app status and replies are the lock-step's own traffic and are left
 out; a payload the logger could not decode becomes INVALID_MESSAGE naming its topic.
@@ -35,7 +40,7 @@ import time
 from collections.abc import Iterable
 from typing import TYPE_CHECKING, TextIO
 
-from nearsub.common.runtime.logfile import INVALID_SUFFIX
+from nearsub.common.runtime.logfile import INVALID_SUFFIX, vehicle_spec
 
 if TYPE_CHECKING:
     from nearsub.common.runtime.logfile import LogContents, LogRecord
@@ -93,21 +98,19 @@ def _community(contents: LogContents) -> str:
 
 def _vehicle_figures(vehicle: str, contents: LogContents) -> dict[str, float]:
     """The vehicle's length [m] and thrust limit [N], from the log's mission (a vehicle given
-    by name or in full) or the vehicle library; an empty dict when neither knows it."""
+    by name or in full, or its `[[vehicles]]` entry) or the vehicle library; an empty dict when
+    neither knows it."""
     from nearsub.common.physics.vehicles import get_vehicle
 
     resolved = contents.metadata.get("mission", {}).get("resolved")
-    if resolved:
-        try:
-            spec = json.loads(resolved).get("vehicle")
-            if isinstance(spec, dict) and spec.get("length") and spec.get("max_thrust"):
-                return {"length": float(spec["length"]), "max_thrust": float(spec["max_thrust"])}
-            if isinstance(spec, str):
-                vehicle = spec
-        except (ValueError, TypeError):
-            pass
     try:
-        model = get_vehicle(vehicle)
+        spec = vehicle_spec(json.loads(resolved), vehicle) if resolved else None
+    except ValueError:
+        spec = None
+    if isinstance(spec, dict) and spec.get("length") and spec.get("max_thrust"):
+        return {"length": float(spec["length"]), "max_thrust": float(spec["max_thrust"])}
+    try:
+        model = get_vehicle(spec if isinstance(spec, str) else vehicle)
     except KeyError:
         return {}
     return {"length": model.length, "max_thrust": model.max_thrust}
@@ -123,11 +126,19 @@ class _Lines:
         self.entries.append((log_time, len(self.entries), variable, source, value))
 
 
-def alog_lines(contents: LogContents, records: Iterable[LogRecord] | None = None) -> list[str]:
-    """The alog's lines (banner included, no newlines) for `records` (default: every record)."""
+def alog_lines(
+    contents: LogContents, records: Iterable[LogRecord] | None = None, vehicle: str | None = None
+) -> list[str]:
+    """The alog's lines (banner included, no newlines) for `records` (default: every record).
+    With several vehicles, each NODE_REPORT names its vehicle (NAME=<vehicle>, as a shoreside's
+    alog); `vehicle` writes that vehicle's own alog (`LogContents.vehicle_records`), whose MOOSDB is named
+    after it, as alogview reads one alog per vehicle."""
     records = contents.records if records is None else list(records)
+    if vehicle is not None:
+        records = contents.vehicle_records(vehicle, records)
     start = log_start(contents)
-    community = _community(contents)
+    mission = _community(contents)
+    community = mission if vehicle is None else vehicle  # a vehicle's own alog: its own MOOS community
     lines = _Lines()
     known: dict[str, dict[str, float]] = {}
 
@@ -136,7 +147,7 @@ def alog_lines(contents: LogContents, records: Iterable[LogRecord] | None = None
             known[vehicle] = _vehicle_figures(vehicle, contents)
         return known[vehicle]
 
-    vehicles = {r.topic.split("/")[2] for r in records if r.topic.endswith("/state") and r.topic.count("/") == 3}
+    vehicles = set(contents.vehicles())
     if records:
         first = min(r.log_time for r in records) // 1_000_000_000
         last = max(r.log_time for r in records) // 1_000_000_000
@@ -147,7 +158,7 @@ def alog_lines(contents: LogContents, records: Iterable[LogRecord] | None = None
     lines.entries.sort(key=lambda e: (e[0], e[1]))
     out = [
         BANNER_RULE,
-        f"%% LOG FILE:       {community}.alog (nearsub mission {community})",
+        f"%% LOG FILE:       {community}.alog (nearsub mission {mission})",
         f"%% FILE OPENED ON  {time.asctime(time.gmtime(start))}",
         f"%% LOGSTART        {start:>20.12g}",
         BANNER_RULE,
@@ -160,9 +171,12 @@ def alog_lines(contents: LogContents, records: Iterable[LogRecord] | None = None
     return out
 
 
-def write_alog(contents: LogContents, out: TextIO, records: Iterable[LogRecord] | None = None) -> int:
-    """Write the alog to `out`; returns the number of postings (lines after the banner)."""
-    lines = alog_lines(contents, records)
+def write_alog(
+    contents: LogContents, out: TextIO, records: Iterable[LogRecord] | None = None, vehicle: str | None = None
+) -> int:
+    """Write the alog (of one `vehicle`, see `alog_lines`) to `out`; returns the number of postings
+    (lines after the banner)."""
+    lines = alog_lines(contents, records, vehicle)
     for line in lines:
         out.write(line + "\n")
     return sum(1 for line in lines if not line.startswith("%"))
@@ -222,7 +236,7 @@ def _state(t, value, source, vehicle, lines: _Lines, start, community, vehicles,
     lines.post(t, "NAV_HEADING", source, number(heading))
     lines.post(t, "NAV_SPEED", source, number(speed))
     lines.post(t, "NAV_YAW", source, number(-math.radians(angle180(heading))))
-    name = community if len(vehicles) <= 1 else f"{community}_{vehicle}"
+    name = community if len(vehicles) <= 1 else vehicle  # MOOS names a node after its vehicle
     report = (
         f"NAME={name},X={number(x)},Y={number(y)},SPD={number(speed)},HDG={number(heading)},DEP=0,"
         f"TYPE=UUV,TIME={start + t / 1e9:.3f}"

@@ -71,3 +71,20 @@ def launcher_control(community: str) -> str:
 def everything(community: str) -> str:
     """The whole community: only the logger subscribes to it."""
     return f"{ROOT}/{community}/**"
+
+
+# The chunks after the community that are mission-wide, not a vehicle's name.
+SERVICES = frozenset({"clock", "events", "status", "alive", "control", "reply", "launcher", "surrogate"})
+
+
+def vehicle_of(key: str) -> tuple[str, str] | None:
+    """(vehicle, leaf) of a vehicle key nearsub/<c>/<vehicle>/<leaf>[/...] (the leaf is the first
+    chunk after the vehicle), or (vehicle, "events") for the events of a vehicle's app, whose
+    instance name `<vehicle>/<app>` adds a chunk (nearsub/<c>/events/<vehicle>/<instance>); None
+    for a mission-wide key. Readers find a mission's vehicles this way."""
+    parts = key.split("/")
+    if len(parts) < 4 or parts[0] != ROOT:
+        return None
+    if parts[2] == "events" and len(parts) >= 5:
+        return parts[3], "events"
+    return None if parts[2] in SERVICES else (parts[2], parts[3])

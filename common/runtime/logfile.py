@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -24,6 +25,7 @@ from mcap.records import Message as McapMessage
 from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
+from nearsub.common.runtime.keys import vehicle_of
 from nearsub.common.runtime.messages import model_for_key
 
 CHUNK_SIZE = 64 * 1024
@@ -120,6 +122,47 @@ class LogContents:
 
     def topics(self) -> list[str]:
         return sorted({r.topic for r in self.records})
+
+    def vehicle_records(self, vehicle: str, records: Iterable[LogRecord] | None = None) -> list[LogRecord]:
+        """One vehicle's part of the log (of `records`, default all), as that vehicle's pLogger
+        would write it in a MOOS-IvP fleet: its own records and the mission-wide ones (clock,
+        mission events, control requests)."""
+        records = self.records if records is None else records
+        owners = ((r, vehicle_of(r.topic.removesuffix(INVALID_SUFFIX))) for r in records)
+        return [r for r, owner in owners if owner is None or owner[0] == vehicle]
+
+    def vehicles(self) -> dict[str, dict]:
+        """The vehicles named by the log's keys (nearsub/<c>/<vehicle>/...), sorted by name, each
+        with its states' count, first and last step and simulated time span (None without states)."""
+        found: dict[str, dict] = {}
+        for r in self.records:
+            owner = vehicle_of(r.topic.removesuffix(INVALID_SUFFIX))
+            if owner is None:
+                continue
+            item = found.setdefault(
+                owner[0], {"states": 0, "first_step": None, "last_step": None, "t_start": None, "t_end": None}
+            )
+            if owner[1] != "state" or r.topic.endswith(INVALID_SUFFIX):
+                continue
+            step = r.value().get("step")
+            item["states"] += 1
+            item["first_step"] = step if item["first_step"] is None else min(item["first_step"], step)
+            item["last_step"] = step if item["last_step"] is None else max(item["last_step"], step)
+            item["t_start"] = r.sim_time if item["t_start"] is None else min(item["t_start"], r.sim_time)
+            item["t_end"] = r.sim_time if item["t_end"] is None else max(item["t_end"], r.sim_time)
+        return dict(sorted(found.items()))
+
+
+def vehicle_spec(resolved: dict | None, name: str):
+    """What a resolved mission (its JSON, as a dict) says the vehicle named `name` in the keys is:
+    its `[[vehicles]]` entry's type, else the mission's `vehicle` (a library name or the vehicle
+    in full); None without a mission."""
+    if not isinstance(resolved, dict):
+        return None
+    for entry in resolved.get("vehicles") or []:
+        if isinstance(entry, dict) and entry.get("name") == name and entry.get("type"):
+            return entry["type"]
+    return resolved.get("vehicle")
 
 
 def read_log(path: str | Path) -> LogContents:

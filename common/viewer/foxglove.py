@@ -4,12 +4,15 @@ and the live server of `nearsub foxglove` (tools/foxglove.py moves the bytes thr
 Every nearsub topic keeps its key and its fields (simulated time `t` included) with the message
 model's JSON schema; beside them, in Foxglove's own schemas:
 
-- `/tf` (`foxglove.FrameTransform`): `world` -> `<vehicle>`, the UUV's pose;
+- `/tf` (`foxglove.FrameTransform`): `world` -> `<vehicle>`, each UUV's pose in a frame named
+  after it (the vehicle chunk of its keys);
 - `/scene/mission` (`foxglove.SceneUpdate`): the submarine's outline to scale, the waypoints and
   track-lines, published once (and again by the live server for clients that join late);
 - `/scene/uuv` (`foxglove.SceneUpdate`): each UUV to scale (outline and a cylinder of its length
-  and diameter) in its own frame, so it follows `/tf`;
-- `/events` (`foxglove.Log`): waypoints, collisions, close calls, swaps and the other events.
+  and diameter) in its own frame, so it follows `/tf`: one entity per vehicle, its id the
+  vehicle's name, in its own colour and, with several vehicles, labelled with its name;
+- `/events` (`foxglove.Log`): waypoints, collisions, close calls, swaps and the other events, the
+  mission's and each vehicle's (named `<vehicle>/<source>`).
 
 `world` is the mission's frame (docs/design.md, "Frames, units and signs"): x and y as in the
 messages, z up, so psi (from +x towards +y) is a rotation about z. Foxglove's JSON form of its
@@ -25,9 +28,10 @@ from functools import cache
 from typing import Any
 
 from nearsub.common.physics.hull import uuv_body_outline
+from nearsub.common.runtime.keys import vehicle_of
 from nearsub.common.runtime.messages import model_for_key
 
-from .scene import static_scene
+from .scene import static_scene, vehicle_size
 
 WORLD = "world"
 TF_TOPIC = "/tf"
@@ -45,6 +49,11 @@ INFO = 2
 HULL_COLOUR = {"r": 0.55, "g": 0.6, "b": 0.65, "a": 1.0}
 TRACK_COLOUR = {"r": 0.2, "g": 0.5, "b": 0.9, "a": 0.8}
 UUV_COLOUR = {"r": 1.0, "g": 0.6, "b": 0.1, "a": 1.0}
+OTHER_UUV_COLOURS = (  # the second and further vehicles, in name order
+    {"r": 0.3, "g": 0.8, "b": 1.0, "a": 1.0},
+    {"r": 0.4, "g": 1.0, "b": 0.55, "a": 1.0},
+    {"r": 0.8, "g": 0.5, "b": 1.0, "a": 1.0},
+)
 
 # protobuf scalar field types (google/protobuf/descriptor.proto, FieldDescriptorProto.Type)
 _PROTO_JSON = {1: "number", 2: "number", 3: "integer", 4: "integer", 5: "integer", 6: "integer", 7: "integer",
@@ -145,9 +154,11 @@ class FoxgloveScene:
 
     def __init__(self, mission, start_ns: int):
         self.start_ns = start_ns
+        self.mission = mission
         self.scene = static_scene(mission)
         self.vehicle = self.scene["vehicle"]
         self.vehicles: list[str] = []
+        self.sizes: dict[str, dict] = {}
 
     def log_time(self, sim_time: float) -> int:
         return self.start_ns + max(0, round(sim_time * 1e9))
@@ -185,15 +196,16 @@ class FoxgloveScene:
         transform and UUV entity, for an event its log line."""
         ns = self.log_time(sim_time)
         out = [(key, fields, ns)]
-        leaf = key.rsplit("/", 1)[-1]
         parts = key.split("/")
-        if len(parts) == 4 and leaf == "state":
-            out += self._pose_messages(parts[2], fields, ns)
+        owner = vehicle_of(key)
+        if owner is not None and owner[1] == "state" and len(parts) == 4:
+            out += self._pose_messages(owner[0], fields, ns)
         elif len(parts) >= 4 and parts[2] == "events":
             kind = str(fields.get("kind", "info"))
             text = f"t={float(fields.get('t', sim_time)):.2f} s {kind}: {fields.get('detail', '')}"
+            name = str(fields.get("source", parts[-1]))
             log = {"timestamp": stamp(ns), "level": LOG_LEVEL.get(kind, INFO), "message": text,
-                   "name": str(fields.get("source", parts[3])), "file": key, "line": 0}  # fmt: skip
+                   "name": name if owner is None else f"{owner[0]}/{name}", "file": key, "line": 0}  # fmt: skip
             out.append((EVENTS_TOPIC, log, ns))
         return out
 
@@ -208,13 +220,24 @@ class FoxgloveScene:
         }
         out = [(TF_TOPIC, transform, ns)]
         if vehicle not in self.vehicles:
-            self.vehicles.append(vehicle)
-            out.append((UUV_TOPIC, self.uuv_update(vehicle, ns), ns))
+            self.vehicles = sorted([*self.vehicles, vehicle])
+            # A new vehicle can change the others' colours and labels: send them all again.
+            out += [(UUV_TOPIC, self.uuv_update(v, ns), ns) for v in self.vehicles]
         return out
 
+    def size(self, vehicle: str) -> dict:
+        """Length and diameter of a vehicle: the mission's own, or its fleet entry's type."""
+        if vehicle not in self.sizes:
+            single = self.mission is None or vehicle == getattr(self.mission, "vehicle_name", None)
+            self.sizes[vehicle] = self.vehicle if single else vehicle_size(self.mission, vehicle)
+        return self.sizes[vehicle]
+
     def uuv_update(self, vehicle: str, ns: int) -> dict:
-        """The UUV to scale in its own frame (locked to the frame `/tf` moves): outline and body."""
-        length, diameter = self.vehicle["length"], self.vehicle["diameter"]
+        """The UUV to scale in its own frame (locked to the frame `/tf` moves): outline and body,
+        in its own colour, and its name above it when there are several."""
+        length, diameter = self.size(vehicle)["length"], self.size(vehicle)["diameter"]
+        index = self.vehicles.index(vehicle) if vehicle in self.vehicles else 0
+        colour = UUV_COLOUR if index == 0 else OTHER_UUV_COLOURS[(index - 1) % len(OTHER_UUV_COLOURS)]
         bx, by = uuv_body_outline(length, diameter)
         body = {  # a cylinder's axis is its z: a quarter turn about y lays it along the UUV's x
             "pose": {
@@ -224,10 +247,18 @@ class FoxgloveScene:
             "size": {"x": diameter, "y": diameter, "z": length},
             "bottom_scale": 1.0,
             "top_scale": 1.0,
-            "color": UUV_COLOUR,
+            "color": colour,
         }
-        outline = _line(zip(bx, by, strict=True), UUV_COLOUR, 0.05, loop=True)
-        entity = self._entity(vehicle, vehicle, ns, lines=[outline], cylinders=[body])
+        outline = _line(zip(bx, by, strict=True), colour, 0.05, loop=True)
+        texts = []
+        if len(self.vehicles) > 1:
+            label = {
+                "position": {"x": 0.0, "y": 0.0, "z": 2.0 * diameter},
+                "orientation": _pose(0, 0, 0)["orientation"],
+            }
+            texts.append({"pose": label, "billboard": True, "font_size": 14.0, "scale_invariant": True,
+                          "color": colour, "text": vehicle})  # fmt: skip
+        entity = self._entity(vehicle, vehicle, ns, lines=[outline], cylinders=[body], texts=texts)
         return {"deletions": [], "entities": [entity]}
 
     def static_updates(self, sim_time: float) -> list[tuple[str, dict, int]]:

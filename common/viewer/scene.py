@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from nearsub.common.physics.hull import submarine_outline, uuv_outline
+from nearsub.common.runtime.keys import vehicle_of
 from nearsub.common.runtime.messages import Event, Forces, HelmProgress, Message, MissionEnd, State
 
 # Events drawn as markers on the map (the rest go to the list only).
@@ -157,19 +158,28 @@ class Pose:
     r: float
 
 
+def vehicle_size(mission, name: str) -> dict:
+    """Name, length and diameter of the vehicle named `name` in the keys: its `[[vehicles]]` entry's
+    type or the mission's vehicle (`logfile.vehicle_spec`), else a library vehicle of that name,
+    else a generic 2 m UUV."""
+    from nearsub.common.physics.vehicles import Vehicle, get_vehicle
+    from nearsub.common.runtime.logfile import vehicle_spec
+
+    spec = vehicle_spec(None if mission is None else mission.model_dump(mode="json"), name)
+    try:
+        model = Vehicle.model_validate(spec) if isinstance(spec, dict) else get_vehicle(spec or name)
+    except (KeyError, ValueError):
+        return {"name": name, "length": 2.0, "diameter": 0.3}
+    return {"name": name, "length": model.length, "diameter": model.diameter}
+
+
 @dataclass
-class SceneModel:
-    """Accumulates a run's messages; `frame(t)` is the picture at simulated time t (latest if None).
+class Track:
+    """One vehicle's poses, trail, forces and helm progress, each sorted by simulated time."""
 
-    `trail_spacing` [m]: a trail point is kept each time the UUV has moved that far (a stable,
-    zoom-independent trail whose size grows with the distance run, not with the step count).
-    """
-
-    length: float = 2.0
-    diameter: float = 0.3
-    force_reference: float = 100.0
-    requested_warp: float | None = None
-    trail_spacing: float | None = None
+    name: str
+    length: float
+    diameter: float
     poses: list[Pose] = field(default_factory=list)
     pose_times: list[float] = field(default_factory=list)
     trail: list[tuple[float, float, float]] = field(default_factory=list)  # (t, x, y)
@@ -178,6 +188,28 @@ class SceneModel:
     force_times: list[float] = field(default_factory=list)
     helm: list[HelmProgress] = field(default_factory=list)
     helm_times: list[float] = field(default_factory=list)
+
+
+@dataclass
+class SceneModel:
+    """Accumulates a run's messages; `frame(t)` is the picture at simulated time t (latest if None).
+
+    Each vehicle named in the keys has its own `Track`; a message fed without a vehicle belongs to
+    the mission's (single) vehicle. The frame's `vehicles` lists every vehicle, sorted by name;
+    its `vehicle`, `trail`, `forces` and status are those of the first.
+
+    `trail_spacing` [m]: a trail point is kept each time a UUV has moved that far (a stable,
+    zoom-independent trail whose size grows with the distance run, not with the step count).
+    """
+
+    length: float = 2.0
+    diameter: float = 0.3
+    force_reference: float = 100.0
+    requested_warp: float | None = None
+    trail_spacing: float | None = None
+    mission: Any = None
+    default_vehicle: str = "uuv"
+    tracks: dict[str, Track] = field(default_factory=dict)
     events: list[dict] = field(default_factory=list)
     event_times: list[float] = field(default_factory=list)
     end: MissionEnd | None = None
@@ -194,54 +226,79 @@ class SceneModel:
             diameter=vehicle.diameter,
             force_reference=force_reference(mission),
             requested_warp=mission.warp,
+            mission=mission,
+            default_vehicle=mission.vehicle_name,
         )
 
+    def track(self, name: str | None) -> Track:
+        name = self.default_vehicle if name is None else name
+        if name not in self.tracks:
+            if name == self.default_vehicle:
+                size = {"length": self.length, "diameter": self.diameter}
+            else:
+                size = vehicle_size(self.mission, name)
+            self.tracks[name] = Track(name, size["length"], size["diameter"])
+            self.tracks = dict(sorted(self.tracks.items()))
+        return self.tracks[name]
+
     @property
-    def spacing(self) -> float:
-        return self.trail_spacing if self.trail_spacing is not None else max(0.25 * self.length, 0.2)
+    def primary(self) -> Track | None:
+        """The first vehicle (by name) that has a pose, else the first."""
+        return next((t for t in self.tracks.values() if t.poses), next(iter(self.tracks.values()), None))
+
+    @property
+    def poses(self) -> list[Pose]:
+        return self.primary.poses if self.primary is not None else []
+
+    def spacing(self, track: Track) -> float:
+        return self.trail_spacing if self.trail_spacing is not None else max(0.25 * track.length, 0.2)
 
     # -- input --------------------------------------------------------------------------------
-    def feed(self, message: Message, wall: float | None = None) -> None:
-        """Take one decoded message; `wall` (monotonic seconds) when it arrived, for the achieved
-        warp (live runs only)."""
+    def feed(self, message: Message, wall: float | None = None, vehicle: str | None = None) -> None:
+        """Take one decoded message of `vehicle` (None: the mission's vehicle; events and the end
+        are the mission's); `wall` (monotonic seconds) when it arrived, for the achieved warp
+        (live runs only)."""
         if isinstance(message, State):
-            self._add_pose(message, wall)
+            self._add_pose(self.track(vehicle), message, wall)
         elif isinstance(message, Forces):
-            if not _has_time(self.force_times, message.t):
-                _insert(self.force_times, self.forces, message.t, message)
+            track = self.track(vehicle)
+            if not _has_time(track.force_times, message.t):
+                _insert(track.force_times, track.forces, message.t, message)
         elif isinstance(message, HelmProgress):
-            if not _has_time(self.helm_times, message.t):
-                _insert(self.helm_times, self.helm, message.t, message)
+            track = self.track(vehicle)
+            if not _has_time(track.helm_times, message.t):
+                _insert(track.helm_times, track.helm, message.t, message)
         elif isinstance(message, Event):
-            self._add_event(message)
+            self._add_event(message, vehicle)
         elif isinstance(message, MissionEnd):
             if self.end is None:
                 self.end = message
 
-    def _add_pose(self, state: State, wall: float | None) -> None:
-        if _has_time(self.pose_times, state.t):
+    def _add_pose(self, track: Track, state: State, wall: float | None) -> None:
+        if _has_time(track.pose_times, state.t):
             return  # seen twice: from the log read at start and from the bus
         pose = Pose(state.step, state.t, state.x, state.y, state.psi, state.u, state.v, state.r)
-        if self.poses and state.t < self.pose_times[-1]:  # out of order (rare): keep the list sorted
-            index = bisect.bisect_right(self.pose_times, state.t)
-            self.poses.insert(index, pose)
-            self.pose_times.insert(index, state.t)
+        if track.poses and state.t < track.pose_times[-1]:  # out of order (rare): keep the list sorted
+            index = bisect.bisect_right(track.pose_times, state.t)
+            track.poses.insert(index, pose)
+            track.pose_times.insert(index, state.t)
         else:
-            self.poses.append(pose)
-            self.pose_times.append(state.t)
-        if not self.trail or math.hypot(state.x - self.trail[-1][1], state.y - self.trail[-1][2]) >= self.spacing:
-            if not self.trail or state.t >= self.trail_times[-1]:
-                self.trail.append((state.t, state.x, state.y))
-                self.trail_times.append(state.t)
-        if wall is not None:
+            track.poses.append(pose)
+            track.pose_times.append(state.t)
+        trail = track.trail
+        if not trail or math.hypot(state.x - trail[-1][1], state.y - trail[-1][2]) >= self.spacing(track):
+            if not trail or state.t >= track.trail_times[-1]:
+                trail.append((state.t, state.x, state.y))
+                track.trail_times.append(state.t)
+        if wall is not None and track is self.primary:
             self._wall.append((wall, state.t))
 
-    def _add_event(self, event: Event) -> None:
+    def _add_event(self, event: Event, vehicle: str | None) -> None:
         if event.kind not in LISTED_EVENTS:
             return
         x, y = event.data.get("x"), event.data.get("y")
         if not (isinstance(x, (int, float)) and isinstance(y, (int, float))):
-            pose = self.pose_at(event.t)
+            pose = self.pose_at(event.t, vehicle)
             x, y = (pose.x, pose.y) if pose is not None else (None, None)
         item = {
             "t": round(event.t, 3),
@@ -249,6 +306,7 @@ class SceneModel:
             "kind": event.kind,
             "detail": event.detail,
             "source": event.source,
+            "vehicle": vehicle,
             "x": None if x is None else round(float(x), 3),
             "y": None if y is None else round(float(y), 3),
             "marked": event.kind in MARKED_EVENTS,
@@ -258,13 +316,15 @@ class SceneModel:
         _insert(self.event_times, self.events, event.t, item)
 
     # -- queries ------------------------------------------------------------------------------
-    def pose_at(self, t: float | None) -> Pose | None:
-        return _latest(self.pose_times, self.poses, t)
+    def pose_at(self, t: float | None, vehicle: str | None = None) -> Pose | None:
+        track = self.primary if vehicle is None or vehicle not in self.tracks else self.tracks[vehicle]
+        return None if track is None else _latest(track.pose_times, track.poses, t)
 
     def time_range(self) -> tuple[float, float]:
-        if not self.pose_times:
+        times = [track.pose_times for track in self.tracks.values() if track.pose_times]
+        if not times:
             return 0.0, 0.0
-        return self.pose_times[0], self.pose_times[-1]
+        return min(t[0] for t in times), max(t[-1] for t in times)
 
     def achieved_warp(self) -> float | None:
         """Simulated seconds per wall second over the last WARP_WINDOW wall seconds."""
@@ -277,19 +337,20 @@ class SceneModel:
             return None
         return (t_end - first[1]) / span
 
-    def frame(self, t: float | None = None, now: float | None = None) -> dict:
-        """The picture at simulated time t (None: the newest). `now` (monotonic wall time) lets
-        a live view report a warp of 0 once the states stop (paused, ended)."""
-        pose = self.pose_at(t)
+    def _vehicle_frame(self, track: Track, t: float | None) -> dict:
+        """One vehicle at t: its outline at its heading (None before its first state), trail,
+        forces and helm status."""
+        pose = _latest(track.pose_times, track.poses, t)
         until = t + TIME_SLACK if t is not None else math.inf
-        trail_end = bisect.bisect_right(self.trail_times, until)
-        trail = [[round(x, 3), round(y, 3)] for _, x, y in self.trail[:trail_end]]
+        trail_end = bisect.bisect_right(track.trail_times, until)
+        trail = [[round(x, 3), round(y, 3)] for _, x, y in track.trail[:trail_end]]
         vehicle = None
         if pose is not None:
             if not trail or trail[-1] != [round(pose.x, 3), round(pose.y, 3)]:
                 trail.append([round(pose.x, 3), round(pose.y, 3)])
-            ox, oy = uuv_outline(pose.x, pose.y, pose.psi, self.length, self.diameter, UUV_POINTS)
+            ox, oy = uuv_outline(pose.x, pose.y, pose.psi, track.length, track.diameter, UUV_POINTS)
             vehicle = {
+                "name": track.name,
                 "step": pose.step,
                 "t": pose.t,
                 "x": pose.x,
@@ -297,16 +358,38 @@ class SceneModel:
                 "psi": pose.psi,
                 "heading_deg": round(math.degrees(pose.psi), 2),
                 "speed": round(math.hypot(pose.u, pose.v), 3),
+                "length": track.length,
                 "outline": _points(ox, oy),
             }
-        forces = self._force_frame(t, pose)
-        helm = _latest(self.helm_times, self.helm, t)
+        helm = _latest(track.helm_times, track.helm, t)
+        return {
+            "name": track.name,
+            "pose": pose,
+            "vehicle": vehicle,
+            "trail": trail,
+            "forces": self._force_frame(track, t, pose),
+            "behaviour": None if helm is None else helm.behaviour,
+            "leg": None if helm is None else helm.leg,
+            "waypoints_reached": None if helm is None else helm.waypoints_reached,
+            "cross_track": None if helm is None else round(helm.cross_track, 3),
+        }
+
+    def frame(self, t: float | None = None, now: float | None = None) -> dict:
+        """The picture at simulated time t (None: the newest). `now` (monotonic wall time) lets
+        a live view report a warp of 0 once the states stop (paused, ended)."""
+        vehicles = [self._vehicle_frame(track, t) for track in self.tracks.values()]
+        primary = self.primary
+        main = next((v for v in vehicles if primary is not None and v["name"] == primary.name), None)
+        pose = None if main is None else main.pop("pose")
+        for item in vehicles:
+            item.pop("pose", None)
+        until = t + TIME_SLACK if t is not None else math.inf
         events_end = bisect.bisect_right(self.event_times, until)
         events = self.events[:events_end]
         end = None
         if self.end is not None:
             # The end is labelled with the step after the last state: show it from that state on.
-            last_pose = self.pose_times[-1] if self.pose_times else math.inf
+            last_pose = self.time_range()[1] if self.tracks else math.inf
             if t is None or until >= min(self.end.t, last_pose):
                 end = self.end
         warp = self.achieved_warp() if t is None else None
@@ -315,9 +398,10 @@ class SceneModel:
         return {
             "type": "frame",
             "t": pose.t if pose is not None else (t or 0.0),
-            "vehicle": vehicle,
-            "trail": trail,
-            "forces": forces,
+            "vehicle": None if main is None else main["vehicle"],
+            "trail": [] if main is None else main["trail"],
+            "forces": None if main is None else main["forces"],
+            "vehicles": vehicles,
             "events": events[-MAX_LISTED:],
             "event_count": len(events),
             "status": {
@@ -325,10 +409,10 @@ class SceneModel:
                 "step": None if pose is None else pose.step,
                 "requested_warp": self.requested_warp,
                 "achieved_warp": None if warp is None else round(warp, 3),
-                "behaviour": None if helm is None else helm.behaviour,
-                "leg": None if helm is None else helm.leg,
-                "waypoints_reached": None if helm is None else helm.waypoints_reached,
-                "cross_track": None if helm is None else round(helm.cross_track, 3),
+                "behaviour": None if main is None else main["behaviour"],
+                "leg": None if main is None else main["leg"],
+                "waypoints_reached": None if main is None else main["waypoints_reached"],
+                "cross_track": None if main is None else main["cross_track"],
                 "outcome": None if end is None else end.outcome,
                 "reason": None if end is None else end.reason,
                 "paused": self.paused,
@@ -336,10 +420,10 @@ class SceneModel:
             "range": list(self.time_range()),
         }
 
-    def _force_frame(self, t: float | None, pose: Pose | None) -> dict | None:
+    def _force_frame(self, track: Track, t: float | None, pose: Pose | None) -> dict | None:
         """The applied interaction (weight times the surrogate's forces) as an arrow from the UUV's
         CB in the submarine frame, and the yaw moment as a gauge fraction in [-1, 1]."""
-        forces = _latest(self.force_times, self.forces, t)
+        forces = _latest(track.force_times, track.forces, t)
         if forces is None:
             return None
         w = forces.weight
@@ -355,11 +439,11 @@ class SceneModel:
             "moment_fraction": 0.0,
         }
         if pose is not None:
-            scale = self.length / self.force_reference  # metres of arrow per newton
+            scale = track.length / self.force_reference  # metres of arrow per newton
             c, s = math.cos(pose.psi), math.sin(pose.psi)
             ex, ey = fx * c - fy * s, fx * s + fy * c
             out["arrow"] = [_round([pose.x, pose.y]), _round([pose.x + ex * scale, pose.y + ey * scale])]
-            fraction = n / (self.force_reference * self.length)
+            fraction = n / (self.force_reference * track.length)
             out["moment_fraction"] = round(max(-1.0, min(1.0, fraction)), 4)
         return out
 
@@ -399,6 +483,7 @@ def feed_payload(model: SceneModel, key: str, payload: bytes, wall: float | None
     use and for malformed payloads (the receiving apps report those; the viewer only watches)."""
     from nearsub.common.runtime.messages import MessageError, decode, model_for_key
 
+    owner = vehicle_of(key)
     message_type = model_for_key(key)
     if message_type not in (State, Forces, HelmProgress, Event, MissionEnd):
         return False
@@ -406,5 +491,5 @@ def feed_payload(model: SceneModel, key: str, payload: bytes, wall: float | None
         message = decode(payload, message_type, key)
     except MessageError:
         return False
-    model.feed(message, wall)
+    model.feed(message, wall, None if owner is None else owner[0])
     return True

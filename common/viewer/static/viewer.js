@@ -1,5 +1,6 @@
 // nearsub view: draws the scene and frames the server pushes over /ws. Plain canvas, no libraries.
-// window.nearsub exposes what was drawn last (tests read it): drawn = {step, t, x, y, psi}.
+// window.nearsub exposes what was drawn last (tests read it): drawn = {step, t, x, y, psi} of the
+// selected vehicle, and drawnAll = {name: {step, t, x, y, psi}} of every vehicle.
 "use strict";
 
 const EVENT_STYLE = {
@@ -10,8 +11,12 @@ const EVENT_STYLE = {
   swap: { color: "#4dd2ff", shape: "diamond" },
 };
 
+// Trail and body colours of the vehicles in name order; the first keeps the single UUV's look.
+const VEHICLE_COLOURS = [["#ff5c5c", "#ffd23f"], ["#4dd2ff", "#9be7ff"], ["#5cff8d", "#b6ffcc"],
+  ["#c77dff", "#e2c2ff"], ["#ffa31a", "#ffd08a"]];
+
 const state = {
-  scene: null, frame: null, drawn: null, history: [], replies: [],
+  scene: null, frame: null, drawn: null, drawnAll: {}, history: [], replies: [], selected: null,
   view: { cx: 0, cy: 0, scale: 4 }, follow: false, fitted: false, socket: null,
 };
 window.nearsub = state;
@@ -66,8 +71,36 @@ function onScene(scene) {
   resize();
 }
 
+// Every vehicle of a frame (a server without `vehicles` sends the one); the selected one first
+// picks the panel's forces and status and what Follow follows.
+function vehiclesOf(frame) {
+  if (frame.vehicles) return frame.vehicles;
+  return [{ name: frame.vehicle ? frame.vehicle.name : "", vehicle: frame.vehicle, trail: frame.trail, forces: frame.forces }];
+}
+
+function selectedOf(frame) {
+  const all = vehiclesOf(frame);
+  return all.find((v) => v.name === state.selected) || all.find((v) => frame.vehicle && v.name === frame.vehicle.name) || all[0];
+}
+
+function updateVehicleList(frame) {
+  const names = vehiclesOf(frame).map((v) => v.name);
+  const select = $("vehicle");
+  $("vehicle-row").hidden = names.length < 2;
+  if (select.dataset.names === names.join(",")) return;
+  select.dataset.names = names.join(",");
+  select.innerHTML = "";
+  for (const name of names) {
+    const option = document.createElement("option");
+    option.textContent = name;
+    option.selected = name === (state.selected || (frame.vehicle && frame.vehicle.name));
+    select.appendChild(option);
+  }
+}
+
 function onFrame(frame) {
   state.frame = frame;
+  updateVehicleList(frame);
   if (!state.fitted) fit();
   updatePanel(frame);
   draw();
@@ -91,8 +124,10 @@ function updatePanel(frame) {
   const requested = s.requested_warp === null ? "-" : s.requested_warp === 0 ? "max" : fmt(s.requested_warp, 1);
   $("st-warp").textContent = `${requested} / ${fmt(s.achieved_warp, 1)}`;
   $("st-warp").title = "requested / achieved (simulated seconds per wall second)";
-  $("st-behaviour").textContent = s.behaviour ?? "-";
-  $("st-waypoints").textContent = s.waypoints_reached ?? "-";
+  const chosen = selectedOf(frame);
+  const several = vehiclesOf(frame).length > 1;
+  $("st-behaviour").textContent = (several ? chosen.behaviour : s.behaviour) ?? "-";
+  $("st-waypoints").textContent = (several ? chosen.waypoints_reached : s.waypoints_reached) ?? "-";
   $("st-outcome").textContent = s.outcome ? `${s.outcome}` : "-";
   $("st-outcome").title = s.reason || "";
   const label = $("st-state");
@@ -111,7 +146,8 @@ function updatePanel(frame) {
   } else {
     label.textContent = s.paused === false ? "running" : "live"; label.className = "running";
   }
-  const f = frame.forces;
+  const f = chosen ? chosen.forces : frame.forces;
+  $("forces-of").textContent = several && chosen ? `of ${chosen.name}` : "";
   $("f-x").textContent = f ? fmt(f.X_s, 1) : "-";
   $("f-y").textContent = f ? fmt(f.Y_s, 1) : "-";
   $("f-n").textContent = f ? fmt(f.N_s, 1) : "-";
@@ -130,7 +166,7 @@ function updatePanel(frame) {
       li.innerHTML = `<span class="kind" style="color:${style ? style.color : "#ccd"}"></span><span class="t"></span> `;
       li.firstChild.textContent = e.kind;
       li.childNodes[1].textContent = `t=${e.t.toFixed(2)}`;
-      li.appendChild(document.createTextNode(e.detail));
+      li.appendChild(document.createTextNode((several && e.vehicle ? `${e.vehicle}: ` : "") + e.detail));
       list.appendChild(li);
     }
   }
@@ -181,8 +217,10 @@ function fit() {
   const points = [];
   if (scene.hull) points.push(...scene.hull);
   for (const leg of scene.legs) points.push(...leg.track);
-  if (frame && frame.vehicle) points.push([frame.vehicle.x, frame.vehicle.y]);
-  if (frame) points.push(...frame.trail);
+  if (frame) for (const v of vehiclesOf(frame)) {
+    if (v.vehicle) points.push([v.vehicle.x, v.vehicle.y]);
+    points.push(...v.trail);
+  }
   if (!points.length) points.push([-50, -50], [50, 50]);
   let [x0, y0, x1, y1] = [Infinity, Infinity, -Infinity, -Infinity];
   for (const [x, y] of points) { x0 = Math.min(x0, x); x1 = Math.max(x1, x); y0 = Math.min(y0, y); y1 = Math.max(y1, y); }
@@ -216,7 +254,8 @@ function draw() {
   const w = canvas.clientWidth, h = canvas.clientHeight;
   ctx.clearRect(0, 0, w, h);
   if (!scene) return;
-  if (state.follow && frame && frame.vehicle) { state.view.cx = frame.vehicle.x; state.view.cy = frame.vehicle.y; }
+  const followed = frame ? selectedOf(frame) : null;
+  if (state.follow && followed && followed.vehicle) { state.view.cx = followed.vehicle.x; state.view.cy = followed.vehicle.y; }
   drawGrid(w, h);
   for (const r of scene.band.rects) {  // where the surrogate acts
     const [ax, ay] = toScreen(r.x0, r.y1), [bx, by] = toScreen(r.x1, r.y0);
@@ -242,12 +281,15 @@ function draw() {
     });
   }
   if (!frame) return;
-  if (frame.trail.length > 1) {
-    path(frame.trail, false);
-    ctx.strokeStyle = "#ff5c5c"; ctx.lineWidth = 1.8; ctx.stroke();
-  }
-  const v = frame.vehicle;
-  if (v) drawVehicle(v, frame.forces, scene);
+  const all = vehiclesOf(frame);
+  all.forEach((item, i) => {
+    const [trailColour, bodyColour] = VEHICLE_COLOURS[i % VEHICLE_COLOURS.length];
+    if (item.trail.length > 1) {
+      path(item.trail, false);
+      ctx.strokeStyle = trailColour; ctx.lineWidth = 1.8; ctx.stroke();
+    }
+    if (item.vehicle) drawVehicle(item.vehicle, item.forces, scene, bodyColour, all.length > 1, item === followed);
+  });
   for (const e of frame.events) {  // on top of the UUV: a collision marks where it is
     const style = EVENT_STYLE[e.kind];
     if (!e.marked || !style || e.x === null) continue;
@@ -260,9 +302,9 @@ function draw() {
   drawLegend(w);
 }
 
-function drawVehicle(v, forces, scene) {
+function drawVehicle(v, forces, scene, colour, labelled, selected) {
   // Below 16 px the outline is magnified about its centre (as pMarineViewer's vehicle scale).
-  const length = scene.vehicle.length * state.view.scale;
+  const length = (v.length || scene.vehicle.length) * state.view.scale;
   const magnify = length < 16 ? 16 / length : 1;
   const [cx, cy] = toScreen(v.x, v.y);
   ctx.beginPath();
@@ -272,9 +314,13 @@ function drawVehicle(v, forces, scene) {
     if (i) ctx.lineTo(qx, qy); else ctx.moveTo(qx, qy);
   });
   ctx.closePath();
-  ctx.fillStyle = "#ffd23f"; ctx.fill();
+  ctx.fillStyle = colour; ctx.fill();
   ctx.strokeStyle = "#1a1a1a"; ctx.lineWidth = 1; ctx.stroke();
-  if (magnify > 1) { ctx.fillStyle = "#ffd23f"; ctx.font = "10px system-ui"; ctx.fillText(`x${magnify.toFixed(0)}`, cx + 10, cy + 14); }
+  if (magnify > 1) { ctx.fillStyle = colour; ctx.font = "10px system-ui"; ctx.fillText(`x${magnify.toFixed(0)}`, cx + 10, cy + 14); }
+  if (labelled) {  // several vehicles: each one's name beside it (as pMarineViewer's vehicle labels)
+    ctx.fillStyle = colour; ctx.font = selected ? "bold 12px system-ui" : "12px system-ui";
+    ctx.fillText(v.name, cx + 10, cy - 8);
+  }
   if (forces && forces.arrow) {
     const [[x0, y0], [x1, y1]] = forces.arrow;
     const [ax, ay] = toScreen(x0, y0), [bx, by] = toScreen(x1, y1);
@@ -296,7 +342,10 @@ function drawVehicle(v, forces, scene) {
       ctx.stroke();
     }
   }
-  state.drawn = { step: v.step, t: v.t, x: v.x, y: v.y, psi: v.psi };
+  const drawn = { step: v.step, t: v.t, x: v.x, y: v.y, psi: v.psi };
+  state.drawnAll[v.name] = drawn;
+  if (!selected) return;
+  state.drawn = drawn;
   state.history.push(state.drawn);
   if (state.history.length > 500) state.history.shift();
   canvas.dataset.step = v.step;
@@ -329,8 +378,12 @@ function drawScaleBar(w, h) {
 }
 
 function drawLegend(w) {
+  const names = state.frame ? vehiclesOf(state.frame).map((v) => v.name) : [];
+  const uuvs = names.length > 1  // several vehicles: each one's colour and name
+    ? names.map((name, i) => [VEHICLE_COLOURS[i % VEHICLE_COLOURS.length][0], name])
+    : [["#ff5c5c", "trail"], ["#ffd23f", "UUV"]];
   const items = [["#5d6b78", "submarine"], ["rgba(80,220,140,0.6)", "surrogate band"], ["#6fa8ff", "track-lines"],
-    ["#ff5c5c", "trail"], ["#ffd23f", "UUV"], ["#ff66cc", "interaction force / moment"]];
+    ...uuvs, ["#ff66cc", "interaction force / moment"]];
   ctx.font = "11px system-ui";
   items.forEach(([color, text], i) => {
     const y = 16 + i * 15;
@@ -369,7 +422,14 @@ $("swap").onclick = () => send({ cmd: "swap", behaviour: $("behaviour").value })
 $("fit").onclick = fit;
 $("follow").onclick = () => {
   state.follow = true;
-  if (state.scene) state.view.scale = Math.max(state.view.scale, canvas.clientWidth / (12 * state.scene.vehicle.length));
+  const chosen = state.frame ? selectedOf(state.frame) : null;
+  const length = chosen && chosen.vehicle ? chosen.vehicle.length : state.scene && state.scene.vehicle.length;
+  if (length) state.view.scale = Math.max(state.view.scale, canvas.clientWidth / (12 * length));
+  draw();
+};
+$("vehicle").onchange = () => {
+  state.selected = $("vehicle").value;
+  if (state.frame) updatePanel(state.frame);
   draw();
 };
 $("play").onclick = () => send({ cmd: state.frame && state.frame.replay && state.frame.replay.playing ? "stop" : "play" });

@@ -1,0 +1,71 @@
+"""`nearsub tap` and `nearsub log play` on a mission of two vehicles: a replay of the two-vehicle log
+(`logsample.write_fleet_log`), found by name. Timeouts come from the mission's own start-up and
+step timeouts."""
+
+import json
+
+import pytest
+from logsample import write_fleet_log
+from test_log_play import STARTUP, STEP, start_player, wait_registered
+
+from conftest import nearsub
+from nearsub.common.runtime.processes import stop
+
+
+@pytest.fixture(scope="module")
+def fleet_log(tmp_path_factory):
+    path = tmp_path_factory.mktemp("fleettap") / "alpha.mcap"
+    write_fleet_log(path, seconds=60.0)
+    return path
+
+
+def test_tap_lists_the_vehicles_and_echoes_one_of_them(fleet_log, runtime_dir, community):
+    # At warp 1 the 60 s log outlasts the taps below (bravo's half of it too).
+    player = start_player(fleet_log, "--warp", 1, "--community", community, "--wait", STARTUP)
+    try:
+        wait_registered(community, player)
+        echo = nearsub(
+            "tap", "echo", f"nearsub/{community}/*/state", "--vehicle", "bravo", "--community", community,
+            "--count", "5", "--json", timeout=STARTUP + STEP,
+        )  # fmt: skip
+        listed = nearsub("tap", "list", "--community", community, "--json", timeout=STARTUP + STEP)
+        hz = nearsub(
+            "tap", "hz", f"nearsub/{community}/**", "--vehicle", "alfa", "--community", community, "--duration", "2",
+            "--json", timeout=STARTUP + STEP,
+        )  # fmt: skip
+        only = nearsub("tap", "list", "--community", community, "--vehicle", "alfa", "--json", timeout=STARTUP + STEP)
+        unknown = nearsub("tap", "list", "--community", community, "--vehicle", "zulu", timeout=STARTUP + STEP)
+    finally:
+        stop([player])
+    assert echo.returncode == 0, echo.stderr
+    lines = [json.loads(line) for line in echo.stdout.splitlines()]
+    assert len(lines) == 5 and all(line["key"] == f"nearsub/{community}/bravo/state" for line in lines)
+    assert all(line["vehicle"] == "bravo" for line in lines)
+    assert hz.returncode == 0, hz.stderr
+    assert {json.loads(line)["key"].split("/")[2] for line in hz.stdout.splitlines()} == {"alfa"}
+    assert listed.returncode == 0, listed.stderr
+    listing = json.loads(listed.stdout)
+    assert listing["vehicles"] == ["alfa", "bravo"]
+    rows = {row["key"]: row for row in listing["topics"]}
+    assert rows[f"nearsub/{community}/bravo/state"]["vehicle"] == "bravo"
+    assert only.returncode == 0, only.stderr
+    assert {row["vehicle"] for row in json.loads(only.stdout)["topics"]} == {"alfa"}
+    assert unknown.returncode == 2 and "--vehicle zulu: no such vehicle (seen: alfa, bravo)" in unknown.stderr
+
+
+def test_play_of_one_vehicle_replays_its_keys_and_the_mission_wide_ones(fleet_log, runtime_dir, community):
+    player = start_player(fleet_log, "--warp", 0, "--vehicle", "bravo", "--community", community, "--wait", STARTUP)
+    try:
+        wait_registered(community, player)
+        tap = nearsub(
+            "tap", "echo", f"nearsub/{community}/**", "--community", community, "--timeout", str(STARTUP), "--json",
+            timeout=2 * STARTUP + STEP,
+        )  # fmt: skip
+        player.communicate(timeout=STARTUP + STEP)
+    finally:
+        stop([player])
+    keys = {json.loads(line)["key"] for line in tap.stdout.splitlines()}
+    assert f"nearsub/{community}/bravo/state" in keys and f"nearsub/{community}/clock/end" in keys
+    assert not any("/alfa/" in key for key in keys)
+    bad = nearsub("log", "play", str(fleet_log), "--vehicle", "zulu", timeout=STARTUP)
+    assert bad.returncode == 2 and bad.stderr.startswith("nearsub log play: --vehicle zulu: not a vehicle")
