@@ -151,14 +151,19 @@ class HelmSettings(AppSettings):
 
     @model_validator(mode="after")
     def _one_form(self) -> HelmSettings:
-        if not self.behaviours and not self.legs:
-            raise ValueError("give the waypoint legs, or a list of behaviours")
         if self.behaviours and self.legs:
             raise ValueError("give either legs (one waypoints behaviour) or a list of behaviours, not both")
         names = [spec.name for spec in self.behaviours]
         if len(set(names)) != len(names):
             raise ValueError(f"behaviour names must be unique (got {names})")
         return self
+
+    def form_error(self) -> str | None:
+        """Why this helm cannot fly a vehicle: it has neither legs nor behaviours (allowed only in
+        a fleet's shared `[apps.helm]`, which each vehicle completes)."""
+        if not self.behaviours and not self.legs:
+            return "give the waypoint legs, or a list of behaviours"
+        return None
 
     def behaviour_specs(self) -> list:
         """The behaviours the helm arbitrates: the list, or the legacy behaviour as one waypoints
@@ -206,10 +211,55 @@ class LoggerSettings(Strict):
 
 
 class Apps(Strict):
-    helm: HelmSettings
+    helm: HelmSettings = Field(default_factory=HelmSettings)
     pid: PidSettings = Field(default_factory=PidSettings)
     sim: SimSettings = Field(default_factory=SimSettings)
     logger: LoggerSettings = Field(default_factory=LoggerSettings)
+
+
+# The vehicle types a fleet entry may name (common/physics/vehicles.py).
+VEHICLE_TYPES = ("remus100", "nps_auv_ii", "sdv")
+
+
+class VehicleApps(Strict):
+    """A fleet vehicle's own apps: the mission's `[apps.helm]`, `.pid` and `.sim` with the
+    vehicle's `[vehicles.apps.*]` merged over them (`overlay`)."""
+
+    helm: HelmSettings = Field(default_factory=HelmSettings)
+    pid: PidSettings = Field(default_factory=PidSettings)
+    sim: SimSettings = Field(default_factory=SimSettings)
+
+    @field_validator("helm")
+    @classmethod
+    def _flies(cls, value: HelmSettings) -> HelmSettings:
+        if error := value.form_error():
+            raise ValueError(error)
+        return value
+
+
+class FleetVehicle(Strict):
+    """One `[[vehicles]]` entry: its name is the key chunk nearsub/<community>/<name>/..."""
+
+    name: str
+    type: Literal[VEHICLE_TYPES]
+    start: Start = Field(default_factory=Start)
+    apps: VehicleApps = Field(default_factory=VehicleApps)
+
+    @field_validator("name")
+    @classmethod
+    def _key_chunk(cls, value: str) -> str:
+        if not COMMUNITY_PATTERN.match(value):
+            raise ValueError("must contain only letters, digits, '_' and '-' (it is a key-expression chunk)")
+        return value
+
+
+def overlay(base: dict, top: dict) -> dict:
+    """`top` over `base` key by key: tables merge, any other value of `top` (lists too) wins."""
+    merged = dict(base)
+    for key, value in top.items():
+        old = merged.get(key)
+        merged[key] = overlay(old, value) if isinstance(old, dict) and isinstance(value, dict) else value
+    return merged
 
 
 class Mission(Strict):
@@ -229,7 +279,39 @@ class Mission(Strict):
     environment: Environment = Field(default_factory=Environment)
     network: Network = Field(default_factory=Network)
     surrogate: SurrogateSettings = Field(default_factory=SurrogateSettings)
+    vehicles: list[FleetVehicle] = Field(default_factory=list, description="several vehicles (a fleet)")
     apps: Apps
+
+    @model_validator(mode="before")
+    @classmethod
+    def _vehicle_apps(cls, data: Any) -> Any:
+        """Each fleet vehicle's helm, pid and sim settings: the mission's `[apps.*]` with the
+        vehicle's own merged over them, so an entry holds its full settings (and merging again,
+        as a re-validated dump does, changes nothing)."""
+        if not isinstance(data, dict) or not isinstance(data.get("vehicles"), list):
+            return data
+        shared = data.get("apps", {})
+        shared = shared if isinstance(shared, dict) else {}
+        vehicles = []
+        for entry in data["vehicles"]:
+            own = entry.get("apps", {}) if isinstance(entry, dict) else None
+            if isinstance(own, dict):
+                merged = {app: overlay(shared.get(app) or {}, own.get(app) or {}) for app in ("helm", "pid", "sim")}
+                entry = {**entry, "apps": {**own, **merged}}
+            vehicles.append(entry)
+        return {**data, "vehicles": vehicles}
+
+    @field_validator("vehicles")
+    @classmethod
+    def _unique_names(cls, value: list[FleetVehicle], info) -> list[FleetVehicle]:
+        names = [entry.name for entry in value]
+        if twice := next((name for name in names if names.count(name) > 1), None):
+            raise ValueError(f"vehicle name {twice!r} is given twice")
+        vehicle, start = info.data.get("vehicle", "remus100"), info.data.get("start", Start())
+        if value and (vehicle != "remus100" or start != Start()):
+            given = f"vehicle = {vehicle!r}" if vehicle != "remus100" else f"[start] {start}"
+            raise ValueError(f"give each vehicle its type and start in its entry, not the mission's {given}")
+        return value
 
     @field_validator("name")
     @classmethod
@@ -248,19 +330,57 @@ class Mission(Strict):
                 raise ValueError(str(exc.args[0])) from None
         return value
 
+    @field_validator("apps")
+    @classmethod
+    def _helm_flies(cls, value: Apps, info) -> Apps:
+        """A single vehicle's helm must fly it; a fleet's `[apps.helm]` is the shared part of its
+        vehicles' helms, which each entry completes (checked there)."""
+        if not info.data.get("vehicles") and (error := value.helm.form_error()):
+            raise ValueError(f"helm: {error}")
+        return value
+
     @model_validator(mode="after")
     def _consistent(self) -> Mission:
         if not math.isfinite(self.dt * self.time_limit):
             raise ValueError("dt and time_limit must be finite")
-        if self.apps.helm.modified and self.environment.u_sub <= 0:
-            what = "a modified waypoints behaviour"
-            if not self.apps.helm.behaviours:
-                what = f"apps.helm.behaviour = {self.apps.helm.behaviour!r}"
-            raise ValueError(
-                f"{what} steers against the submarine's cross-flow "
-                f"and needs environment.u_sub > 0 (got {self.environment.u_sub})"
-            )
+        for member in self.members():
+            helm = member.apps.helm
+            if helm.modified and self.environment.u_sub <= 0:
+                what = "a modified waypoints behaviour"
+                if not helm.behaviours:
+                    what = f"apps.helm.behaviour = {helm.behaviour!r}"
+                raise ValueError(
+                    f"{what} steers against the submarine's cross-flow "
+                    f"and needs environment.u_sub > 0 (got {self.environment.u_sub})"
+                )
         return self
+
+    def members(self) -> list[Mission]:
+        """The mission as each of its vehicles sees it: for a fleet, one single-vehicle mission per
+        `[[vehicles]]` entry (its type, start and merged apps, and the entry itself, whose name is
+        the key chunk); without `[[vehicles]]`, the mission itself. The app cores take these."""
+        return [self.member(entry.name) for entry in self.vehicles] if self.vehicles else [self]
+
+    def member(self, name: str | None) -> Mission:
+        """One vehicle's mission (see `members`); `name` None for a mission without a fleet."""
+        if name is None and not self.vehicles:
+            return self
+        entry = next((e for e in self.vehicles if e.name == name), None)
+        if entry is None:
+            known = ", ".join(self.vehicle_names) or "none: it has no [[vehicles]]"
+            raise KeyError(f"no vehicle named {name!r} (the mission's vehicles: {known})")
+        apps = self.apps.model_copy(update=dict(entry.apps))
+        return self.model_copy(update={"vehicle": entry.type, "start": entry.start, "apps": apps, "vehicles": [entry]})
+
+    @property
+    def fleet(self) -> bool:
+        """Whether the mission names its vehicles (`[[vehicles]]`): apps and keys carry the names."""
+        return bool(self.vehicles)
+
+    @property
+    def vehicle_names(self) -> list[str]:
+        """The vehicle chunk of every vehicle's key expressions, in mission order."""
+        return [entry.name for entry in self.vehicles] if self.vehicles else [self.vehicle_model.name]
 
     @property
     def vehicle_model(self) -> Vehicle:
@@ -268,13 +388,19 @@ class Mission(Strict):
 
     @property
     def vehicle_name(self) -> str:
-        """The vehicle chunk of the key expressions."""
-        return self.vehicle_model.name
+        """The vehicle chunk of the key expressions (of a fleet: its only vehicle; a mission of
+        several vehicles has one per member)."""
+        names = self.vehicle_names
+        if len(names) > 1:
+            raise ValueError(f"mission {self.name!r} has several vehicles ({', '.join(names)}): take its members()")
+        return names[0]
 
     @property
     def needs_surrogate(self) -> bool:
-        """A submarine is near, and the sim adds its interaction forces or the helm compensates."""
-        return self.environment.submarine and (self.apps.sim.interaction != "off" or self.apps.helm.compensated)
+        """A submarine is near, and a sim adds its interaction forces or a helm compensates."""
+        return self.environment.submarine and any(
+            m.apps.sim.interaction != "off" or m.apps.helm.compensated for m in self.members()
+        )
 
     @property
     def max_steps(self) -> int:
@@ -300,17 +426,38 @@ def parse_override(text: str) -> tuple[list[str], Any]:
 
 
 def apply_overrides(data: dict, overrides: list[str]) -> dict:
+    """Set each dotted key; `vehicles.NAME.` continues in the `[[vehicles]]` entry named NAME
+    (MissionError naming it when there is none)."""
     for text in overrides:
         path, value = parse_override(text)
         node = data
-        for part in path[:-1]:
+        parts = iter(path[:-1])
+        for part in parts:
             child = node.get(part)
-            if not isinstance(child, dict):
+            if part == "vehicles" and node is data:
+                name = next(parts, path[-1])
+                child = vehicle_entry(data, name, text)
+                if name == path[-1]:
+                    raise MissionError(
+                        f"--set {text}: give a setting of vehicle {name!r}, e.g. vehicles.{name}.start.y=12"
+                    )
+            elif not isinstance(child, dict):
                 child = {}
                 node[part] = child
             node = child
         node[path[-1]] = value
     return data
+
+
+def vehicle_entry(data: dict, name: str, text: str) -> dict:
+    """The `[[vehicles]]` entry named `name` of a raw mission; MissionError naming it."""
+    entries = data.get("vehicles")
+    entries = entries if isinstance(entries, list) else []
+    for entry in entries:
+        if isinstance(entry, dict) and entry.get("name") == name:
+            return entry
+    known = ", ".join(str(e.get("name")) for e in entries if isinstance(e, dict)) or "none: it has no [[vehicles]]"
+    raise MissionError(f"--set {text}: no vehicle named {name!r} (the mission's vehicles: {known})")
 
 
 def read_toml(path: Path) -> dict:
@@ -380,12 +527,34 @@ def mission_from_dict(data: dict, where: str = "mission", overrides: list[str] =
     try:
         return Mission.model_validate(data)
     except ValidationError as exc:
-        raise MissionError(describe_validation_error(exc, _source_of(exc, where, overrides))) from None
+        name = _vehicle_names(data)
+        text = describe_validation_error(exc, _source_of(exc, where, overrides, name), name)
+        raise MissionError(text) from None
 
 
-def _source_of(error: ValidationError, where: str, overrides: list[str]) -> str:
+def _vehicle_names(data: dict):
+    """Error locations as users write them: `vehicles.NAME...` for the entry's index, and the
+    names alone for the vehicles list itself (a duplicate name)."""
+    entries = data.get("vehicles") if isinstance(data, dict) else None
+    entries = entries if isinstance(entries, list) else []
+
+    def name(loc: tuple, value):
+        if loc[:1] != ("vehicles",):
+            return loc, value
+        if len(loc) == 1:
+            return loc, [e.get("name") if isinstance(e, dict) else e for e in entries]
+        index = loc[1]
+        entry = entries[index] if isinstance(index, int) and index < len(entries) else None
+        if isinstance(entry, dict) and isinstance(entry.get("name"), str):
+            return ("vehicles", entry["name"], *loc[2:]), value
+        return loc, value
+
+    return name
+
+
+def _source_of(error: ValidationError, where: str, overrides: list[str], name=lambda loc, value: (loc, value)) -> str:
     """`--set KEY=VALUE` when the first bad field lies at or below an override's key, else `where`."""
-    loc = [str(p) for p in error.errors()[0]["loc"]]
+    loc = [str(p) for p in name(tuple(error.errors()[0]["loc"]), None)[0]]
     for text in reversed(list(overrides)):  # the last override of a key wins, as in apply_overrides
         path, _ = parse_override(text)
         if loc[: len(path)] == path:
