@@ -15,7 +15,7 @@ from nearsub.common.autonomy import helm as ivphelm
 from nearsub.common.mission.schema import Mission
 from nearsub.common.physics import dynamics, encounters
 from nearsub.common.physics import proximity as events
-from nearsub.common.runtime.lifecycle import ENCOUNTERS, Fleet, InProcessResult, Iteration, Schedule, run_inprocess
+from nearsub.common.runtime.lifecycle import ENCOUNTERS, InProcessResult, Iteration, Schedule, run_inprocess
 from nearsub.common.runtime.messages import Desired, Event, Forces, HelmProgress, Input, Message, State
 
 if TYPE_CHECKING:
@@ -447,11 +447,6 @@ class EncounterCheck:
         return result
 
 
-def mission_fleet(mission: Mission) -> Fleet:
-    """The lock-step of the mission's vehicles (one vehicle named None without [[vehicles]])."""
-    return Fleet({(m.vehicle_name if mission.fleet else None): Schedule(m.periods()) for m in mission.members()})
-
-
 def build_fleet(mission: Mission, surrogate: ForceModel | None = None) -> dict:
     """{vehicle: {role: core}} for a mission with [[vehicles]], all sharing one surrogate."""
     return {m.vehicle_name: build_cores(m, surrogate) for m in mission.members()}
@@ -473,6 +468,6 @@ def run_mission(mission: Mission, surrogate: ForceModel | None = None) -> InProc
 
         surrogate = load_surrogate(mission.surrogate.model or None)
     if mission.fleet:
-        cores, fleet = build_fleet(mission, surrogate), mission_fleet(mission)
+        cores, fleet = build_fleet(mission, surrogate), mission.lockstep()
         return run_inprocess(cores, fleet, mission.dt, mission.max_steps, observer=EncounterCheck(mission))
     return run_inprocess(build_cores(mission, surrogate), Schedule(mission.periods()), mission.dt, mission.max_steps)

@@ -20,6 +20,7 @@ from nearsub.common.autonomy import logic
 from nearsub.common.autonomy.behaviours import MAX_SPEED, Coordinate, Leg, Speed
 from nearsub.common.physics import dynamics
 from nearsub.common.physics.vehicles import Vehicle, get_vehicle
+from nearsub.common.runtime.lifecycle import Fleet, Schedule
 from nearsub.common.runtime.messages import describe_validation_error
 
 COMMUNITY_PATTERN = re.compile(r"^[A-Za-z0-9_\-]+$")
@@ -408,6 +409,11 @@ class Mission(Strict):
 
     def periods(self) -> dict[str, int]:
         return {"helm": self.apps.helm.period, "pid": self.apps.pid.period, "sim": self.apps.sim.period}
+
+    def lockstep(self) -> Fleet:
+        """The lock-step of the mission's vehicles, each under its own periods (one vehicle named
+        None without [[vehicles]], whose apps keep their bare role names)."""
+        return Fleet({(m.vehicle_name if self.fleet else None): Schedule(m.periods()) for m in self.members()})
 
 
 def parse_override(text: str) -> tuple[list[str], Any]:

@@ -197,7 +197,7 @@ class ClockCore:
         self.policy = GrantPolicy(dt, warp, max_steps, fleet.window)
         # A fleet's checks between vehicles run on each vehicle's x_{k+1} once step k is complete.
         self.observer = observer if fleet.shared else None
-        self.states: dict[int, dict[str, Message]] = {}  # label -> vehicle -> state
+        self.states: dict[int, dict[str, Message]] = {}  # the sim's step -> vehicle -> state
         self.latest: dict[str, Message] = {}
         self.observed = -1
         self.dt = dt
@@ -264,16 +264,18 @@ class ClockCore:
         return request.reply_to, control_reply(request, "clock", self.step, self.dt, **answer)
 
     def record_state(self, vehicle: str, label: int, state: Message) -> None:
-        """A vehicle's state, for the observer (ignored without one, or for a step observed)."""
-        if self.observer is not None and self.observed < label <= self.granted + 1:
-            self.states.setdefault(label, {})[vehicle] = state
+        """A vehicle's state, for the observer, by the step whose sim produced it."""
+        step = label - self.progress.fleet.period(keys.app_name(vehicle, "sim"))
+        if self.observer is not None and self.observed < step <= self.granted:
+            self.states.setdefault(step, {})[vehicle] = state
 
     def observe(self) -> list[Event]:
-        """Run the observer on each newly completed step: its events, and its end request."""
+        """Run the observer on each newly completed step, with each vehicle's latest state as
+        `run_inprocess` has it: its events, and its end request."""
         found = []
         while self.observer is not None and self.observed < self.progress.completed:
             self.observed += 1
-            self.latest.update(self.states.pop(self.observed + 1, {}))
+            self.latest.update(self.states.pop(self.observed, {}))
             result = self.observer.observe(self.observed, self.latest)
             found += result.events
             if result.end is not None:
