@@ -419,31 +419,36 @@ class EncounterCheck:
         self.capsules = {
             m.vehicle_name: encounters.Capsule.of(m.vehicle_model.length, m.vehicle_model.diameter) for m in members
         }
+        self.order = {name: i for i, name in enumerate(self.names)}
+        self.margin = 2 * max(capsule.radius for capsule in self.capsules.values())  # the widest close call
         self.dt = mission.dt
         self.close: set[tuple[str, str]] = set()
 
     def observe(self, step: int, states: dict[str, State]) -> Iteration:
+        """Pairs whose CBs are too far apart for a close call are skipped (`near_pairs`); those
+        in a close call are always checked again, to see them leave it."""
         result = Iteration()
         label, t = step + 1, (step + 1) * self.dt
-        for i, a in enumerate(self.names):
-            for b in self.names[i + 1 :]:
-                if a not in states or b not in states:
-                    continue
-                sa, sb = states[a], states[b]
-                found = encounters.classify_pair(
-                    self.capsules[a], (sa.x, sa.y, sa.psi), self.capsules[b], (sb.x, sb.y, sb.psi)
-                )
-                data = {"vehicles": [a, b], "clearance": found.clearance, "a": [sa.x, sa.y], "b": [sb.x, sb.y]}
-                if found.collision:
-                    detail = f"{a} and {b} touched at ({sa.x:.2f}, {sa.y:.2f}) and ({sb.x:.2f}, {sb.y:.2f})"
-                    result.events.append(event(ENCOUNTERS, label, t, "collision", detail, data))
-                    if result.end is None:
-                        result.end, result.reason = "collision", f"collision between {a} and {b} at t = {t:.2f} s"
-                close = found.close_call
-                if close and (a, b) not in self.close:
-                    detail = f"close call between {a} and {b}: {found.clearance:.2f} m apart"
-                    result.events.append(event(ENCOUNTERS, label, t, "close_call", detail, data))
-                (self.close.add if close else self.close.discard)((a, b))
+        names = [name for name in self.names if name in states]
+        x = np.array([states[name].x for name in names])
+        y = np.array([states[name].y for name in names])
+        reaches = np.array([encounters.reach(self.capsules[name]) for name in names])
+        near = {(names[i], names[j]) for i, j in encounters.near_pairs(x, y, reaches, self.margin)}
+        for a, b in sorted(near | self.close, key=lambda pair: (self.order[pair[0]], self.order[pair[1]])):
+            sa, sb = states[a], states[b]
+            found = encounters.classify_pair(
+                self.capsules[a], (sa.x, sa.y, sa.psi), self.capsules[b], (sb.x, sb.y, sb.psi)
+            )
+            data = {"vehicles": [a, b], "clearance": found.clearance, "a": [sa.x, sa.y], "b": [sb.x, sb.y]}
+            if found.collision:
+                detail = f"{a} and {b} touched at ({sa.x:.2f}, {sa.y:.2f}) and ({sb.x:.2f}, {sb.y:.2f})"
+                result.events.append(event(ENCOUNTERS, label, t, "collision", detail, data))
+                if result.end is None:
+                    result.end, result.reason = "collision", f"collision between {a} and {b} at t = {t:.2f} s"
+            if found.close_call and (a, b) not in self.close:
+                detail = f"close call between {a} and {b}: {found.clearance:.2f} m apart"
+                result.events.append(event(ENCOUNTERS, label, t, "close_call", detail, data))
+            (self.close.add if found.close_call else self.close.discard)((a, b))
         return result
 
 

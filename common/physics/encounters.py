@@ -43,6 +43,20 @@ class Capsule:
         return centre + self.ahead * direction, centre - self.behind * direction
 
 
+def reach(capsule: Capsule) -> float:
+    """The largest distance from the CB to the capsule's surface."""
+    return max(capsule.ahead, capsule.behind) + capsule.radius
+
+
+def near_pairs(x: np.ndarray, y: np.ndarray, reaches: np.ndarray, margin: float) -> list[tuple[int, int]]:
+    """The pairs (i < j) of UUVs whose clearance may be `margin` or less: their CBs are within
+    both reaches plus the margin (the others cannot be, so the exact clearance is skipped)."""
+    i, j = np.triu_indices(len(x), k=1)
+    apart = np.hypot(x[i] - x[j], y[i] - y[j]) - reaches[i] - reaches[j]
+    near = apart <= margin
+    return list(zip(i[near].tolist(), j[near].tolist(), strict=True))
+
+
 def segment_distance(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarray) -> float:
     """Least distance between the segments p0-p1 and q0-q1 in the plane. Two segments that do not
     cross are closest at an end of one of them, so the least of the four end-to-segment

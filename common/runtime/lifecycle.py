@@ -480,15 +480,20 @@ def run_inprocess(
     ends = Ends(fleet)
     states: dict[str, Message] = {}  # each vehicle's latest state, for the observer
 
-    def run_until_quiet() -> None:
-        """Run the steppers in loop order, each again only once it has new input, until none has."""
-        consumers = {
+    def consumers_of() -> dict[str, dict[str, list[str]]]:
+        """app -> topic leaf -> the apps of its vehicle that consume it (again after a swap)."""
+        return {
             app: {
                 leaf: [a for a in steppers if vehicle_of[a] == v and leaf in steppers[a].core.inputs]
                 for leaf in PRODUCER
             }
             for app, v in vehicle_of.items()
         }
+
+    consumers = consumers_of()
+
+    def run_until_quiet() -> None:
+        """Run the steppers in loop order, each again only once it has new input, until none has."""
         due = set(steppers)
         while due:
             for app in steppers:
@@ -522,6 +527,7 @@ def run_inprocess(
                 raise RuntimeError(f"{app} cannot hand over at step {step}")
             steppers[app] = stepper(app, core)
             steppers[app].take_over(handover, step)
+            consumers = consumers_of()
         pauses = [pause - 1 for pause in swaps if step < pause < max_steps]
         target = step if fleet.shared else min([*pauses, max_steps - 1])
         for waiting in steppers.values():
