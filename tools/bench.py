@@ -99,7 +99,7 @@ class AlphaFleet:
         data.pop("vehicle")
         data["time_limit"] = self.time_limit
         # Every process of the fleet imports at once on a shared machine: allow for it.
-        data["startup_timeout"] = 30.0 + 5.0 * self.count
+        data["startup_timeout"] = 60.0 + 10.0 * self.count
         data["vehicles"] = []
         for k in range(self.count):
             dy = -FLEET_SPACING * k

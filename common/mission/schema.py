@@ -224,7 +224,8 @@ VEHICLE_TYPES = ("remus100", "nps_auv_ii", "sdv")
 
 class VehicleApps(Strict):
     """A fleet vehicle's own apps: the mission's `[apps.helm]`, `.pid` and `.sim` with the
-    vehicle's `[vehicles.apps.*]` merged over them (`overlay`)."""
+    vehicle's `[vehicles.apps.*]` merged over them (`overlay`: key by key, behaviours and legs by
+    name)."""
 
     helm: HelmSettings = Field(default_factory=HelmSettings)
     pid: PidSettings = Field(default_factory=PidSettings)
@@ -244,7 +245,10 @@ class FleetVehicle(Strict):
     name: str
     type: Literal[VEHICLE_TYPES]
     start: Start = Field(default_factory=Start)
-    apps: VehicleApps = Field(default_factory=VehicleApps)
+    apps: dict[str, Any] = Field(default_factory=dict, description="the vehicle's own [vehicles.apps.*], as written")
+    # Its apps' full settings, the mission's merged under its own (`Mission._vehicle_apps`);
+    # left out of dumps, so a dump validates again to the same mission.
+    settings: VehicleApps = Field(default_factory=VehicleApps, exclude=True)
 
     @field_validator("name")
     @classmethod
@@ -255,12 +259,26 @@ class FleetVehicle(Strict):
 
 
 def overlay(base: dict, top: dict) -> dict:
-    """`top` over `base` key by key: tables merge, any other value of `top` (lists too) wins."""
+    """`top` over `base` key by key: tables merge; the `behaviours` (each has a name) merge by
+    name, an entry of `top` over the one of the same name in `base`, a new name after them; any
+    other value of `top` (legs and lists in general) replaces the one of `base`."""
     merged = dict(base)
     for key, value in top.items():
         old = merged.get(key)
-        merged[key] = overlay(old, value) if isinstance(old, dict) and isinstance(value, dict) else value
+        if isinstance(old, dict) and isinstance(value, dict):
+            merged[key] = overlay(old, value)
+        elif key == "behaviours" and _named(old) and _named(value):
+            mine = {item["name"]: item for item in value}
+            kept = [overlay(item, mine.pop(item["name"], {})) for item in old]
+            merged[key] = kept + list(mine.values())
+        else:
+            merged[key] = value
     return merged
+
+
+def _named(value: Any) -> bool:
+    """An array of tables that all have a name (as behaviours must)."""
+    return isinstance(value, list) and all(isinstance(v, dict) and isinstance(v.get("name"), str) for v in value)
 
 
 class Mission(Strict):
@@ -287,8 +305,7 @@ class Mission(Strict):
     @classmethod
     def _vehicle_apps(cls, data: Any) -> Any:
         """Each fleet vehicle's helm, pid and sim settings: the mission's `[apps.*]` with the
-        vehicle's own merged over them, so an entry holds its full settings (and merging again,
-        as a re-validated dump does, changes nothing)."""
+        vehicle's own merged over them (`overlay`), validated as the entry's `settings`."""
         if not isinstance(data, dict) or not isinstance(data.get("vehicles"), list):
             return data
         shared = data.get("apps", {})
@@ -297,8 +314,13 @@ class Mission(Strict):
         for entry in data["vehicles"]:
             own = entry.get("apps", {}) if isinstance(entry, dict) else None
             if isinstance(own, dict):
-                merged = {app: overlay(shared.get(app) or {}, own.get(app) or {}) for app in ("helm", "pid", "sim")}
-                entry = {**entry, "apps": {**own, **merged}}
+                merged = {
+                    app: overlay(shared.get(app) or {}, own.get(app) or {})
+                    if isinstance(shared.get(app) or {}, dict) and isinstance(own.get(app) or {}, dict)
+                    else own.get(app)
+                    for app in ("helm", "pid", "sim")
+                }
+                entry = {**entry, "settings": {**own, **merged}}
             vehicles.append(entry)
         return {**data, "vehicles": vehicles}
 
@@ -370,7 +392,7 @@ class Mission(Strict):
         if entry is None:
             known = ", ".join(self.vehicle_names) or "none: it has no [[vehicles]]"
             raise KeyError(f"no vehicle named {name!r} (the mission's vehicles: {known})")
-        apps = self.apps.model_copy(update=dict(entry.apps))
+        apps = self.apps.model_copy(update=dict(entry.settings))
         return self.model_copy(update={"vehicle": entry.type, "start": entry.start, "apps": apps, "vehicles": [entry]})
 
     @property
@@ -549,11 +571,12 @@ def _vehicle_names(data: dict):
             return loc, value
         if len(loc) == 1:
             return loc, [e.get("name") if isinstance(e, dict) else e for e in entries]
-        index = loc[1]
+        index, rest = loc[1], loc[2:]
+        rest = ("apps", *rest[1:]) if rest[:1] == ("settings",) else rest  # what the user wrote
         entry = entries[index] if isinstance(index, int) and index < len(entries) else None
         if isinstance(entry, dict) and isinstance(entry.get("name"), str):
-            return ("vehicles", entry["name"], *loc[2:]), value
-        return loc, value
+            return ("vehicles", entry["name"], *rest), value
+        return ("vehicles", index, *rest), value
 
     return name
 
