@@ -156,3 +156,30 @@ def test_the_encounter_check_reports_a_close_call_once_per_entry():
     kinds = [[e.kind for e in check.observe(k, states(y)).events] for k, y in enumerate((5, 0.7, 0.7, 5, 0.7))]
     assert kinds == [[], ["close_call"], [], [], ["close_call"]]
     assert check.observe(5, states(0.3)).end == "collision"
+
+
+def test_launch_two_departs_in_order_clear_of_the_hull_and_of_each_other():
+    """missions/launch_two.toml (docs/scenarios/launch_two.md), in-process."""
+    from nearsub.common.analysis.fleet import fleet_figures
+
+    mission = load_mission(ROOT / "missions" / "launch_two.toml")
+    assert mission_from_dict(mission.model_dump(mode="json")) == mission
+    behaviours = [spec.name for spec in mission.member("auv2").apps.helm.behaviours]
+    assert behaviours == ["avoid_hull", "op_region", "pace_heading", "pace_speed", "hold", "wait", "depart"]
+    result = run_mission(mission)
+    figures = fleet_figures(mission, result)
+    assert result.outcome == "completed", result.reason
+    auv1, auv2 = figures.vehicle("auv1"), figures.vehicle("auv2")
+    # Both depart and complete; auv2 starts only once auv1 has reached its departure point.
+    assert auv1.completed_at is not None and auv2.completed_at is not None
+    assert auv1.phase_times["depart"] < auv1.phase_times["clear"] < auv2.phase_times["depart"]
+    kinds = {e.kind for _, leaf, e in result.messages if leaf == "events"}
+    assert not kinds & {"collision", "close_call", "error"}, kinds
+    # Clear of the hull (a close call is one diameter: 0.19 m and 0.42 m) and of each other.
+    assert auv1.closest_hull > 1.0 and auv2.closest_hull > 1.0
+    gap, _ = figures.closest_pair[("auv1", "auv2")]
+    assert gap > 10.0
+    # Each held its station within 0.2 m until it departed.
+    for v, point in ((auv1, (8.0, 6.5)), (auv2, (-14.0, 7.0))):
+        holding = v.times < v.phase_times["depart"]
+        assert np.max(np.hypot(v.track[holding, 0] - point[0], v.track[holding, 1] - point[1])) < 0.2

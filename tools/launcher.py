@@ -700,7 +700,6 @@ class Launcher:
         self.caller.call("clock", "resume", timeout=5.0)
         return {"ok": True, "old": old.instance, "new": instance, "step": step}
 
-
     def swapped_vehicle(self, vehicle: str | None) -> str | None:
         """The vehicle a swap serves: the one named, the only one, or None without [[vehicles]]."""
         names = self.mission.vehicle_names
