@@ -11,9 +11,9 @@ import math
 import re
 import tomllib
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from nearsub.common.autonomy import helm as ivphelm
 from nearsub.common.autonomy import logic
@@ -28,6 +28,16 @@ COMMUNITY_PATTERN = re.compile(r"^[A-Za-z0-9_\-]+$")
 ENDPOINT_PATTERN = re.compile(
     r"^(?:(?:tcp|udp|tls|quic|ws)/(?:\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.\-]+):\d{1,5}|unixsock-stream/\S+)$"
 )
+
+
+def _key_chunk(value: str) -> str:
+    if not COMMUNITY_PATTERN.match(value):
+        raise ValueError("must contain only letters, digits, '_' and '-' (it is a key-expression chunk)")
+    return value
+
+
+# A community or vehicle name: one chunk of the key expressions.
+KeyChunk = Annotated[str, AfterValidator(_key_chunk)]
 
 
 class MissionError(ValueError):
@@ -242,20 +252,13 @@ class VehicleApps(Strict):
 class FleetVehicle(Strict):
     """One `[[vehicles]]` entry: its name is the key chunk nearsub/<community>/<name>/..."""
 
-    name: str
+    name: KeyChunk
     type: Literal[VEHICLE_TYPES]
     start: Start = Field(default_factory=Start)
     apps: dict[str, Any] = Field(default_factory=dict, description="the vehicle's own [vehicles.apps.*], as written")
     # Its apps' full settings, the mission's merged under its own (`Mission._vehicle_apps`);
     # left out of dumps, so a dump validates again to the same mission.
     settings: VehicleApps = Field(default_factory=VehicleApps, exclude=True)
-
-    @field_validator("name")
-    @classmethod
-    def _key_chunk(cls, value: str) -> str:
-        if not COMMUNITY_PATTERN.match(value):
-            raise ValueError("must contain only letters, digits, '_' and '-' (it is a key-expression chunk)")
-        return value
 
 
 def overlay(base: dict, top: dict) -> dict:
@@ -282,7 +285,7 @@ def _named(value: Any) -> bool:
 
 
 class Mission(Strict):
-    name: str = Field(description="community name: the key-expression prefix nearsub/<name>/...")
+    name: KeyChunk = Field(description="community name: the key-expression prefix nearsub/<name>/...")
     description: str = ""
     vehicle: str | Vehicle = "remus100"
     dt: float = Field(default=0.05, gt=0, le=1.0, description="base step [s]")
@@ -334,13 +337,6 @@ class Mission(Strict):
         if value and (vehicle != "remus100" or start != Start()):
             given = f"vehicle = {vehicle!r}" if vehicle != "remus100" else f"[start] {start}"
             raise ValueError(f"give each vehicle its type and start in its entry, not the mission's {given}")
-        return value
-
-    @field_validator("name")
-    @classmethod
-    def _community_name(cls, value: str) -> str:
-        if not COMMUNITY_PATTERN.match(value):
-            raise ValueError("must contain only letters, digits, '_' and '-' (it is a key-expression chunk)")
         return value
 
     @field_validator("vehicle")
