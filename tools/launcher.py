@@ -1,6 +1,7 @@
 """The launcher of `nearsub launch`: a mission as separate processes (the pAntler of nearsub).
 
-Start order: router, then logger, surrogate server, sim, pid, helm and clock at once. The router
+Start order: router, then logger, surrogate server, sim, pid, helm (of each vehicle of a fleet:
+`auv1/sim-1`, ..., docs/architecture.md, "Several vehicles") and clock at once. The router
 is started on loopback port 0 and reports the endpoint it really listens on in a ready file; the
 lock-stepped apps wait for the logger's and the server's liveliness before they publish, so
 nothing is published before the logger listens, and the clock waits for them. Every wait is
