@@ -47,6 +47,7 @@ def test_vehicles_merge_their_apps_over_the_missions_key_by_key():
         ),
         ("vehicles.auv2.colour='red'", "field 'vehicles.auv2.colour' = 'red': Extra inputs"),
         ("vehicles.auv2.name='a/b'", "field 'vehicles.a/b.name' = 'a/b'"),
+        ("vehicles.auv2.name='clock'", "field 'vehicles.clock.name' = 'clock': Value error, 'clock' is a mission-wide"),
         ("vehicles.auv2.apps.helm.period=0", "field 'vehicles.auv2.apps.helm.period' = 0"),
         ("vehicles.auv2.apps.logger.enabled=false", "field 'vehicles.auv2.apps.logger' "),
         ("vehicle='sdv'", "give each vehicle its type and start in its entry, not the mission's vehicle = 'sdv'"),

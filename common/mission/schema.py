@@ -20,6 +20,7 @@ from nearsub.common.autonomy import logic
 from nearsub.common.autonomy.behaviours import MAX_SPEED, Coordinate, Leg, Speed
 from nearsub.common.physics import dynamics
 from nearsub.common.physics.vehicles import Vehicle, get_vehicle
+from nearsub.common.runtime import keys
 from nearsub.common.runtime.lifecycle import Fleet, Schedule
 from nearsub.common.runtime.messages import describe_validation_error
 
@@ -38,6 +39,16 @@ def _key_chunk(value: str) -> str:
 
 # A community or vehicle name: one chunk of the key expressions.
 KeyChunk = Annotated[str, AfterValidator(_key_chunk)]
+
+
+def _vehicle_chunk(value: str) -> str:
+    if value in keys.SERVICES:
+        raise ValueError(f"{value!r} is a mission-wide key chunk; give the vehicle another name")
+    return value
+
+
+# A vehicle's name, which stands where a service's name would (nearsub/<c>/<vehicle>/...).
+VehicleChunk = Annotated[KeyChunk, AfterValidator(_vehicle_chunk)]
 
 
 class MissionError(ValueError):
@@ -252,7 +263,7 @@ class VehicleApps(Strict):
 class FleetVehicle(Strict):
     """One `[[vehicles]]` entry: its name is the key chunk nearsub/<community>/<name>/..."""
 
-    name: KeyChunk
+    name: VehicleChunk
     type: Literal[VEHICLE_TYPES]
     start: Start = Field(default_factory=Start)
     apps: dict[str, Any] = Field(default_factory=dict, description="the vehicle's own [vehicles.apps.*], as written")

@@ -91,3 +91,7 @@ def launcher_control(community: str) -> str:
 def everything(community: str) -> str:
     """The whole community: only the logger subscribes to it."""
     return f"{ROOT}/{community}/**"
+
+
+# The chunks after the community that are mission-wide, not a vehicle's name.
+SERVICES = frozenset({"clock", "events", "status", "alive", "control", "reply", "launcher", "surrogate"})
