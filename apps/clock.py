@@ -29,11 +29,12 @@ from nearsub.common.mission.schema import RunConfig
 from nearsub.common.runtime import keys
 from nearsub.common.runtime.bus import Bus, Endpoints, signal_self
 from nearsub.common.runtime.clock import ClockCore, Reply
-from nearsub.common.runtime.lifecycle import DONE_TOPIC, ORDER, Schedule
+from nearsub.common.runtime.lifecycle import DONE_TOPIC, ENCOUNTERS
 from nearsub.common.runtime.messages import (
     Ack,
     Control,
     MessageError,
+    State,
     decode,
     encode,
 )
@@ -44,30 +45,44 @@ class Clock:
     def __init__(self, run: RunConfig, bus: Bus):
         mission = self.mission = run.mission
         c = self.community = mission.name
+        self.fleet = mission.lockstep()
+        observer = None
+        if self.fleet.shared:  # checks between the vehicles (numpy: only a fleet's clock imports it)
+            from nearsub.common.mission.cores import EncounterCheck
+
+            observer = EncounterCheck(mission)
         self.core = ClockCore(
-            Schedule(mission.periods()),
+            self.fleet,
             mission.dt,
             mission.warp,
             mission.max_steps,
             mission.step_timeout,
             mission.pause_at_step,
+            observer,
         )
         self.bus = bus
         self.ack_prefix = keys.ack(c, "")
         self.control_key = keys.control(c, "clock")
         self.end_key = keys.mission_end(c)
-        self.done_topics = {keys.vehicle_topic(c, mission.vehicle_name, leaf): leaf for leaf in DONE_TOPIC.values()}
+        # key -> (vehicle, leaf): every vehicle's done topics.
+        self.done_topics = {
+            keys.vehicle_topic(c, name, leaf): (vehicle, leaf)
+            for vehicle, name in zip(self.fleet.vehicles, mission.vehicle_names, strict=True)
+            for leaf in DONE_TOPIC.values()
+        }
         # The done topics, acks, its control key and the end: not its own ticks, nor other data.
         self.stream = bus.inputs([*self.done_topics, keys.all_acks(c), self.control_key, self.end_key])
         bus.on_liveliness_lost(keys.alive(c, "launcher", "*"), signal_self())
         self.tick_pub = bus.publisher(keys.tick(c))
         self.end_pub = bus.publisher(keys.mission_end(c))
+        self.events_pub = bus.publisher(keys.events(c, ENCOUNTERS)) if observer else None
         self.ended = False
 
     def wait_for_apps(self) -> str | None:
-        """Block until helm, pid and sim have liveliness tokens; an error text on timeout."""
+        """Block until every vehicle's helm, pid and sim have liveliness tokens; an error text on
+        timeout."""
         timeout = self.mission.startup_timeout
-        if missing := wait_for_roles(self.bus, self.community, list(ORDER), timeout):
+        if missing := wait_for_roles(self.bus, self.community, self.fleet.runners(0), timeout):
             return f"apps did not start within {timeout:g} s: {', '.join(missing)}"
         return None
 
@@ -77,13 +92,14 @@ class Clock:
 
     def handle(self, key: str, payload: bytes) -> None:
         """One stream item: progress, a control request, or someone else's mission end."""
-        leaf = self.done_topics.get(key)
-        if leaf is not None:
-            self.record_done(leaf, payload)
+        done = self.done_topics.get(key)
+        if done is not None:
+            self.record_done(*done, payload)
             return
         try:
             if key.startswith(self.ack_prefix):
-                self.core.progress.record_ack(decode(payload, Ack, key))
+                vehicle, _ = keys.split_app(key[len(self.ack_prefix) :])
+                self.core.progress.record_ack(decode(payload, Ack, key), vehicle)
             elif key == self.control_key:
                 self.send(self.core.on_control(decode(payload, Control, key), time.monotonic()))
             elif key == self.end_key:
@@ -91,17 +107,20 @@ class Clock:
         except MessageError as exc:
             print(f"[clock] error: rejected message: {exc}", file=sys.stderr)
 
-    def record_done(self, leaf: str, payload: bytes) -> None:
+    def record_done(self, vehicle: str | None, leaf: str, payload: bytes) -> None:
         """A done output counts by its source and step label alone, so the clock reads just
         those two fields (a full validation costs about 8 times as much per message); the
-        consumers validate and report malformed data."""
+        consumers validate and report malformed data. A fleet's clock keeps the states for the
+        checks between vehicles, unvalidated too (the sims made them)."""
         try:
             fields = msgpack.unpackb(payload)
             role, label = fields["source"], fields["step"]
         except Exception:  # not msgpack, not a map, no such field: a consumer reports it
             return
         if isinstance(role, str) and isinstance(label, int) and not isinstance(label, bool):
-            self.core.progress.record_output(leaf, role, label)
+            self.core.progress.record_output(leaf, role, label, vehicle)
+            if leaf == "state" and self.events_pub is not None:
+                self.core.record_state(vehicle, label, State.model_construct(**fields))
 
     def run(self) -> int:
         error = self.wait_for_apps()
@@ -112,6 +131,8 @@ class Clock:
         self.core.start(time.monotonic())
         while not self.ended:
             advance = self.core.advance(time.monotonic())
+            for event in advance.events:
+                self.events_pub.put(encode(event))
             self.send(advance.replies)
             if advance.end is not None:
                 self.end_pub.put(encode(advance.end))

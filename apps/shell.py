@@ -66,7 +66,8 @@ ERROR_INTERVAL = 1.0  # wall seconds between error events; the rejections in bet
 def app_arguments(description: str) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(description=description)
     parser.add_argument("--run", required=True, help="run configuration written by `nearsub launch`")
-    parser.add_argument("--instance", required=True, help="unique instance name, e.g. helm-1")
+    parser.add_argument("--instance", required=True, help="unique instance name, e.g. helm-1 or auv1/helm-1")
+    parser.add_argument("--vehicle", help="the [[vehicles]] entry this app serves (a mission with a fleet)")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="mission override")
     parser.add_argument("--takeover", metavar="INSTANCE", help="take over from a running instance (swap)")
     parser.add_argument("--resume-step", type=int, help="the step at which the clock paused (swap)")
@@ -80,7 +81,7 @@ def wait_for_roles(bus: Bus, community: str, roles: list[str], timeout: float) -
     """Wait up to `timeout` wall seconds for a liveliness token of each role; the roles missing."""
     end = time.monotonic() + timeout
     while True:
-        alive = {key.split("/")[3] for key in bus.alive(keys.all_alive(community), timeout=0.5)}
+        alive = {keys.alive_role(key) for key in bus.alive(keys.all_alive(community), timeout=0.5)}
         missing = [role for role in roles if role not in alive]
         if not missing or time.monotonic() > end:
             return missing
@@ -97,15 +98,20 @@ def load_run(args) -> RunConfig:
 
 class AppShell:
     """Runs one core under the lock-step protocol. `core_factory(mission, surrogate)` builds the
-    core once the bus is open; `surrogate` is the remote surrogate server when the mission needs it."""
+    core once the bus is open; `surrogate` is the remote surrogate server when the mission needs it.
+    In a fleet, `vehicle` names the entry the app serves: the core gets that vehicle's mission
+    (`Mission.member`) and the app hears its own vehicle's inputs only, and of the clock only the
+    ticks and the end (the clock alone decides a fleet's end and never grants past it)."""
 
-    def __init__(self, core_factory: Callable[..., Core], run: RunConfig, instance: str):
+    def __init__(self, core_factory: Callable[..., Core], run: RunConfig, instance: str, vehicle: str | None = None):
         self.core_factory = core_factory
         self.run = run
         self.instance = instance
-        mission = run.mission
+        self.lockstep = run.mission.lockstep()
+        mission = self.mission = run.mission.member(vehicle)
         c = self.community = mission.name
         self.vehicle = mission.vehicle_name
+        self.named = vehicle  # None: the app names of a mission without [[vehicles]]
         self.dt = mission.dt
         self.tick_key = keys.tick(c)
         self.end_key = keys.mission_end(c)
@@ -124,7 +130,7 @@ class AppShell:
         with Bus(Endpoints("client", tuple(self.run.connect))) as bus:
             self.bus = bus
             c = self.community
-            mission = self.run.mission
+            mission = self.mission
             if missing := wait_for_roles(bus, c, list(after), mission.startup_timeout):
                 raise SystemExit(
                     f"{self.instance}: {', '.join(missing)} did not start within {mission.startup_timeout:g} s"
@@ -136,25 +142,33 @@ class AppShell:
                 surrogate = RemoteSurrogate(bus, c)
             self.core = self.core_factory(mission, surrogate)
             # A surrogate server that stops answering ends the mission, naming it.
+            shared = self.lockstep.shared
             self.stepper = Stepper(
-                self.core, Schedule(mission.periods()), self.dt, mission.max_steps, recoverable=(ServiceError,)
+                self.core,
+                Schedule(mission.periods()),
+                self.dt,
+                mission.max_steps,
+                recoverable=(ServiceError,),
+                ends_itself=not shared,
             )
             pokes = [leaf for leaf, role in OPERATOR_ONLY.items() if role == self.core.role]
             self.input_of_key = {
                 keys.vehicle_topic(c, self.vehicle, leaf): leaf for leaf in (*self.core.inputs, *pokes)
             }
-            self.stream = bus.inputs([*self.input_of_key, keys.clock_traffic(c), self.control_key, self.reply_key])
+            clock = [self.tick_key, self.end_key] if shared else [keys.clock_traffic(c)]
+            self.stream = bus.inputs([*self.input_of_key, *clock, self.control_key, self.reply_key])
             bus.on_liveliness_lost(keys.alive(c, "launcher", "*"), signal_self())
             self.publishers = {
                 leaf: bus.publisher(keys.vehicle_topic(c, self.vehicle, leaf)) for leaf in self.core.outputs
             }
-            self.publishers[ACK] = bus.publisher(keys.ack(c, self.core.role))
+            self.app = keys.app_name(self.named, self.core.role)
+            self.publishers[ACK] = bus.publisher(keys.ack(c, self.app))
             self.publishers[EVENTS] = bus.publisher(keys.events(c, self.instance))
             self.status_pub = bus.publisher(keys.status(c, self.instance))
             if takeover is not None:
                 self.take_over(takeover, resume_step)
             self.publish_status("running")
-            bus.token(keys.alive(c, self.core.role, self.instance))
+            bus.token(keys.alive(c, self.app, self.instance))
             try:
                 return self.loop()
             finally:
@@ -283,7 +297,7 @@ class AppShell:
     def publish_status(self, state: str) -> None:
         step = self.stepper.step
         status = AppStatus(
-            step=step, t=step * self.dt, source=self.core.role, app=self.core.role, instance=self.instance, state=state
+            step=step, t=step * self.dt, source=self.core.role, app=self.app, instance=self.instance, state=state
         )
         self.status_pub.put(encode(status))
 
@@ -297,7 +311,12 @@ def main_for(core_factory, description: str, argv=None) -> int:
     except MissionError as exc:
         print(f"[{args.instance}] {exc}", file=sys.stderr)
         return 2
-    shell = AppShell(core_factory, run, args.instance)
+    try:
+        run.mission.member(args.vehicle)
+    except KeyError as exc:
+        print(f"[{args.instance}] --vehicle: {exc.args[0]}", file=sys.stderr)
+        return 2
+    shell = AppShell(core_factory, run, args.instance, args.vehicle)
     try:
         return shell.serve(args.takeover, args.resume_step, args.after)
     except KeyboardInterrupt:

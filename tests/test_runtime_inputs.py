@@ -8,15 +8,17 @@ import time
 from collections import Counter
 
 import pytest
+from test_fleet import TWO
 
 from conftest import ALPHA
 from nearsub.apps.shell import AppShell
-from nearsub.common.mission.cores import PidCore, build_cores
+from nearsub.common.mission.cores import PidCore, build_cores, run_mission
 from nearsub.common.mission.schema import RunConfig, load_mission
 from nearsub.common.runtime import keys
 from nearsub.common.runtime.bus import Bus, Endpoints, free_tcp_port, make_config
 from nearsub.common.runtime.lifecycle import Schedule, run_inprocess
 from nearsub.common.runtime.messages import (
+    Ack,
     Desired,
     Event,
     Input,
@@ -138,3 +140,53 @@ def rejections(samples) -> int:
         total += 0 if event.detail.startswith("mission over") else 1
         total += sum(int(n) for n in re.findall(r"and (\d+) more errors", event.detail))
     return total
+
+
+def test_a_fleet_vehicles_pid_receives_only_its_own_vehicles_inputs():
+    """In a mission of two vehicles, auv2's pid hears auv2's state and desired, the clock's ticks
+    and end, and nothing of auv1 (its data, acks, control keys) nor of the other acks."""
+    mission = load_mission(TWO, ["name=fleet-inputs-test", "time_limit=5"])
+    c = mission.name
+    reference = run_mission(mission)
+    states, desireds = reference.topic("state", "auv2"), reference.topic("desired", "auv2")
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    with Bus(make_config("router", listen=[endpoint])), Bus(Endpoints("client", (endpoint,))) as world:
+        outputs = []
+        world.session.declare_subscriber(keys.vehicle_topic(c, "auv2", "input"), lambda s: outputs.append(s))
+        run = RunConfig(mission=mission, connect=[endpoint])
+        shell = CountingShell(lambda m, s: PidCore(m), run, "auv2/pid-1", "auv2")
+        thread = threading.Thread(target=shell.serve, daemon=True)
+        thread.start()
+        timeout = mission.startup_timeout + mission.step_timeout
+        wait_until(lambda: world.alive(keys.alive(c, "auv2/pid", "*")), timeout, "auv2's pid did not start")
+        own = {leaf: keys.vehicle_topic(c, "auv2", leaf) for leaf in ("state", "desired")}
+        others = {
+            keys.vehicle_topic(c, "auv1", "state"): encode(reference.topic("state", "auv1")[0]),
+            keys.vehicle_topic(c, "auv1", "desired"): encode(reference.topic("desired", "auv1")[0]),
+            keys.ack(c, "auv1/pid"): encode(Ack(step=0, t=0.0, source="pid", end="completed")),
+            keys.ack(c, "auv2/helm"): encode(Ack(step=0, t=0.0, source="helm")),
+            keys.control(c, "auv1/pid-1"): b"\x80",
+            keys.vehicle_topic(c, "auv1", "input"): b"\x80",
+        }
+        sent = Counter()
+
+        def put(k: str, payload: bytes) -> None:
+            world.put_when_matched(k, payload, wait=timeout) if not sent[k] else world.put(k, payload)
+            sent[k] += 1
+
+        put(keys.tick(c), encode(Tick(step=mission.max_steps - 1, t=0.0, source="clock")))
+        desired = iter(desireds)
+        for state in states[:-1]:
+            for k, payload in others.items():
+                world.put(k, payload)
+            if state.step % mission.members()[1].periods()["helm"] == 0:
+                put(own["desired"], encode(next(desired)))
+            put(own["state"], encode(state))
+        expected = reference.topic("input", "auv2")
+        wait_until(lambda: len(outputs) >= len(expected), timeout, "auv2's pid did not publish every input")
+        put(keys.mission_end(c), encode(MissionEnd(step=mission.max_steps, t=0.0, source="clock", outcome="x")))
+        thread.join(timeout)
+        assert not thread.is_alive()
+    assert [s.payload.to_bytes() for s in outputs] == [encode(m) for m in expected]
+    assert shell.received == sent
+    assert set(sent) == {own["state"], own["desired"], keys.tick(c), keys.mission_end(c)}

@@ -36,6 +36,13 @@ def add_parser(subparsers) -> None:
     t = b.add_parser("pipeline", help="lock-stepped steps per second, CPU per app, start-up and shutdown")
     t.add_argument("--mission", default=None, help="one mission file (default: alpha and overtake_stern_nuv)")
     t.add_argument("--repeats", type=int, default=3)
+    t.add_argument(
+        "--vehicles",
+        type=vehicle_counts,
+        metavar="N,N,...",
+        help="instead: fleets of N REMUS 100s flying copies of alpha, e.g. 1,4,16 (steps/s, CPU per vehicle-step)",
+    )
+    t.add_argument("--fleet-time", type=float, default=60.0, metavar="T", help="simulated seconds of each fleet run")
     t.add_argument("--json", action="store_true")
     t.set_defaults(func=bench_pipeline)
     add_bench_parser(b)
@@ -45,47 +52,88 @@ def add_parser(subparsers) -> None:
     t.set_defaults(func=bench_hydro)
 
 
-def inprocess_rate(mission_path: Path) -> tuple[float, int]:
+def inprocess_rate(mission) -> tuple[float, int]:
     """Steps per second of `run_inprocess` (the surrogate, when needed, loaded before the clock starts)."""
-    from nearsub.common.mission.cores import build_cores
-    from nearsub.common.mission.schema import load_mission
+    from nearsub.common.mission.cores import EncounterCheck, build_cores, build_fleet
     from nearsub.common.runtime.lifecycle import Schedule, run_inprocess
 
-    mission = load_mission(mission_path)
     surrogate = None
     if mission.needs_surrogate:
         from nearsub.common.surrogate.model import load_surrogate
 
         surrogate = load_surrogate(mission.surrogate.model or None)
-    cores = build_cores(mission, surrogate)
+    if mission.fleet:
+        cores, schedule, observer = build_fleet(mission, surrogate), mission.lockstep(), EncounterCheck(mission)
+    else:
+        cores, schedule, observer = build_cores(mission, surrogate), Schedule(mission.periods()), None
     start = time.perf_counter()
-    result = run_inprocess(cores, Schedule(mission.periods()), mission.dt, mission.max_steps)
+    result = run_inprocess(cores, schedule, mission.dt, mission.max_steps, observer=observer)
     return result.steps / (time.perf_counter() - start), result.steps
 
 
-def launch_once(mission_path: Path, log_dir: str, tag: str, *overrides: str):
-    """One launch at warp 0 through the multi-process launcher: its `Summary`."""
-    from nearsub.common.mission.schema import load_mission
+class MissionFile:
+    """A mission file to benchmark, loaded with each run's overrides."""
 
+    def __init__(self, path: Path):
+        self.path, self.name = path, path.stem
+
+    def load(self, overrides: list[str]):
+        from nearsub.common.mission.schema import load_mission
+
+        return load_mission(self.path, overrides)
+
+
+class AlphaFleet:
+    """N REMUS 100s, each flying alpha's waypoints shifted FLEET_SPACING metres south of the
+    previous vehicle's (no two meet), for `nearsub bench pipeline --vehicles`."""
+
+    def __init__(self, count: int, time_limit: float):
+        self.count, self.time_limit, self.path = count, time_limit, None
+        self.name = f"alpha_x{count}"
+
+    def load(self, overrides: list[str]):
+        from nearsub.common.mission.schema import apply_overrides, mission_from_dict, resolve_includes
+
+        data = resolve_includes(DEFAULT_MISSION)
+        start, legs = data.pop("start"), data["apps"]["helm"].pop("legs")
+        data.pop("vehicle")
+        data["time_limit"] = self.time_limit
+        # Every process of the fleet imports at once on a shared machine: allow for it.
+        data["startup_timeout"] = 60.0 + 10.0 * self.count
+        data["vehicles"] = []
+        for k in range(self.count):
+            dy = -FLEET_SPACING * k
+            shifted = [leg | {"points": [[x, y + dy] for x, y in leg["points"]]} for leg in legs]
+            entry = {"name": f"auv{k + 1}", "type": "remus100", "start": start | {"y": start["y"] + dy}}
+            data["vehicles"].append(entry | {"apps": {"helm": {"legs": shifted}}})
+        return mission_from_dict(apply_overrides(data, list(overrides)), self.name, overrides)
+
+
+FLEET_SPACING = 250.0  # m between two vehicles' copies of alpha (its survey spans 180 m by 160 m)
+
+
+def launch_once(source, log_dir: str, tag: str, *overrides: str):
+    """One launch at warp 0 through the multi-process launcher: its `Summary`."""
     from .launcher import Launcher
 
-    mission = load_mission(mission_path, [f"name=bench{tag}_{int(time.time())}", "warp=0", *overrides])
-    return Launcher(mission, str(mission_path), log_dir, quiet=True).run()
+    mission = source.load([f"name=bench{tag}_{int(time.time())}", "warp=0", *overrides])
+    return Launcher(mission, source.path and str(source.path), log_dir, quiet=True).run()
 
 
 def median_spread(values: list[float]) -> dict:
     return {"median": statistics.median(values), "min": min(values), "max": max(values)}
 
 
-def bench_mission(mission_path: Path, log_dir: str, repeats: int, verbose: bool) -> dict | None:
-    """Steps per second, CPU-ms per step of each process, start-up and shutdown time of one mission.
-    A launch of a few steps costs the start-up and shutdown: the CPU per step is what a full run
-    costs beyond it (each process's CPU read at the mission end)."""
-    name = mission_path.stem
-    short = launch_once(mission_path, log_dir, f"{name}_short", "time_limit=0.5")
+def bench_mission(source, log_dir: str, repeats: int, verbose: bool) -> dict | None:
+    """Steps per second, CPU-ms per step of each process, start-up and shutdown time of one mission
+    (a `MissionFile` or an `AlphaFleet`). A launch of a few steps costs the start-up and shutdown:
+    the CPU per step is what a full run costs beyond it (each process's CPU read at the mission
+    end); per vehicle-step it is that divided by the vehicles."""
+    name = source.name
+    short = launch_once(source, log_dir, f"{name}_short", "time_limit=0.5")
     runs = []
     for index in range(repeats):
-        summary = launch_once(mission_path, log_dir, f"{name}{index}")
+        summary = launch_once(source, log_dir, f"{name}{index}")
         if summary.outcome not in ("completed", "time_limit", "collision"):
             print(
                 f"nearsub bench: {name} run {index + 1} ended with {summary.outcome}: {summary.reason}", file=sys.stderr
@@ -102,12 +150,16 @@ def bench_mission(mission_path: Path, log_dir: str, repeats: int, verbose: bool)
             )
             print(f"  {name} run {index + 1}: {line}", file=sys.stderr)
     apps = sorted({app for _, per_app in runs for app in per_app})
-    local = [inprocess_rate(mission_path)[0] for _ in range(repeats)]
+    mission = source.load([])
+    local = [inprocess_rate(mission)[0] for _ in range(repeats)]
+    vehicles = len(mission.vehicle_names)
     return {
-        "mission": str(mission_path),
+        "mission": str(source.path or name),
+        "vehicles": vehicles,
         "steps": runs[-1][0].steps,
         "pipeline_steps_per_second": median_spread([s.steps_per_second for s, _ in runs]),
         "pipeline_cpu_ms_per_step": median_spread([sum(per_app.values()) for _, per_app in runs]),
+        "cpu_ms_per_vehicle_step": median_spread([sum(per_app.values()) / vehicles for _, per_app in runs]),
         "cpu_ms_per_step_by_app": {app: statistics.median(p.get(app, 0.0) for _, p in runs) for app in apps},
         "startup_s": median_spread([s.startup_time for s, _ in runs] + [short.startup_time]),
         "shutdown_s": median_spread([s.shutdown_time for s, _ in runs] + [short.shutdown_time]),
@@ -115,19 +167,35 @@ def bench_mission(mission_path: Path, log_dir: str, repeats: int, verbose: bool)
     }
 
 
+def vehicle_counts(text: str) -> list[int]:
+    """'1,4,16' -> [1, 4, 16], for argparse."""
+    import argparse
+
+    try:
+        counts = [int(part) for part in text.split(",") if part.strip()]
+    except ValueError:
+        counts = []
+    if not counts or any(not 1 <= n <= 64 for n in counts):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a list of vehicle counts from 1 to 64, such as 1,4,16")
+    return counts
+
+
 def bench_pipeline(args) -> int:
     import os
 
-    missions = [Path(args.mission)] if args.mission else [DEFAULT_MISSION, NUV_MISSION]
+    if args.vehicles:
+        sources = [AlphaFleet(n, args.fleet_time) for n in args.vehicles]
+    else:
+        sources = [MissionFile(Path(p)) for p in ([args.mission] if args.mission else [DEFAULT_MISSION, NUV_MISSION])]
     load_before = os.getloadavg()[0]
     result = {"repeats": args.repeats, "target_steps_per_second": 1000, "target_startup_plus_shutdown_s": 2.0}
     with tempfile.TemporaryDirectory() as log_dir:
-        for path in missions:
-            measured = bench_mission(path, log_dir, args.repeats, not args.json)
+        for source in sources:
+            measured = bench_mission(source, log_dir, args.repeats, not args.json)
             if measured is None:
                 return 1
-            result[path.stem] = measured
-    if DEFAULT_MISSION in [path.resolve() for path in missions]:
+            result[source.name] = measured
+    if DEFAULT_MISSION in [source.path.resolve() for source in sources if source.path]:
         result["moos_ivp"] = moos_alpha.compare(DEFAULT_MISSION, args.repeats, not args.json)
     else:
         result["moos_ivp"] = {"ran": False, "reason": "it runs beside the alpha mission only: comparison skipped"}
@@ -135,13 +203,17 @@ def bench_pipeline(args) -> int:
     if args.json:
         print(json.dumps(result))
         return 0
-    for path in missions:
-        m = result[path.stem]
+    for source in sources:
+        m = result[source.name]
         p, c = m["pipeline_steps_per_second"], m["pipeline_cpu_ms_per_step"]
-        print(f"{path.stem} ({m['steps']} steps), over {args.repeats} runs:")
+        print(f"{source.name} ({m['vehicles']} vehicles, {m['steps']} steps), over {args.repeats} runs:")
         print(f"  lock-stepped pipeline: median {p['median']:.0f} steps/s (min {p['min']:.0f}, max {p['max']:.0f})")
         by_app = ", ".join(f"{app} {ms:.2f}" for app, ms in m["cpu_ms_per_step_by_app"].items())
+        if m["vehicles"] > 1:  # one line per process would not fit
+            by_app = f"clock {m['cpu_ms_per_step_by_app'].get('clock', 0.0):.2f}"
+        v = m["cpu_ms_per_vehicle_step"]
         print(f"  CPU per step:          median {c['median']:.2f} ms over all processes ({by_app})")
+        print(f"  CPU per vehicle-step:  median {v['median']:.2f} ms (min {v['min']:.2f}, max {v['max']:.2f})")
         local = m["inprocess_steps_per_second"]["median"]
         print(f"  in-process loop:       median {local:.0f} steps/s ({local / p['median']:.1f}x the pipeline)")
         up, down = m["startup_s"], m["shutdown_s"]

@@ -1,6 +1,7 @@
 """The launcher of `nearsub launch`: a mission as separate processes (the pAntler of nearsub).
 
-Start order: router, then logger, surrogate server, sim, pid, helm and clock at once. The router
+Start order: router, then logger, surrogate server, sim, pid, helm (of each vehicle of a fleet:
+`auv1/sim-1`, ..., docs/architecture.md, "Several vehicles") and clock at once. The router
 is started on loopback port 0 and reports the endpoint it really listens on in a ready file; the
 lock-stepped apps wait for the logger's and the server's liveliness before they publish, so
 nothing is published before the logger listens, and the clock waits for them. Every wait is
@@ -103,6 +104,15 @@ class Summary:
     startup_time: float = 0.0  # launch until every process is up (the clock grants step 0)
     shutdown_time: float = 0.0  # mission end until every process has gone
     cpu: dict[str, float] = field(default_factory=dict)  # CPU seconds of each process at the end
+    vehicles: dict[str, dict] = field(default_factory=dict)  # a fleet: waypoints and events per vehicle
+
+    def record_vehicle_event(self, vehicle: str, kind: str) -> None:
+        mine = self.vehicles.get(vehicle)
+        if mine is None:  # not a vehicle of the mission (a stray publisher)
+            return
+        mine["events"][kind] += 1
+        if kind == "waypoint":
+            mine["waypoints_reached"] += 1
 
     @property
     def steps_per_second(self) -> float:
@@ -134,6 +144,11 @@ class Summary:
             "startup_time": round(self.startup_time, 3),
             "shutdown_time": round(self.shutdown_time, 3),
             "cpu": {name: round(seconds, 3) for name, seconds in self.cpu.items()},
+            **(
+                {"vehicles": {n: v | {"events": dict(v["events"])} for n, v in self.vehicles.items()}}
+                if self.vehicles
+                else {}
+            ),
         }
 
     def text(self) -> str:
@@ -146,6 +161,9 @@ class Summary:
             f"  warp {self.warp:g} requested, {self.achieved_warp:.1f} achieved; start-up {self.startup_time:.2f} s, "
             f"shutdown {self.shutdown_time:.2f} s",
         ]
+        for name, mine in sorted(self.vehicles.items()):
+            events = ", ".join(f"{k} {v}" for k, v in sorted(mine["events"].items())) or "none"
+            lines.append(f"    {name}: waypoints reached {mine['waypoints_reached']}; events: {events}")
         if self.swaps:
             lines.append("  swaps: " + "; ".join(f"{s['old']} -> {s['new']} at step {s['step']}" for s in self.swaps))
         if self.log:
@@ -199,6 +217,8 @@ class Launcher:
         self.run_dir = Path(log_root) / f"{self.community}-{stamp}-{os.getpid()}"
         self.children: dict[str, Child] = {}
         self.summary = Summary(self.community, warp=mission.warp)
+        for name in mission.vehicle_names if mission.fleet else ():
+            self.summary.vehicles[name] = {"waypoints_reached": 0, "events": Counter()}
         self.ended_at: float | None = None
         self.status_line = not quiet and sys.stdout.isatty()
         self.next_status = 0.0
@@ -213,7 +233,8 @@ class Launcher:
 
     # -- processes ----------------------------------------------------------------------------
     def spawn(self, module: str, instance: str, role: str, extra: list[str] = ()) -> Child:
-        output = self.run_dir / f"{instance}.out"
+        output = self.run_dir / f"{instance}.out"  # a fleet vehicle's apps: in its own folder
+        output.parent.mkdir(exist_ok=True)
         with open(output, "wb") as out:
             process = spawn_app(module, ["--run", str(self.run_file), "--instance", instance, *extra], out)
         child = Child(instance, role, process, output)
@@ -309,12 +330,13 @@ class Launcher:
                         f"mission {c} running: {len(self.children) + (self.router is not None)} processes up "
                         f"in {self.summary.startup_time:.2f} s"
                     )
-                    registry.register(self.community, connect, str(log_path), self.credentials)  # tools find it
+                    names = self.mission.vehicle_names if self.mission.fleet else []
+                    registry.register(self.community, connect, str(log_path), self.credentials, names)  # tools find it
                     self.companion_processes += [start(self.run_file) for start in self.companions]
                     if self.status_line:
-                        self.latest_state = bus.stream(
-                            keys.vehicle_topic(c, self.mission.vehicle_name, "state"), 1, True
-                        )
+                        self.positions: dict[str, tuple] = {}
+                        vehicles = self.mission.vehicle_names
+                        self.latest_state = bus.stream(keys.vehicle_topic(c, "*", "state"), len(vehicles), True)
                     self.supervise()
                 except LaunchError as exc:
                     self.fail(exc)
@@ -395,6 +417,7 @@ class Launcher:
         the logger and the surrogate server (`--after`) before they publish, and the clock for
         them before it grants step 0, so the order of the mission is kept."""
         services, wanted = [], []
+        mission = self.mission
         if self.mission.apps.logger.enabled:
             extra = ["--output", str(log_path)]
             if self.mission_path:
@@ -406,10 +429,13 @@ class Launcher:
             self.spawn("surrogate", "surrogate", "surrogate")
             services.append("surrogate")
         after = [argument for role in services for argument in ("--after", role)]
-        for role in reversed(ORDER):
-            instance = self.next_instance(role)
-            self.spawn(role, instance, role, after)
-            wanted.append((role, instance))
+        for vehicle in mission.vehicle_names if mission.fleet else [None]:
+            serves = ["--vehicle", vehicle] if vehicle else []
+            for role in reversed(ORDER):
+                app = keys.app_name(vehicle, role)
+                instance = self.next_instance(app)
+                self.spawn(role, instance, app, [*after, *serves])
+                wanted.append((app, instance))
         self.spawn("clock", "clock", "clock")
         self.wait_alive(
             bus, [(role, role) for role in services] + wanted + [("clock", "clock")], self.mission.startup_timeout
@@ -441,13 +467,17 @@ class Launcher:
         if status["warp"] > 0:
             warp += f" of {status['warp']:g}"
         line = f"t {status['t']:8.2f} s  step {status['step']:>6}  {warp}"
-        latest = self.latest_state.try_recv()
-        if latest is not None:
+        while (latest := self.latest_state.try_recv()) is not None:
             try:
                 state = decode(latest[1], model_for_key(latest[0]), latest[0])
-                line += f"  u {state.u:5.2f} m/s  at ({state.x:8.2f}, {state.y:8.2f})"
             except MessageError:
-                pass
+                continue
+            self.positions[latest[0].split("/")[2]] = (state.u, state.x, state.y)
+        if not self.mission.fleet and self.positions:
+            u, x, y = next(iter(self.positions.values()))
+            line += f"  u {u:5.2f} m/s  at ({x:8.2f}, {y:8.2f})"
+        for vehicle, (u, x, y) in sorted(self.positions.items()) if self.mission.fleet else ():
+            line += f"  {vehicle} {u:.1f} m/s ({x:.0f}, {y:.0f})"
         sys.stdout.write(f"\r\033[K{line}")
         sys.stdout.flush()
         self.showing_status = True
@@ -519,7 +549,8 @@ class Launcher:
             self.on_control(mail)
             return False
         if mail.kind in ("alive", "gone"):
-            instance = mail.key.rsplit("/", 1)[-1]
+            vehicle, _ = keys.split_app(keys.alive_role(mail.key))
+            instance = keys.app_name(vehicle, mail.key.rsplit("/", 1)[-1])
             if instance != "launcher":
                 kind = "app_joined" if mail.kind == "alive" else "app_left"
                 self.publish_event(kind, f"{instance} {'joined' if kind == 'app_joined' else 'left'}")
@@ -544,9 +575,14 @@ class Launcher:
             self.summary.events[message.kind] += 1
             if message.kind == "waypoint":
                 self.summary.waypoints_reached += 1
+            # events/<vehicle>/<instance> in a fleet: count and print them per vehicle
+            vehicle = mail.key.split("/")[3] if self.mission.fleet and mail.key.count("/") > 3 else None
+            if vehicle is not None:
+                self.summary.record_vehicle_event(vehicle, message.kind)
             if not self.quiet and message.kind in ("waypoint", "collision", "swap", "error"):
                 self.clear_status()
-                print(f"  t={message.t:8.2f}  {message.kind:<10} {message.detail}", file=sys.stderr, flush=True)
+                who = f"{vehicle}: " if vehicle else ""
+                print(f"  t={message.t:8.2f}  {message.kind:<10} {who}{message.detail}", file=sys.stderr, flush=True)
         return False
 
     def cpu_now(self) -> dict[str, float]:
@@ -603,23 +639,32 @@ class Launcher:
             return
         try:
             at = request.get("at_step")
+            vehicle = request.get("vehicle")
             result = self.swap(
-                str(request.get("app", "")), list(request.get("set", [])), None if at is None else int(at)
+                str(request.get("app", "")),
+                list(request.get("set", [])),
+                None if at is None else int(at),
+                None if vehicle is None else str(vehicle),
             )
         except LaunchError as exc:
             mail.reply_error(str(exc))
             return
         mail.reply(msgpack.packb(result))
 
-    def swap(self, role: str, overrides: list[str], at_step: int | None = None) -> dict:
+    def swap(self, role: str, overrides: list[str], at_step: int | None = None, vehicle: str | None = None) -> dict:
+        """Replace `role` (of `vehicle`, which a mission of several vehicles needs) at a step boundary."""
         if role not in ORDER:
             raise LaunchError(f"cannot swap {role!r}: only {', '.join(ORDER)} can be swapped")
+        vehicle = self.swapped_vehicle(vehicle)
+        app = keys.app_name(vehicle, role)
         old = next(
-            (c for c in self.children.values() if c.role == role and not c.retiring and c.process.poll() is None), None
+            (c for c in self.children.values() if c.role == app and not c.retiring and c.process.poll() is None), None
         )
         if old is None:
-            raise LaunchError(f"no running {role} to swap")
+            raise LaunchError(f"no running {app} to swap")
         prefixed = [o if o.startswith("apps.") else f"apps.{role}.{o}" for o in overrides]
+        if vehicle is not None:  # that vehicle's own settings
+            prefixed = [f"vehicles.{vehicle}.{o}" for o in prefixed]
         try:
             mission_from_dict(apply_overrides(self.mission.model_dump(mode="json"), prefixed), "swap")
         except MissionError as exc:
@@ -633,13 +678,15 @@ class Launcher:
         if not paused.ok:
             raise LaunchError(paused.error)
         step = int(paused.data["step"])
-        instance = self.next_instance(role)
+        instance = self.next_instance(app)
         extra = ["--takeover", old.instance, "--resume-step", str(step)]
         for override in prefixed:
             extra += ["--set", override]
-        new = self.spawn(role, instance, role, extra)
+        if vehicle is not None:
+            extra += ["--vehicle", vehicle]
+        new = self.spawn(role, instance, app, extra)
         try:
-            self.wait_alive(self.bus, [(role, instance)], self.mission.startup_timeout)
+            self.wait_alive(self.bus, [(app, instance)], self.mission.startup_timeout)
         except LaunchError:
             stop([new.process], grace=0.0)
             new.retiring = True
@@ -653,6 +700,19 @@ class Launcher:
         self.summary.swaps.append({"old": old.instance, "new": instance, "step": step})
         self.caller.call("clock", "resume", timeout=5.0)
         return {"ok": True, "old": old.instance, "new": instance, "step": step}
+
+    def swapped_vehicle(self, vehicle: str | None) -> str | None:
+        """The vehicle a swap serves: the one named, the only one, or None without [[vehicles]]."""
+        names = self.mission.vehicle_names
+        if not self.mission.fleet:
+            if vehicle is not None:
+                raise LaunchError(f"vehicle {vehicle!r}: mission {self.community!r} has no [[vehicles]]")
+            return None
+        if vehicle is None and len(names) > 1:
+            raise LaunchError(f"mission {self.community!r} has several vehicles ({', '.join(names)}): name one")
+        if vehicle is not None and vehicle not in names:
+            raise LaunchError(f"no vehicle named {vehicle!r} (the mission's vehicles: {', '.join(names)})")
+        return vehicle or names[0]
 
 
 def exit_code(summary: Summary) -> int:

@@ -88,10 +88,14 @@ def credentials_path(community: str) -> Path:
     return runtime_dir() / f"{community}.credentials"
 
 
-def register(community: str, endpoint: list[str], log: str, credentials: str | None = None) -> Path:
-    """Make the mission findable; `credentials` is the file its router requires (None: open)."""
+def register(
+    community: str, endpoint: list[str], log: str, credentials: str | None = None, vehicles: list[str] = ()
+) -> Path:
+    """Make the mission findable; `credentials` is the file its router requires (None: open);
+    `vehicles` the names of its [[vehicles]] (empty without)."""
     path = runtime_dir() / f"{community}.json"
     entry = {"community": community, "connect": endpoint, "pid": os.getpid(), "log": log, "credentials": credentials}
+    entry["vehicles"] = list(vehicles)
     path.write_text(json.dumps(entry))
     return path
 

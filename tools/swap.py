@@ -29,6 +29,7 @@ def add_parser(subparsers) -> None:
         help="settings of the new app: key=value,key=value",
     )
     p.add_argument("--behaviour", help="shorthand for --with behaviour=NAME")
+    p.add_argument("--vehicle", help="the vehicle whose app to replace (needed when the mission has several)")
     p.add_argument("--at-step", type=int, help="swap when the clock reaches this step (default: now)")
     p.add_argument("--timeout", type=float, default=120.0, help="wall seconds to wait for the swap")
     p.add_argument("--json", action="store_true")
@@ -45,16 +46,36 @@ def settings_list(spec: str) -> list[str]:
     return items
 
 
+def vehicle_problem(args, community: str) -> str | None:
+    """What is wrong with --vehicle for the mission as the registry knows it (None: fine, or a
+    mission reached with --connect, which the launcher checks itself)."""
+    if args.connect:
+        return None
+    from . import registry
+
+    vehicles = registry.lookup(community).get("vehicles", [])
+    if args.vehicle is None and len(vehicles) > 1:
+        return f"mission {community!r} has several vehicles ({', '.join(vehicles)}): name one"
+    if args.vehicle is not None and args.vehicle not in vehicles:
+        known = ", ".join(vehicles) or "none: it has no [[vehicles]]"
+        return f"no vehicle named {args.vehicle!r} in mission {community!r} (its vehicles: {known})"
+    return None
+
+
 def swap_command(args) -> int:
     overrides = list(args.with_)
     if args.behaviour:
         overrides.append(f"behaviour={args.behaviour}")
     bus, community = open_bus(args)  # no such mission: the command line reports it, exit 2
+    if problem := vehicle_problem(args, community):
+        print(f"nearsub swap: --vehicle: {problem}", file=sys.stderr)
+        return 2
     import msgpack
 
     from nearsub.common.runtime import keys
 
-    request = msgpack.packb({"cmd": "swap", "app": args.app, "set": overrides, "at_step": args.at_step})
+    request = {"cmd": "swap", "app": args.app, "set": overrides, "at_step": args.at_step, "vehicle": args.vehicle}
+    request = msgpack.packb(request)
     with bus:
         replies = bus.request(keys.launcher_control(community), request, timeout=args.timeout)
     if not replies:

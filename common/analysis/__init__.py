@@ -3,5 +3,6 @@
 - batch: the vectorised engine, N UUVs through the very functions the apps call.
 - envelope: operating envelopes (thesis 5.11, 6.4) and sweeps.
 - scenarios: figures of merit of the thesis scenarios.
+- fleet: figures of merit of a mission of several vehicles.
 - validation: the thesis section 5.10 validation cases.
 """

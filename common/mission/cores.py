@@ -13,9 +13,9 @@ import numpy as np
 from nearsub.common.autonomy import behaviours, control, logic
 from nearsub.common.autonomy import helm as ivphelm
 from nearsub.common.mission.schema import Mission
-from nearsub.common.physics import dynamics
+from nearsub.common.physics import dynamics, encounters
 from nearsub.common.physics import proximity as events
-from nearsub.common.runtime.lifecycle import InProcessResult, Iteration, Schedule, run_inprocess
+from nearsub.common.runtime.lifecycle import ENCOUNTERS, InProcessResult, Iteration, Schedule, run_inprocess
 from nearsub.common.runtime.messages import Desired, Event, Forces, HelmProgress, Input, Message, State
 
 if TYPE_CHECKING:
@@ -407,6 +407,56 @@ def forces_message(seen: InteractionAt, step: int, t: float, source: str) -> For
     )
 
 
+class EncounterCheck:
+    """uFldCollisionDetect's role: after each step, every pair of vehicles at x_{k+1}
+    (`physics.encounters`). A collision between two UUVs ends the mission, as a collision with
+    the hull does; a close call is reported when a pair enters it. The clock runs it in the
+    multi-process mission (`runtime.lifecycle.Observer`)."""
+
+    def __init__(self, mission: Mission):
+        members = mission.members()
+        self.names = [m.vehicle_name for m in members]
+        self.capsules = {
+            m.vehicle_name: encounters.Capsule.of(m.vehicle_model.length, m.vehicle_model.diameter) for m in members
+        }
+        self.order = {name: i for i, name in enumerate(self.names)}
+        self.margin = 2 * max(capsule.radius for capsule in self.capsules.values())  # the widest close call
+        self.dt = mission.dt
+        self.close: set[tuple[str, str]] = set()
+
+    def observe(self, step: int, states: dict[str, State]) -> Iteration:
+        """Pairs whose CBs are too far apart for a close call are skipped (`near_pairs`); those
+        in a close call are always checked again, to see them leave it."""
+        result = Iteration()
+        label, t = step + 1, (step + 1) * self.dt
+        names = [name for name in self.names if name in states]
+        x = np.array([states[name].x for name in names])
+        y = np.array([states[name].y for name in names])
+        reaches = np.array([encounters.reach(self.capsules[name]) for name in names])
+        near = {(names[i], names[j]) for i, j in encounters.near_pairs(x, y, reaches, self.margin)}
+        for a, b in sorted(near | self.close, key=lambda pair: (self.order[pair[0]], self.order[pair[1]])):
+            sa, sb = states[a], states[b]
+            found = encounters.classify_pair(
+                self.capsules[a], (sa.x, sa.y, sa.psi), self.capsules[b], (sb.x, sb.y, sb.psi)
+            )
+            data = {"vehicles": [a, b], "clearance": found.clearance, "a": [sa.x, sa.y], "b": [sb.x, sb.y]}
+            if found.collision:
+                detail = f"{a} and {b} touched at ({sa.x:.2f}, {sa.y:.2f}) and ({sb.x:.2f}, {sb.y:.2f})"
+                result.events.append(event(ENCOUNTERS, label, t, "collision", detail, data))
+                if result.end is None:
+                    result.end, result.reason = "collision", f"collision between {a} and {b} at t = {t:.2f} s"
+            if found.close_call and (a, b) not in self.close:
+                detail = f"close call between {a} and {b}: {found.clearance:.2f} m apart"
+                result.events.append(event(ENCOUNTERS, label, t, "close_call", detail, data))
+            (self.close.add if found.close_call else self.close.discard)((a, b))
+        return result
+
+
+def build_fleet(mission: Mission, surrogate: ForceModel | None = None) -> dict:
+    """{vehicle: {role: core}} for a mission with [[vehicles]], all sharing one surrogate."""
+    return {m.vehicle_name: build_cores(m, surrogate) for m in mission.members()}
+
+
 def build_cores(mission: Mission, surrogate: ForceModel | None = None) -> dict:
     return {
         "helm": HelmCore(mission, surrogate),
@@ -422,4 +472,7 @@ def run_mission(mission: Mission, surrogate: ForceModel | None = None) -> InProc
         from nearsub.common.surrogate.model import load_surrogate
 
         surrogate = load_surrogate(mission.surrogate.model or None)
+    if mission.fleet:
+        cores, fleet = build_fleet(mission, surrogate), mission.lockstep()
+        return run_inprocess(cores, fleet, mission.dt, mission.max_steps, observer=EncounterCheck(mission))
     return run_inprocess(build_cores(mission, surrogate), Schedule(mission.periods()), mission.dt, mission.max_steps)

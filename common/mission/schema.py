@@ -11,15 +11,17 @@ import math
 import re
 import tomllib
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from nearsub.common.autonomy import helm as ivphelm
 from nearsub.common.autonomy import logic
 from nearsub.common.autonomy.behaviours import MAX_SPEED, Coordinate, Leg, Speed
 from nearsub.common.physics import dynamics
 from nearsub.common.physics.vehicles import Vehicle, get_vehicle
+from nearsub.common.runtime import keys
+from nearsub.common.runtime.lifecycle import Fleet, Schedule
 from nearsub.common.runtime.messages import describe_validation_error
 
 COMMUNITY_PATTERN = re.compile(r"^[A-Za-z0-9_\-]+$")
@@ -27,6 +29,26 @@ COMMUNITY_PATTERN = re.compile(r"^[A-Za-z0-9_\-]+$")
 ENDPOINT_PATTERN = re.compile(
     r"^(?:(?:tcp|udp|tls|quic|ws)/(?:\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.\-]+):\d{1,5}|unixsock-stream/\S+)$"
 )
+
+
+def _key_chunk(value: str) -> str:
+    if not COMMUNITY_PATTERN.match(value):
+        raise ValueError("must contain only letters, digits, '_' and '-' (it is a key-expression chunk)")
+    return value
+
+
+# A community or vehicle name: one chunk of the key expressions.
+KeyChunk = Annotated[str, AfterValidator(_key_chunk)]
+
+
+def _vehicle_chunk(value: str) -> str:
+    if value in keys.SERVICES:
+        raise ValueError(f"{value!r} is a mission-wide key chunk; give the vehicle another name")
+    return value
+
+
+# A vehicle's name, which stands where a service's name would (nearsub/<c>/<vehicle>/...).
+VehicleChunk = Annotated[KeyChunk, AfterValidator(_vehicle_chunk)]
 
 
 class MissionError(ValueError):
@@ -151,14 +173,19 @@ class HelmSettings(AppSettings):
 
     @model_validator(mode="after")
     def _one_form(self) -> HelmSettings:
-        if not self.behaviours and not self.legs:
-            raise ValueError("give the waypoint legs, or a list of behaviours")
         if self.behaviours and self.legs:
             raise ValueError("give either legs (one waypoints behaviour) or a list of behaviours, not both")
         names = [spec.name for spec in self.behaviours]
         if len(set(names)) != len(names):
             raise ValueError(f"behaviour names must be unique (got {names})")
         return self
+
+    def form_error(self) -> str | None:
+        """Why this helm cannot fly a vehicle: it has neither legs nor behaviours (allowed only in
+        a fleet's shared `[apps.helm]`, which each vehicle completes)."""
+        if not self.behaviours and not self.legs:
+            return "give the waypoint legs, or a list of behaviours"
+        return None
 
     def behaviour_specs(self) -> list:
         """The behaviours the helm arbitrates: the list, or the legacy behaviour as one waypoints
@@ -206,14 +233,70 @@ class LoggerSettings(Strict):
 
 
 class Apps(Strict):
-    helm: HelmSettings
+    helm: HelmSettings = Field(default_factory=HelmSettings)
     pid: PidSettings = Field(default_factory=PidSettings)
     sim: SimSettings = Field(default_factory=SimSettings)
     logger: LoggerSettings = Field(default_factory=LoggerSettings)
 
 
+# The vehicle types a fleet entry may name (common/physics/vehicles.py).
+VEHICLE_TYPES = ("remus100", "nps_auv_ii", "sdv")
+
+
+class VehicleApps(Strict):
+    """A fleet vehicle's own apps: the mission's `[apps.helm]`, `.pid` and `.sim` with the
+    vehicle's `[vehicles.apps.*]` merged over them (`overlay`: key by key, behaviours and legs by
+    name)."""
+
+    helm: HelmSettings = Field(default_factory=HelmSettings)
+    pid: PidSettings = Field(default_factory=PidSettings)
+    sim: SimSettings = Field(default_factory=SimSettings)
+
+    @field_validator("helm")
+    @classmethod
+    def _flies(cls, value: HelmSettings) -> HelmSettings:
+        if error := value.form_error():
+            raise ValueError(error)
+        return value
+
+
+class FleetVehicle(Strict):
+    """One `[[vehicles]]` entry: its name is the key chunk nearsub/<community>/<name>/..."""
+
+    name: VehicleChunk
+    type: Literal[VEHICLE_TYPES]
+    start: Start = Field(default_factory=Start)
+    apps: dict[str, Any] = Field(default_factory=dict, description="the vehicle's own [vehicles.apps.*], as written")
+    # Its apps' full settings, the mission's merged under its own (`Mission._vehicle_apps`);
+    # left out of dumps, so a dump validates again to the same mission.
+    settings: VehicleApps = Field(default_factory=VehicleApps, exclude=True)
+
+
+def overlay(base: dict, top: dict) -> dict:
+    """`top` over `base` key by key: tables merge; the `behaviours` (each has a name) merge by
+    name, an entry of `top` over the one of the same name in `base`, a new name after them; any
+    other value of `top` (legs and lists in general) replaces the one of `base`."""
+    merged = dict(base)
+    for key, value in top.items():
+        old = merged.get(key)
+        if isinstance(old, dict) and isinstance(value, dict):
+            merged[key] = overlay(old, value)
+        elif key == "behaviours" and _named(old) and _named(value):
+            mine = {item["name"]: item for item in value}
+            kept = [overlay(item, mine.pop(item["name"], {})) for item in old]
+            merged[key] = kept + list(mine.values())
+        else:
+            merged[key] = value
+    return merged
+
+
+def _named(value: Any) -> bool:
+    """An array of tables that all have a name (as behaviours must)."""
+    return isinstance(value, list) and all(isinstance(v, dict) and isinstance(v.get("name"), str) for v in value)
+
+
 class Mission(Strict):
-    name: str = Field(description="community name: the key-expression prefix nearsub/<name>/...")
+    name: KeyChunk = Field(description="community name: the key-expression prefix nearsub/<name>/...")
     description: str = ""
     vehicle: str | Vehicle = "remus100"
     dt: float = Field(default=0.05, gt=0, le=1.0, description="base step [s]")
@@ -229,13 +312,42 @@ class Mission(Strict):
     environment: Environment = Field(default_factory=Environment)
     network: Network = Field(default_factory=Network)
     surrogate: SurrogateSettings = Field(default_factory=SurrogateSettings)
+    vehicles: list[FleetVehicle] = Field(default_factory=list, description="several vehicles (a fleet)")
     apps: Apps
 
-    @field_validator("name")
+    @model_validator(mode="before")
     @classmethod
-    def _community_name(cls, value: str) -> str:
-        if not COMMUNITY_PATTERN.match(value):
-            raise ValueError("must contain only letters, digits, '_' and '-' (it is a key-expression chunk)")
+    def _vehicle_apps(cls, data: Any) -> Any:
+        """Each fleet vehicle's helm, pid and sim settings: the mission's `[apps.*]` with the
+        vehicle's own merged over them (`overlay`), validated as the entry's `settings`."""
+        if not isinstance(data, dict) or not isinstance(data.get("vehicles"), list):
+            return data
+        shared = data.get("apps", {})
+        shared = shared if isinstance(shared, dict) else {}
+        vehicles = []
+        for entry in data["vehicles"]:
+            own = entry.get("apps", {}) if isinstance(entry, dict) else None
+            if isinstance(own, dict):
+                merged = {
+                    app: overlay(shared.get(app) or {}, own.get(app) or {})
+                    if isinstance(shared.get(app) or {}, dict) and isinstance(own.get(app) or {}, dict)
+                    else own.get(app)
+                    for app in ("helm", "pid", "sim")
+                }
+                entry = {**entry, "settings": {**own, **merged}}
+            vehicles.append(entry)
+        return {**data, "vehicles": vehicles}
+
+    @field_validator("vehicles")
+    @classmethod
+    def _unique_names(cls, value: list[FleetVehicle], info) -> list[FleetVehicle]:
+        names = [entry.name for entry in value]
+        if twice := next((name for name in names if names.count(name) > 1), None):
+            raise ValueError(f"vehicle name {twice!r} is given twice")
+        vehicle, start = info.data.get("vehicle", "remus100"), info.data.get("start", Start())
+        if value and (vehicle != "remus100" or start != Start()):
+            given = f"vehicle = {vehicle!r}" if vehicle != "remus100" else f"[start] {start}"
+            raise ValueError(f"give each vehicle its type and start in its entry, not the mission's {given}")
         return value
 
     @field_validator("vehicle")
@@ -248,19 +360,57 @@ class Mission(Strict):
                 raise ValueError(str(exc.args[0])) from None
         return value
 
+    @field_validator("apps")
+    @classmethod
+    def _helm_flies(cls, value: Apps, info) -> Apps:
+        """A single vehicle's helm must fly it; a fleet's `[apps.helm]` is the shared part of its
+        vehicles' helms, which each entry completes (checked there)."""
+        if not info.data.get("vehicles") and (error := value.helm.form_error()):
+            raise ValueError(f"helm: {error}")
+        return value
+
     @model_validator(mode="after")
     def _consistent(self) -> Mission:
         if not math.isfinite(self.dt * self.time_limit):
             raise ValueError("dt and time_limit must be finite")
-        if self.apps.helm.modified and self.environment.u_sub <= 0:
-            what = "a modified waypoints behaviour"
-            if not self.apps.helm.behaviours:
-                what = f"apps.helm.behaviour = {self.apps.helm.behaviour!r}"
-            raise ValueError(
-                f"{what} steers against the submarine's cross-flow "
-                f"and needs environment.u_sub > 0 (got {self.environment.u_sub})"
-            )
+        for member in self.members():
+            helm = member.apps.helm
+            if helm.modified and self.environment.u_sub <= 0:
+                what = "a modified waypoints behaviour"
+                if not helm.behaviours:
+                    what = f"apps.helm.behaviour = {helm.behaviour!r}"
+                raise ValueError(
+                    f"{what} steers against the submarine's cross-flow "
+                    f"and needs environment.u_sub > 0 (got {self.environment.u_sub})"
+                )
         return self
+
+    def members(self) -> list[Mission]:
+        """The mission as each of its vehicles sees it: for a fleet, one single-vehicle mission per
+        `[[vehicles]]` entry (its type, start and merged apps, and the entry itself, whose name is
+        the key chunk); without `[[vehicles]]`, the mission itself. The app cores take these."""
+        return [self.member(entry.name) for entry in self.vehicles] if self.vehicles else [self]
+
+    def member(self, name: str | None) -> Mission:
+        """One vehicle's mission (see `members`); `name` None for a mission without a fleet."""
+        if name is None and not self.vehicles:
+            return self
+        entry = next((e for e in self.vehicles if e.name == name), None)
+        if entry is None:
+            known = ", ".join(self.vehicle_names) or "none: it has no [[vehicles]]"
+            raise KeyError(f"no vehicle named {name!r} (the mission's vehicles: {known})")
+        apps = self.apps.model_copy(update=dict(entry.settings))
+        return self.model_copy(update={"vehicle": entry.type, "start": entry.start, "apps": apps, "vehicles": [entry]})
+
+    @property
+    def fleet(self) -> bool:
+        """Whether the mission names its vehicles (`[[vehicles]]`): apps and keys carry the names."""
+        return bool(self.vehicles)
+
+    @property
+    def vehicle_names(self) -> list[str]:
+        """The vehicle chunk of every vehicle's key expressions, in mission order."""
+        return [entry.name for entry in self.vehicles] if self.vehicles else [self.vehicle_model.name]
 
     @property
     def vehicle_model(self) -> Vehicle:
@@ -268,13 +418,19 @@ class Mission(Strict):
 
     @property
     def vehicle_name(self) -> str:
-        """The vehicle chunk of the key expressions."""
-        return self.vehicle_model.name
+        """The vehicle chunk of the key expressions (of a fleet: its only vehicle; a mission of
+        several vehicles has one per member)."""
+        names = self.vehicle_names
+        if len(names) > 1:
+            raise ValueError(f"mission {self.name!r} has several vehicles ({', '.join(names)}): take its members()")
+        return names[0]
 
     @property
     def needs_surrogate(self) -> bool:
-        """A submarine is near, and the sim adds its interaction forces or the helm compensates."""
-        return self.environment.submarine and (self.apps.sim.interaction != "off" or self.apps.helm.compensated)
+        """A submarine is near, and a sim adds its interaction forces or a helm compensates."""
+        return self.environment.submarine and any(
+            m.apps.sim.interaction != "off" or m.apps.helm.compensated for m in self.members()
+        )
 
     @property
     def max_steps(self) -> int:
@@ -282,6 +438,11 @@ class Mission(Strict):
 
     def periods(self) -> dict[str, int]:
         return {"helm": self.apps.helm.period, "pid": self.apps.pid.period, "sim": self.apps.sim.period}
+
+    def lockstep(self) -> Fleet:
+        """The lock-step of the mission's vehicles, each under its own periods (one vehicle named
+        None without [[vehicles]], whose apps keep their bare role names)."""
+        return Fleet({(m.vehicle_name if self.fleet else None): Schedule(m.periods()) for m in self.members()})
 
 
 def parse_override(text: str) -> tuple[list[str], Any]:
@@ -300,17 +461,38 @@ def parse_override(text: str) -> tuple[list[str], Any]:
 
 
 def apply_overrides(data: dict, overrides: list[str]) -> dict:
+    """Set each dotted key; `vehicles.NAME.` continues in the `[[vehicles]]` entry named NAME
+    (MissionError naming it when there is none)."""
     for text in overrides:
         path, value = parse_override(text)
         node = data
-        for part in path[:-1]:
+        parts = iter(path[:-1])
+        for part in parts:
             child = node.get(part)
-            if not isinstance(child, dict):
+            if part == "vehicles" and node is data:
+                name = next(parts, path[-1])
+                child = vehicle_entry(data, name, text)
+                if name == path[-1]:
+                    raise MissionError(
+                        f"--set {text}: give a setting of vehicle {name!r}, e.g. vehicles.{name}.start.y=12"
+                    )
+            elif not isinstance(child, dict):
                 child = {}
                 node[part] = child
             node = child
         node[path[-1]] = value
     return data
+
+
+def vehicle_entry(data: dict, name: str, text: str) -> dict:
+    """The `[[vehicles]]` entry named `name` of a raw mission; MissionError naming it."""
+    entries = data.get("vehicles")
+    entries = entries if isinstance(entries, list) else []
+    for entry in entries:
+        if isinstance(entry, dict) and entry.get("name") == name:
+            return entry
+    known = ", ".join(str(e.get("name")) for e in entries if isinstance(e, dict)) or "none: it has no [[vehicles]]"
+    raise MissionError(f"--set {text}: no vehicle named {name!r} (the mission's vehicles: {known})")
 
 
 def read_toml(path: Path) -> dict:
@@ -380,12 +562,35 @@ def mission_from_dict(data: dict, where: str = "mission", overrides: list[str] =
     try:
         return Mission.model_validate(data)
     except ValidationError as exc:
-        raise MissionError(describe_validation_error(exc, _source_of(exc, where, overrides))) from None
+        name = _vehicle_names(data)
+        text = describe_validation_error(exc, _source_of(exc, where, overrides, name), name)
+        raise MissionError(text) from None
 
 
-def _source_of(error: ValidationError, where: str, overrides: list[str]) -> str:
+def _vehicle_names(data: dict):
+    """Error locations as users write them: `vehicles.NAME...` for the entry's index, and the
+    names alone for the vehicles list itself (a duplicate name)."""
+    entries = data.get("vehicles") if isinstance(data, dict) else None
+    entries = entries if isinstance(entries, list) else []
+
+    def name(loc: tuple, value):
+        if loc[:1] != ("vehicles",):
+            return loc, value
+        if len(loc) == 1:
+            return loc, [e.get("name") if isinstance(e, dict) else e for e in entries]
+        index, rest = loc[1], loc[2:]
+        rest = ("apps", *rest[1:]) if rest[:1] == ("settings",) else rest  # what the user wrote
+        entry = entries[index] if isinstance(index, int) and index < len(entries) else None
+        if isinstance(entry, dict) and isinstance(entry.get("name"), str):
+            return ("vehicles", entry["name"], *rest), value
+        return ("vehicles", index, *rest), value
+
+    return name
+
+
+def _source_of(error: ValidationError, where: str, overrides: list[str], name=lambda loc, value: (loc, value)) -> str:
     """`--set KEY=VALUE` when the first bad field lies at or below an override's key, else `where`."""
-    loc = [str(p) for p in error.errors()[0]["loc"]]
+    loc = [str(p) for p in name(tuple(error.errors()[0]["loc"]), None)[0]]
     for text in reversed(list(overrides)):  # the last override of a key wins, as in apply_overrides
         path, _ = parse_override(text)
         if loc[: len(path)] == path:

@@ -25,60 +25,80 @@ import math
 from collections import deque
 from dataclasses import dataclass, field
 
+from nearsub.common.runtime import keys
 from nearsub.common.runtime.lifecycle import (
     DONE_TOPIC,
     NEXT_STEP_TOPICS,
-    ORDER,
     EndRequest,
+    Ends,
+    Fleet,
+    Observer,
     Schedule,
     control_reply,
-    first_end,
     time_limit_end,
 )
-from nearsub.common.runtime.messages import Ack, Control, ControlReply, MissionEnd, Tick
+from nearsub.common.runtime.messages import Ack, Control, ControlReply, Event, Message, MissionEnd, Tick
 
 
 @dataclass
 class Progress:
-    """Which apps have finished which steps; `completed` is the last step every app finished.
-    A step beyond `granted` cannot have been run: claims of it are ignored, so the bookkeeping
-    stays bounded whatever is published."""
+    """Which apps have finished which steps; `completed` is the last step every app (of every
+    vehicle) finished. A step beyond `granted` cannot have been run: claims of it are ignored, so
+    the bookkeeping stays bounded whatever is published. Apps are named by `keys.app_name`; the
+    `vehicle` arguments say whose output or ack it is (None without [[vehicles]])."""
 
-    schedule: Schedule
+    fleet: Fleet
     completed: int = -1
     granted: int = -1
     done: dict[int, set[str]] = field(default_factory=dict)
-    end: EndRequest | None = None
+    ends: Ends = None
 
-    def record_output(self, leaf: str, role: str, label: int) -> None:
+    def __post_init__(self) -> None:
+        self.ends = Ends(self.fleet)
+
+    @property
+    def end(self) -> EndRequest | None:
+        return self.ends.end
+
+    @property
+    def schedule(self) -> Schedule:
+        """The schedule of a mission of one vehicle."""
+        if self.fleet.shared:
+            raise ValueError("a fleet has one schedule per vehicle: see `fleet`")
+        return next(iter(self.fleet.schedules.values()))
+
+    def record_output(self, leaf: str, role: str, label: int, vehicle: str | None = None) -> None:
         """A lock-stepped output (its topic leaf, source and step label) counts when it is its
         producer's done topic."""
-        if DONE_TOPIC.get(role) != leaf:
+        if DONE_TOPIC.get(role) != leaf or vehicle not in self.fleet.schedules:
             return
-        step = label - (self.schedule.periods[role] if leaf in NEXT_STEP_TOPICS else 0)
+        app = keys.app_name(vehicle, role)
+        step = label - (self.fleet.period(app) if leaf in NEXT_STEP_TOPICS else 0)
         if step >= 0:
-            self._mark(role, step)
+            self._mark(app, step)
 
-    def record_ack(self, ack: Ack) -> None:
-        self._mark(ack.source, ack.step)
+    def record_ack(self, ack: Ack, vehicle: str | None = None) -> None:
+        if vehicle not in self.fleet.schedules or ack.source not in DONE_TOPIC:
+            return
+        self._mark(keys.app_name(vehicle, ack.source), ack.step)
         if ack.end is not None:
-            self.end = first_end(self.end, EndRequest(ack.step, ack.end, ack.reason))
+            self.ends.request(vehicle, EndRequest(ack.step, ack.end, ack.reason))
 
-    def _mark(self, role: str, step: int) -> None:
+    def _mark(self, app: str, step: int) -> None:
         if self.completed < step <= self.granted:
-            self.done.setdefault(step, set()).add(role)
-        while set(self.schedule.runners(self.completed + 1)) <= self.done.get(self.completed + 1, set()):
+            self.done.setdefault(step, set()).add(app)
+        while set(self.fleet.runners(self.completed + 1)) <= self.done.get(self.completed + 1, set()):
             self.done.pop(self.completed + 1, None)
             self.completed += 1
 
     def missing(self, step: int) -> list[str]:
-        return [role for role in self.schedule.runners(step) if role not in self.done.get(step, set())]
+        return [app for app in self.fleet.runners(step) if app not in self.done.get(step, set())]
 
     def stall_reason(self, timeout: float) -> str:
         step = self.completed + 1
         missing = self.missing(step)
-        culprit = next(role for role in ORDER if role in missing)
-        others = [role for role in missing if role != culprit]
+        culprit = self.fleet.first_in_loop(missing)
+        others = [app for app in missing if app != culprit]
         waiting = f" ({', '.join(others)} waiting on it)" if others else ""
         return f"app '{culprit}' did not finish step {step} within {timeout:g} s{waiting}"
 
@@ -146,6 +166,7 @@ class Advance:
     tick: Tick | None = None
     replies: list[Reply] = field(default_factory=list)
     end: MissionEnd | None = None
+    events: list[Event] = field(default_factory=list)  # found between the vehicles (`observer`)
 
 
 class ClockCore:
@@ -163,16 +184,22 @@ class ClockCore:
 
     def __init__(
         self,
-        schedule: Schedule,
+        schedule: Schedule | Fleet,
         dt: float,
         warp: float,
         max_steps: int,
         step_timeout: float,
         pause_at_step: int | None = None,
-        window: int = 20,
+        observer: Observer | None = None,
     ):
-        self.progress = Progress(schedule)
-        self.policy = GrantPolicy(dt, warp, max_steps, window)
+        fleet = schedule if isinstance(schedule, Fleet) else Fleet.single(schedule)
+        self.progress = Progress(fleet)
+        self.policy = GrantPolicy(dt, warp, max_steps, fleet.window)
+        # A fleet's checks between vehicles run on each vehicle's x_{k+1} once step k is complete.
+        self.observer = observer if fleet.shared else None
+        self.states: dict[int, dict[str, Message]] = {}  # the sim's step -> vehicle -> state
+        self.latest: dict[str, Message] = {}
+        self.observed = -1
         self.dt = dt
         self.max_steps = max_steps
         self.step_timeout = step_timeout
@@ -236,7 +263,27 @@ class ClockCore:
     def reply(self, request: Control, **answer) -> Reply:
         return request.reply_to, control_reply(request, "clock", self.step, self.dt, **answer)
 
+    def record_state(self, vehicle: str, label: int, state: Message) -> None:
+        """A vehicle's state, for the observer, by the step whose sim produced it."""
+        step = label - self.progress.fleet.period(keys.app_name(vehicle, "sim"))
+        if self.observer is not None and self.observed < step <= self.granted:
+            self.states.setdefault(step, {})[vehicle] = state
+
+    def observe(self) -> list[Event]:
+        """Run the observer on each newly completed step, with each vehicle's latest state as
+        `run_inprocess` has it: its events, and its end request."""
+        found = []
+        while self.observer is not None and self.observed < self.progress.completed:
+            self.observed += 1
+            self.latest.update(self.states.pop(self.observed, {}))
+            result = self.observer.observe(self.observed, self.latest)
+            found += result.events
+            if result.end is not None:
+                self.progress.ends.request(None, EndRequest(self.observed, result.end, result.reason))
+        return found
+
     def advance(self, now: float) -> Advance:
+        events = self.observe()
         completed, end = self.progress.completed, self.progress.end
         self.meter.record(now, completed)
         if end is None and completed >= self.max_steps - 1:
@@ -244,8 +291,8 @@ class ClockCore:
         # An error ends the mission at once: the step it broke may never complete (an app that
         # failed at start-up leaves its consumers waiting on step 0).
         if end is not None and (completed >= end.step or end.outcome == "error"):
-            return Advance(end=self.mission_end(end.step + 1, end.outcome, end.reason))
-        advance = Advance()
+            return Advance(end=self.mission_end(end.step + 1, end.outcome, end.reason), events=events)
+        advance = Advance(events=events)
         if self.pause_before is not None and completed == self.pause_before - 1:
             self.paused = True
         if self.paused:  # answer the requests due now, also those that came after the pause began
@@ -256,7 +303,9 @@ class ClockCore:
             advance.tick = self.grant(completed, now)
         if self.stalled(completed, now):
             reason = self.progress.stall_reason(self.step_timeout)
-            return Advance(replies=advance.replies, end=self.mission_end(completed + 1, "stalled", reason))
+            return Advance(
+                replies=advance.replies, end=self.mission_end(completed + 1, "stalled", reason), events=events
+            )
         return advance
 
     def wake_in(self, now: float) -> float:

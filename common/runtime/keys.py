@@ -5,6 +5,19 @@ services."""
 ROOT = "nearsub"
 
 
+def app_name(vehicle: str | None, role: str) -> str:
+    """A lock-stepped app's name: its role for a mission without [[vehicles]], else
+    `<vehicle>/<role>` (docs/architecture.md, "Processes"), which adds a key chunk wherever the
+    name appears (acks, liveliness, status, events, control)."""
+    return role if vehicle is None else f"{vehicle}/{role}"
+
+
+def split_app(name: str) -> tuple[str | None, str]:
+    """`app_name`'s inverse: (vehicle or None, role)."""
+    vehicle, _, role = name.rpartition("/")
+    return vehicle or None, role
+
+
 def community_root(community: str) -> str:
     return f"{ROOT}/{community}"
 
@@ -27,7 +40,7 @@ def clock_traffic(community: str) -> str:
 
 
 def all_acks(community: str) -> str:
-    return f"{ROOT}/{community}/clock/ack/*"
+    return f"{ROOT}/{community}/clock/ack/**"
 
 
 def mission_end(community: str) -> str:
@@ -47,8 +60,15 @@ def status(community: str, instance: str) -> str:
 
 
 def alive(community: str, role: str, instance: str) -> str:
-    """Liveliness token of one app instance; the role (helm, sim, ...) survives a swap."""
-    return f"{ROOT}/{community}/alive/{role}/{instance}"
+    """Liveliness token of one app instance; the role (helm, sim, ..., or a vehicle's app such as
+    auv1/helm) survives a swap. An instance named after its vehicle (auv1/helm-1) adds only its
+    last chunk."""
+    return f"{ROOT}/{community}/alive/{role}/{instance.rsplit('/', 1)[-1]}"
+
+
+def alive_role(key: str) -> str:
+    """The role (app name) of a liveliness key made by `alive`."""
+    return key.split("/alive/", 1)[1].rsplit("/", 1)[0]
 
 
 def all_alive(community: str) -> str:

@@ -24,6 +24,7 @@ from typing import Protocol
 
 import msgpack
 
+from nearsub.common.runtime import keys
 from nearsub.common.runtime.messages import (
     VEHICLE_TOPICS,
     Ack,
@@ -160,6 +161,57 @@ class Inbox:
 
 
 @dataclass(frozen=True)
+class Fleet:
+    """Every lock-stepped app of a mission: each vehicle's helm, pid and sim under its vehicle's
+    schedule. A mission without [[vehicles]] is one vehicle named None, whose apps are named by
+    role alone (keys.app_name).
+
+    Several vehicles share one lock-step: the clock grants step k + 1 only once every vehicle's
+    apps have finished step k (`window` 1), so an end requested by any app at step k (or found
+    between the vehicles, `Observer`) stops them all after step k whatever their speed."""
+
+    schedules: dict[str | None, Schedule]
+
+    @classmethod
+    def single(cls, schedule: Schedule) -> Fleet:
+        return cls({None: schedule})
+
+    @property
+    def vehicles(self) -> list[str | None]:
+        return list(self.schedules)
+
+    @property
+    def shared(self) -> bool:
+        """Several vehicles: one step at a time, ends decided by the clock (`Ends`)."""
+        return len(self.schedules) > 1
+
+    @property
+    def window(self) -> int:
+        """Steps the clock grants ahead of the last completed one (docs/design.md, "Grants")."""
+        return 1 if self.shared else 20
+
+    def runners(self, step: int) -> list[str]:
+        """The apps that run `step`, in loop order: helm, pid, sim of each vehicle in turn."""
+        return [keys.app_name(v, role) for v, schedule in self.schedules.items() for role in schedule.runners(step)]
+
+    def period(self, app: str) -> int:
+        vehicle, role = keys.split_app(app)
+        return self.schedules[vehicle].periods[role]
+
+    def first_in_loop(self, apps: list[str]) -> str:
+        """The app the others wait on: the earliest role in loop order, then vehicle order."""
+        order = {v: i for i, v in enumerate(self.schedules)}
+        return min(apps, key=lambda app: (ORDER.index(keys.split_app(app)[1]), order[keys.split_app(app)[0]]))
+
+
+class Observer(Protocol):
+    """Checks between vehicles (common/physics/encounters.py): after every vehicle finished step
+    k, `observe(k, states)` sees each vehicle's x_{k+1} and returns events and an optional end."""
+
+    def observe(self, step: int, states: dict[str, Message]) -> Iteration: ...
+
+
+@dataclass(frozen=True)
 class EndRequest:
     """An app's request to end the mission after step `step` with `outcome`."""
 
@@ -176,6 +228,33 @@ def first_end(held: EndRequest | None, request: EndRequest) -> EndRequest:
     if request.step == held.step and rank.get(request.outcome, 0) < rank.get(held.outcome, 0):
         return request
     return held
+
+
+class Ends:
+    """The end of the mission from the end requests of its apps. One vehicle: the first request
+    wins (`first_end`). A fleet: a failure (diverged, collision, error) ends it at once; a
+    vehicle's "completed" only marks that vehicle done (it carries on, all-stop, as pHelmIvP
+    does), and the mission completes at the step the last vehicle completes."""
+
+    def __init__(self, fleet: Fleet):
+        self.fleet = fleet
+        self.failure: EndRequest | None = None
+        self.completed: dict[str | None, EndRequest] = {}
+
+    def request(self, vehicle: str | None, request: EndRequest) -> None:
+        if not self.fleet.shared or request.outcome != "completed":
+            self.failure = first_end(self.failure, request)
+        elif vehicle not in self.completed:
+            self.completed[vehicle] = request
+
+    @property
+    def end(self) -> EndRequest | None:
+        if len(self.completed) < len(self.fleet.vehicles):
+            return self.failure
+        last = max(self.completed.values(), key=lambda r: r.step)
+        names = ", ".join(str(v) for v in self.completed)
+        completed = EndRequest(last.step, "completed", f"every vehicle completed ({names}); last: {last.reason}")
+        return first_end(self.failure, completed)
 
 
 def time_limit_end(max_steps: int, dt: float) -> EndRequest:
@@ -207,7 +286,9 @@ class Stepper:
     out on `ACK` before the outputs of its step, so every app hears of it before it could run
     the next one; so does an explicit Ack when the core did not publish its done topic.
     Exceptions of the `recoverable` types from `startup` or `iterate` (a service that stopped answering) end
-    the mission with "error" and an error event instead of crashing the app.
+    the mission with "error" and an error event instead of crashing the app. In a fleet
+    (`ends_itself` False) an app's own end request does not stop it: the clock decides the end
+    (`Ends`) and never grants past it.
     """
 
     def __init__(
@@ -217,11 +298,13 @@ class Stepper:
         dt: float,
         max_steps: int,
         recoverable: tuple[type[Exception], ...] = (),
+        ends_itself: bool = True,
     ):
         self.core = core
         self.schedule = schedule
         self.dt = dt
         self.recoverable = recoverable
+        self.ends_itself = ends_itself
         self.inbox = Inbox(core.inputs, schedule)
         self.granted = -1
         self.stop_after = max_steps - 1
@@ -312,7 +395,7 @@ class Stepper:
         published: list[tuple[str, Message]] = []
         if result.end is not None or all(leaf != DONE_TOPIC[role] for leaf, _ in result.outputs):
             published.append((ACK, Ack(step=step, t=t, source=role, end=result.end, reason=result.reason)))
-            if result.end is not None:
+            if result.end is not None and self.ends_itself:
                 self.end_after(step)
         published.extend(result.outputs)
         published.extend((EVENTS, event) for event in result.events)
@@ -349,76 +432,112 @@ class InProcessResult:
     outcome: str
     reason: str
     steps: int
-    messages: list[tuple[str, str, Message]]  # (role, topic leaf or "events", message)
+    messages: list[tuple[str, str, Message]]  # (app, topic leaf or "events", message)
 
-    def topic(self, leaf: str) -> list[Message]:
-        return [m for _, t, m in self.messages if t == leaf]
+    def topic(self, leaf: str, vehicle: str | None = None) -> list[Message]:
+        """One topic of one vehicle (None: the mission without [[vehicles]], or the checks
+        between vehicles)."""
+        return [m for app, t, m in self.messages if t == leaf and keys.split_app(app)[0] == vehicle]
+
+
+# The source of the events the checks between vehicles find (`Observer`).
+ENCOUNTERS = "encounters"
 
 
 def run_inprocess(
-    cores: dict[str, Core],
-    schedule: Schedule,
+    cores: dict,
+    schedule: Schedule | Fleet,
     dt: float,
     max_steps: int,
     swaps: dict[int, dict[str, Core]] | None = None,
     operator: list[tuple[str, str, int, Message]] = (),
+    observer: Observer | None = None,
 ) -> InProcessResult:
-    """Run the lock-stepped cores in one process, exactly as the clock and shells would: every
-    step is granted at once, and the steppers run in loop order until none can go further.
+    """Run the lock-stepped cores in one process, exactly as the clock and shells would, and
+    return what they published. One vehicle: `cores` is {role: core} under one `Schedule`, every
+    step is granted at once, and the steppers run in loop order until none can go further. A
+    fleet: `cores` is {vehicle: {role: core}} under a `Fleet`, granted one step at a time as the
+    clock does, with `observer` checking between the vehicles after each step.
 
-    `swaps` maps a step to replacement cores ({role: core}), swapped in before that step as
+    `swaps` maps a step to replacement cores ({app: core}), swapped in before that step as
     `nearsub swap --at-step` does: the grant stops before the step, the new core takes over
     through the same handover as a swapped-in process, and the grant goes on. `operator` replays
-    operator overrides (role, topic leaf, from step, message), as their events in a log record.
+    operator overrides (app, topic leaf, from step, message), as their events in a log record.
     """
+    fleet = schedule if isinstance(schedule, Fleet) else Fleet.single(schedule)
+    crews = cores if isinstance(schedule, Fleet) else {None: cores}
     swaps = swaps or {}
-    steppers = {role: Stepper(cores[role], schedule, dt, max_steps) for role in ORDER}
-    for role, leaf, step, message in operator:
-        steppers[role].override(leaf, message, step)
+    vehicle_of = {keys.app_name(v, role): v for v in crews for role in ORDER}
+
+    def stepper(app: str, core: Core) -> Stepper:
+        schedule = fleet.schedules[vehicle_of[app]]
+        return Stepper(core, schedule, dt, max_steps, ends_itself=not fleet.shared)
+
+    steppers = {app: stepper(app, crews[v][keys.split_app(app)[1]]) for app, v in vehicle_of.items()}
+    for app, leaf, step, message in operator:
+        steppers[app].override(leaf, message, step)
     messages: list[tuple[str, str, Message]] = []
-    end: EndRequest | None = None
+    ends = Ends(fleet)
+    states: dict[str, Message] = {}  # each vehicle's latest state, for the observer
+
+    def consumers_of() -> dict[str, dict[str, list[str]]]:
+        """app -> topic leaf -> the apps of its vehicle that consume it (again after a swap)."""
+        return {
+            app: {
+                leaf: [a for a in steppers if vehicle_of[a] == v and leaf in steppers[a].core.inputs]
+                for leaf in PRODUCER
+            }
+            for app, v in vehicle_of.items()
+        }
+
+    consumers = consumers_of()
 
     def run_until_quiet() -> None:
         """Run the steppers in loop order, each again only once it has new input, until none has."""
-        nonlocal end
-        consumers = {leaf: [r for r in ORDER if leaf in steppers[r].core.inputs] for leaf in PRODUCER}
-        due = set(ORDER)
+        due = set(steppers)
         while due:
-            for role in ORDER:
-                if role not in due:
+            for app in steppers:
+                if app not in due:
                     continue
-                due.discard(role)
-                for channel, message in steppers[role].run():
+                due.discard(app)
+                for channel, message in steppers[app].run():
                     if channel == ACK:
                         if message.end is not None:
-                            end = first_end(end, EndRequest(message.step, message.end, message.reason))
-                            for other in steppers.values():
-                                other.end_after(message.step)
+                            ends.request(vehicle_of[app], EndRequest(message.step, message.end, message.reason))
+                            if not fleet.shared:
+                                for other in steppers.values():
+                                    other.end_after(message.step)
                         continue
-                    messages.append((role, channel, message))
-                    for consumer in consumers.get(channel, ()):
+                    messages.append((app, channel, message))
+                    if channel == "state":
+                        states[vehicle_of[app]] = message
+                    for consumer in consumers[app].get(channel, ()):
                         if error := steppers[consumer].offer(channel, message):
                             raise RuntimeError(error)
                         due.add(consumer)
-        for role, stepper in steppers.items():
-            if missing := stepper.blocked():
-                raise RuntimeError(f"{role} at step {stepper.step} is missing {missing}")
+        for app, waiting in steppers.items():
+            if missing := waiting.blocked():
+                raise RuntimeError(f"{app} at step {waiting.step} is missing {missing}")
 
-    for pause in sorted(step for step in swaps if step < max_steps):
-        for stepper in steppers.values():
-            stepper.grant(pause - 1)
-        run_until_quiet()
-        if end is not None:
-            break
-        for role, core in swaps[pause].items():
-            handover = steppers[role].handover(pause)
+    step = 0  # the next step to grant
+    while step < max_steps and ends.end is None:
+        for app, core in swaps.get(step, {}).items():
+            handover = steppers[app].handover(step)
             if handover is None:
-                raise RuntimeError(f"{role} cannot hand over at step {pause}")
-            steppers[role] = Stepper(core, schedule, dt, max_steps)
-            steppers[role].take_over(handover, pause)
-    if end is None:
-        for stepper in steppers.values():
-            stepper.grant(max_steps - 1)
+                raise RuntimeError(f"{app} cannot hand over at step {step}")
+            steppers[app] = stepper(app, core)
+            steppers[app].take_over(handover, step)
+            consumers = consumers_of()
+        pauses = [pause - 1 for pause in swaps if step < pause < max_steps]
+        target = step if fleet.shared else min([*pauses, max_steps - 1])
+        for waiting in steppers.values():
+            waiting.grant(target)
         run_until_quiet()
-    end = end or time_limit_end(max_steps, dt)
+        if observer is not None and fleet.shared:
+            found = observer.observe(target, states)
+            messages.extend((ENCOUNTERS, EVENTS, event) for event in found.events)
+            if found.end is not None:
+                ends.request(None, EndRequest(target, found.end, found.reason))
+        step = target + 1
+    end = ends.end or time_limit_end(max_steps, dt)
     return InProcessResult(end.outcome, end.reason, end.step + 1, messages)

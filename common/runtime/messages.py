@@ -225,12 +225,15 @@ def encode(message: Message) -> bytes:
     return msgpack.packb(message.model_dump(mode="python"), use_bin_type=True)
 
 
-def describe_validation_error(error: ValidationError, where: str) -> str:
-    """One line naming each bad field and its value."""
+def describe_validation_error(error: ValidationError, where: str, name=None) -> str:
+    """One line naming each bad field and its value; `name(loc, value) -> (loc, value)` may
+    rename them (a mission names its vehicles by name, not by index)."""
     parts = []
     for item in error.errors():
-        field = ".".join(str(p) for p in item["loc"]) or "<message>"
-        value = item.get("input")
+        loc, value = tuple(item["loc"]), item.get("input")
+        if name is not None:
+            loc, value = name(loc, value)
+        field = ".".join(str(p) for p in loc) or "<message>"
         parts.append(f"field '{field}' = {value!r}: {item['msg']}")
     return f"{where}: " + "; ".join(parts)
 
