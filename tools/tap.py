@@ -137,8 +137,7 @@ def tap_list(args) -> int:
     console = tables.console()
     table = Table("app", "instance", title="apps alive", title_justify="left")
     for key in apps:
-        role, _, instance = key.split("/alive/", 1)[-1].partition("/")
-        table.add_row(role, instance)
+        table.add_row(keys.alive_role(key), key.rsplit("/", 1)[-1])  # a fleet's role is <vehicle>/<app>
     console.print(table)
     title = f"topics (rates over {args.sample:g} s); vehicles: {', '.join(vehicles) or 'none'}"
     table = Table("vehicle", "topic", "message", title=title, title_justify="left")
