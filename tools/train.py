@@ -302,7 +302,7 @@ def fit_from_data(path: Path, out: Path, seed: int = 0, n_restarts: int = FINAL_
     provenance = {
         "method": "single-fidelity GP regression (thesis section 2.2.1) fitted to a user's table",
         "high_fidelity": f"user-supplied data: {path.name} (nearsub did not compute it)",
-        "data": str(path),
+        "data": tr.file_reference(path)["file"],  # relative to the working directory, or the name alone
         "data_sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
         "rows": int(len(X)),
         "command": command_line(f"nearsub train --data {path}"),

@@ -191,7 +191,7 @@ def acquisition(
 COMPARE_DESIGNS = ("sobol", "residual-us", "nmmf", "envelope")
 COMPARE_BUDGETS = (25, 50, 100)
 COMPARE_N_SEED = 10  # space-filling seed points of every adaptive design in the comparison
-COMPARE_BATCH = {"residual-us": 10, "envelope": 15}  # picks per round (nmmf: one)
+COMPARE_BATCH = {"residual-us": 10, "envelope": 25}  # picks per round (nmmf: one); envelope: 4 rounds of flying
 
 
 def reference_model(X: np.ndarray, Y: np.ndarray, path: Path) -> LFInLoopModel:
