@@ -2,11 +2,11 @@
 brute-force conditioning, the envelope specs, pool mode and the provenance of the files a model
 was trained from (common/learning/envelope_design.py, common/analysis/envelope_design.py)."""
 
-import argparse
 import hashlib
 
 import numpy as np
 import pytest
+from test_train import args as train_args
 
 from nearsub.common.analysis import envelope_design as ed
 from nearsub.common.learning.envelope_design import (
@@ -117,27 +117,9 @@ def test_a_model_names_its_files_relative_to_the_working_directory_or_by_name_an
     assert tr.file_reference(work / "runs" / "hf.csv")["file"] == "runs/hf.csv"
     outside = tr.file_reference(samples)  # a temporary folder's file: its name and hash only
     assert outside == {"file": "pool.csv", "sha256": hashlib.sha256(samples.read_bytes()).hexdigest()}
-    args = argparse.Namespace(
-        design="sobol",
-        budget=10,
-        seed=1,
-        n_seed=5,
-        batch=3,
-        workers=None,
-        scheduler=None,
-        state=str(tmp_path / "hf-store.csv"),
-        restart=False,
-        out="model.npz",
-        data=None,
-        progress=False,
-        envelope=None,
-        samples=8,
-        pool=[str(samples)],
-        compare=None,
-        budgets=[25],
-        designs=None,
-    )
-    assert train_command(args) == 0
+    settings = train_args(tmp_path, design="sobol", state=str(tmp_path / "hf-store.csv"), out="model.npz")
+    settings.pool = [str(samples)]
+    assert train_command(settings) == 0
     provenance = load_model(work / "model.npz").provenance
     assert provenance["pool"] == [outside] and "hf_store" not in provenance
     assert str(tmp_path) not in repr(provenance)
