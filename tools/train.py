@@ -207,30 +207,39 @@ def compare_command(args, specs: list) -> int:
         "seed": args.seed,
         "n_seed": ed.COMPARE_N_SEED,
     }
+    # what steers each design's picks (the posterior samples only the envelope design's)
+    setup_of = {d: setup if d == "envelope" else {k: v for k, v in setup.items() if k != "samples"} for d in tr.DESIGNS}
+    scored = {"reference": [tr.file_reference(Path(p)) for p in args.reference or args.pool]}  # and its scores
     runs = []
     for design in args.designs or ed.COMPARE_DESIGNS:
         kept = out / "designs" / f"{design}-picks.json"
-        if kept.exists() and (old := json.loads(kept.read_text()))["setup"] == setup:  # resume
+        if kept.exists() and (old := json.loads(kept.read_text()))["setup"] == setup_of[design]:  # resume
             picks = old["picks"]
             runs.append(ed.DesignRun(design, X[picks], Y[picks], old["seconds"], old["rounds"]))
             continue
         run = ed.run_pool_design(design, X, Y, specs, budgets, args.samples, args.seed)
         picks = [int(np.flatnonzero(np.all(X == x, axis=1))[0]) for x in run.X]
-        record = {"setup": setup, "design": design, "picks": picks, "seconds": run.seconds, "rounds": run.rounds}
+        record = {
+            "setup": setup_of[design],
+            "design": design,
+            "picks": picks,
+            "seconds": run.seconds,
+            "rounds": run.rounds,
+        }
         kept.write_text(json.dumps(record, indent=1) + "\n")
         print(f"{design}: picked {len(picks)} in {run.seconds:.0f} s", flush=True)
         runs.append(run)
     began = time.perf_counter()
-    reference = ed.reference_model(X, Y, out / "reference.npz")
+    reference = ed.reference_model(*(read_pool(args.reference) if args.reference else (X, Y)), out / "reference.npz")
     references = ed.mean_outcomes(reference, specs)
     print(f"reference: {len(reference.X)} pool points, fitted or read in {time.perf_counter() - began:.0f} s")
     for run in runs:
         rows = ed.score_design(run, specs, references, budgets)
-        result = {"setup": setup, "design": run.design, "rows": rows}
+        result = {"setup": setup_of[run.design] | scored, "design": run.design, "rows": rows}
         (out / "designs" / f"{run.design}.json").write_text(json.dumps(result, indent=1) + "\n")
         print(f"{run.design}: " + ", ".join(f"{r['vehicle']} {r['budget']}: {r['misclassified']}" for r in rows))
     results = [json.loads(p.read_text()) for p in sorted((out / "designs").glob("*.json")) if "picks" not in p.stem]
-    table = ed.comparison_table([r for r in results if r["setup"] == setup], specs)
+    table = ed.comparison_table([r for r in results if r["setup"] == setup_of.get(r["design"], {}) | scored], specs)
     (out / "comparison.md").write_text(table + "\n")
     print(table)
     return 0
@@ -363,6 +372,9 @@ def add_parser(subparsers) -> None:
         metavar="DIR",
         help="with --pool and --envelope: run every design on the pool at --budgets and score its envelopes "
         "against a reference fitted to the whole pool; tables into DIR",
+    )
+    p.add_argument(
+        "--reference", nargs="+", metavar="CSV", help="with --compare: fit the reference to these (default: the pool)"
     )
     p.add_argument("--budgets", nargs="+", type=int, default=[25, 50, 100], help="with --compare (default 25 50 100)")
     p.add_argument("--designs", nargs="+", choices=tr.DESIGNS, help="with --compare: these designs only (default all)")
