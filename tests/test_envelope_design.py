@@ -19,7 +19,7 @@ from nearsub.common.learning.gp import MultiOutputGP
 from nearsub.common.surrogate import training as tr
 from nearsub.common.surrogate.domain import constraints_ok, in_domain
 from nearsub.common.surrogate.modelfile import load_model
-from nearsub.tools.train import train_command
+from nearsub.tools.train import command_line, train_command
 
 pytestmark = pytest.mark.timeout(600)
 
@@ -123,3 +123,6 @@ def test_a_model_names_its_files_relative_to_the_working_directory_or_by_name_an
     provenance = load_model(work / "model.npz").provenance
     assert provenance["pool"] == [outside] and "hf_store" not in provenance
     assert str(tmp_path) not in repr(provenance)
+    argv = ["/usr/bin/nearsub", "train", "--state", str(tmp_path / "hf.csv"), f"--out={work / 'runs' / 'm.npz'}"]
+    monkeypatch.setattr("sys.argv", argv)
+    assert command_line("") == "nearsub train --state hf.csv --out=runs/m.npz"

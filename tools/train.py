@@ -32,6 +32,7 @@ naming the file, row, column and value (exit 2).
 from __future__ import annotations
 
 import hashlib
+import os
 import sys
 import time
 from datetime import UTC, datetime
@@ -50,8 +51,17 @@ from nearsub.common.surrogate.validation import read_number_table
 DEFAULT_STATE = Path("training") / "hf-samples.csv"
 
 
+def _shown(word: str) -> str:
+    """An absolute path in a command line as a model records it: relative to the working directory
+    when below it, else its name (a shipped model carries no temporary folder's path)."""
+    key, sep, value = word.rpartition("=") if word.startswith("--") else ("", "", word)
+    if not os.path.isabs(value):
+        return word
+    return key + sep + tr.file_reference(Path(value))["file"]
+
+
 def command_line(default: str) -> str:
-    return "nearsub " + " ".join(sys.argv[1:]) if sys.argv and "nearsub" in sys.argv[0] else default
+    return "nearsub " + " ".join(map(_shown, sys.argv[1:])) if sys.argv and "nearsub" in sys.argv[0] else default
 
 
 def read_pool(paths) -> tuple[np.ndarray, np.ndarray]:
