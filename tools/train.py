@@ -1,6 +1,9 @@
 """`nearsub train`: train the interaction surrogate, LF in the loop (common/surrogate/training.py).
 
     nearsub train [--design sobol|residual-us|nmmf] [--budget 300] [--workers 2 | --scheduler ADDRESS]
+    nearsub train --design envelope --envelope vehicle=sdv [--envelope vehicle=remus100] [--samples 8]
+    nearsub train --design D --pool A.csv [B.csv]        # pick among HF values that exist; no HF runs
+    nearsub train --compare DIR --pool A.csv B.csv --envelope SPEC [--envelope SPEC]   # designs.md table
 
 The model is the exact low fidelity (the one-way slender-body model, `common/hydro/low_fidelity.py`)
 plus a residual GP on HF - LF at the HF samples (the two-way panel model,
@@ -12,6 +15,14 @@ At the end the model is written with its provenance, its HF samples as CSV besid
 (<stem>-hf-samples.csv) and the HF's free-stream table for the increment mode
 (<stem>-free-stream.npz, `common/hydro/free_stream.py`).
 
+`--design envelope` aims the HF runs at the outcome boundary of one or two envelopes
+(`--envelope KEY=VALUE,...` with the keys of `nearsub envelope`: vehicle, behaviour, d_lead,
+gamma, sea_state, depth, u_sub, u_ot, grid (20x10 unless given), r_long and r_lat as LO:HI,
+duration, dt); docs/hydro/envelope-design.md. `--pool` runs any design on HF values that already
+exist (CSVs with the samples CSV's columns, or the held-out file's `_hf` ones): the candidates are
+the pool's rows and no HF runs. `--compare DIR` runs every design on the pool and scores each
+design's envelopes against those of a reference fitted to the whole pool.
+
 `nearsub train --data FILE.csv --out MODEL.npz` instead fits a single-fidelity GP to a user's own
 table (columns as the samples CSV), after checking every value: a missing column, a value that is
 not a plain number (a unit written into it), or a row outside table 4.2 or (4.4)-(4.7) is an error
@@ -21,6 +32,7 @@ naming the file, row, column and value (exit 2).
 from __future__ import annotations
 
 import hashlib
+import os
 import sys
 import time
 from datetime import UTC, datetime
@@ -39,40 +51,100 @@ from nearsub.common.surrogate.validation import read_number_table
 DEFAULT_STATE = Path("training") / "hf-samples.csv"
 
 
+def _shown(word: str) -> str:
+    """An absolute path in a command line as a model records it: relative to the working directory
+    when below it, else its name (a shipped model carries no temporary folder's path)."""
+    key, sep, value = word.rpartition("=") if word.startswith("--") else ("", "", word)
+    if not os.path.isabs(value):
+        return word
+    return key + sep + tr.file_reference(Path(value))["file"]
+
+
 def command_line(default: str) -> str:
-    return "nearsub " + " ".join(sys.argv[1:]) if sys.argv and "nearsub" in sys.argv[0] else default
+    return "nearsub " + " ".join(map(_shown, sys.argv[1:])) if sys.argv and "nearsub" in sys.argv[0] else default
+
+
+def read_pool(paths) -> tuple[np.ndarray, np.ndarray]:
+    """HF inputs and values of the --pool CSVs in file order: the samples CSV's columns (checked
+    as --data is) or the held-out file's `_hf` columns; rows whose HF failed (NaN) are left out."""
+    from nearsub.common.surrogate.validation import PointsFileError, read_points_file
+
+    parts = []
+    for path in map(Path, paths):
+        try:
+            parts.append(read_training_table(path))
+        except DataFileError as first:
+            try:
+                parts.append(read_points_file(path))
+            except PointsFileError:
+                raise first from None
+    X, Y = np.vstack([p[0] for p in parts]), np.vstack([p[1] for p in parts])
+    keep = np.all(np.isfinite(Y), axis=1)
+    return X[keep], Y[keep]
+
+
+def envelope_specs(args) -> list:
+    """The --envelope specs as EnvelopeConfig (ValueError naming the bad one)."""
+    from nearsub.common.analysis import envelope_design as ed
+
+    specs = args.envelope or []
+    if len(specs) > ed.MAX_SPECS:
+        raise ValueError(f"--envelope given {len(specs)} times: at most {ed.MAX_SPECS} envelopes")
+    if args.samples < 1:
+        raise ValueError(f"--samples {args.samples}: need at least 1")
+    return [ed.parse_spec(spec) for spec in specs]
 
 
 def train_command(args) -> int:
     if getattr(args, "data", None):
         return data_command(args)
     try:
+        specs = envelope_specs(args)
+        if args.compare:
+            return compare_command(args, specs)
         settings = tr.DesignSettings(
             design=args.design, budget=args.budget, seed=args.seed, n_seed=args.n_seed, batch=args.batch
         )
-    except ValueError as exc:
+        if settings.design == "envelope" and not specs:
+            raise ValueError("--design envelope: name the envelope(s) to aim at with --envelope KEY=VALUE,...")
+        pool = read_pool(args.pool) if args.pool else None
+    except (ValueError, LookupError) as exc:
         print(f"nearsub train: {exc}", file=sys.stderr)
         return 2
     if args.workers is not None and args.workers < 1:
         print(f"nearsub train: --workers {args.workers}: need at least 1", file=sys.stderr)
         return 2
     state = Path(args.state)
-    if args.restart:
+    if args.restart and pool is None:
         state.unlink(missing_ok=True)
     try:
-        store = tr.HFStore(state)
+        store = tr.HFStore(state) if pool is None else tr.pool_store(*pool)
     except ValueError as exc:
         print(f"nearsub train: --state {state}: {exc}", file=sys.stderr)
         return 2
+    acquire = None
+    if settings.design == "envelope":
+        from nearsub.common.analysis.envelope_design import acquisition
+
+        acquire = acquisition(specs, args.samples)
     started = time.perf_counter()
     columns = (TextColumn("[bold]HF runs"), BarColumn(), TextColumn("{task.completed}"), TimeRemainingColumn())
     with Progress(*columns, disable=not sys.stderr.isatty() and not args.progress) as progress:
         task = progress.add_task("train", total=None)
-        with tr.hf_runner(args.workers, args.scheduler) as run:
-            X, Y = tr.run_design(settings, store, run, on_row=lambda: progress.advance(task))
+        if pool is not None:  # the pool's values stand in for the HF runs
+            try:
+                X, Y = tr.run_design(
+                    settings, store, tr.pool_runner, candidates=tr.pool_candidates(pool[0]), acquire=acquire
+                )
+            except tr.NotInPoolError as exc:
+                print(f"nearsub train: --pool: {exc}", file=sys.stderr)
+                return 2
+        else:
+            with tr.hf_runner(args.workers, args.scheduler) as run:
+                X, Y = tr.run_design(settings, store, run, on_row=lambda: progress.advance(task), acquire=acquire)
     design_seconds = time.perf_counter() - started
     overlap = tr.held_out_overlap(X)
-    if overlap:
+    if overlap and pool is None:  # a pool may hold the held-out points on purpose (the comparison's)
         print(f"nearsub train: {overlap} sample(s) coincide with held-out validation points", file=sys.stderr)
         return 2
     began = time.perf_counter()
@@ -81,13 +153,19 @@ def train_command(args) -> int:
     out = Path(args.out or "surrogate.npz")  # never over the shipped model unless asked
     out.parent.mkdir(parents=True, exist_ok=True)
     hf_seconds = sum(store.rows[store._key(x)][1] for x in X)
+    where = {"hf_store": tr.file_reference(state)} if pool is None else {}
+    if pool is not None:
+        where["pool"] = [tr.file_reference(Path(p)) for p in args.pool]
+    if specs:
+        where["envelopes"] = [spec.model_dump(mode="json", exclude={"model"}) for spec in specs]
+        where["posterior_samples"] = args.samples
     provenance = tr.provenance(
         settings.design,
         model,
         command_line("nearsub train"),
         created_utc=datetime.now(UTC).isoformat(timespec="seconds"),
         settings=settings.__dict__,
-        hf_store=str(state),
+        **where,
         hf_seconds=round(hf_seconds, 1),
         design_wall_seconds=round(design_seconds, 1),
         fit_wall_seconds=round(fit_seconds, 1),
@@ -109,6 +187,71 @@ def train_command(args) -> int:
         f"wrote {out} ({settings.design}, {len(model.X)} HF samples) in {elapsed / 60:.1f} min: design "
         f"{design_seconds / 60:.1f} min (HF runs {hf_seconds:.0f} s), fit {fit_seconds:.0f} s; LML {lml}"
     )
+    return 0
+
+
+# ------------------------------------------------------------------ --compare: the pool comparison
+def compare_command(args, specs: list) -> int:
+    """Every design on the pool, scored by the misclassified cells of its envelopes against the
+    reference's (docs/hydro/envelope-design.md). Each design's result is written as it finishes
+    (DIR/designs/<design>.json); the table is made of every design result in DIR."""
+    import json
+
+    from nearsub.common.analysis import envelope_design as ed
+
+    if not args.pool or not specs:
+        raise ValueError("--compare needs --pool CSV... and at least one --envelope SPEC")
+    budgets = sorted(set(args.budgets))
+    if budgets[0] <= ed.COMPARE_N_SEED:
+        raise ValueError(f"--budgets {budgets[0]}: each budget must exceed the {ed.COMPARE_N_SEED} seed points")
+    X, Y = read_pool(args.pool)
+    if budgets[-1] > len(X):
+        raise ValueError(f"--budgets {budgets[-1]}: the pool holds {len(X)} HF values")
+    out = Path(args.compare)
+    (out / "designs").mkdir(parents=True, exist_ok=True)
+    setup = {
+        "pool": [tr.file_reference(Path(p)) for p in args.pool],
+        "envelopes": [spec.model_dump(mode="json", exclude={"model"}) for spec in specs],
+        "budgets": budgets,
+        "samples": args.samples,
+        "seed": args.seed,
+        "n_seed": ed.COMPARE_N_SEED,
+    }
+    # what steers each design's picks (the posterior samples only the envelope design's)
+    setup_of = {d: setup if d == "envelope" else {k: v for k, v in setup.items() if k != "samples"} for d in tr.DESIGNS}
+    scored = {"reference": [tr.file_reference(Path(p)) for p in args.reference or args.pool]}  # and its scores
+    runs = []
+    for design in args.designs or ed.COMPARE_DESIGNS:
+        kept = out / "designs" / f"{design}-picks.json"
+        if kept.exists() and (old := json.loads(kept.read_text()))["setup"] == setup_of[design]:  # resume
+            picks = old["picks"]
+            runs.append(ed.DesignRun(design, X[picks], Y[picks], old["seconds"], old["rounds"]))
+            continue
+        run = ed.run_pool_design(design, X, Y, specs, budgets, args.samples, args.seed)
+        picks = [int(np.flatnonzero(np.all(X == x, axis=1))[0]) for x in run.X]
+        record = {
+            "setup": setup_of[design],
+            "design": design,
+            "picks": picks,
+            "seconds": run.seconds,
+            "rounds": run.rounds,
+        }
+        kept.write_text(json.dumps(record, indent=1) + "\n")
+        print(f"{design}: picked {len(picks)} in {run.seconds:.0f} s", flush=True)
+        runs.append(run)
+    began = time.perf_counter()
+    reference = ed.reference_model(*(read_pool(args.reference) if args.reference else (X, Y)), out / "reference.npz")
+    references = ed.mean_outcomes(reference, specs)
+    print(f"reference: {len(reference.X)} pool points, fitted or read in {time.perf_counter() - began:.0f} s")
+    for run in runs:
+        rows = ed.score_design(run, specs, references, budgets)
+        result = {"setup": setup_of[run.design] | scored, "design": run.design, "rows": rows}
+        (out / "designs" / f"{run.design}.json").write_text(json.dumps(result, indent=1) + "\n")
+        print(f"{run.design}: " + ", ".join(f"{r['vehicle']} {r['budget']}: {r['misclassified']}" for r in rows))
+    results = [json.loads(p.read_text()) for p in sorted((out / "designs").glob("*.json")) if "picks" not in p.stem]
+    table = ed.comparison_table([r for r in results if r["setup"] == setup_of.get(r["design"], {}) | scored], specs)
+    (out / "comparison.md").write_text(table + "\n")
+    print(table)
     return 0
 
 
@@ -178,7 +321,7 @@ def fit_from_data(path: Path, out: Path, seed: int = 0, n_restarts: int = FINAL_
     provenance = {
         "method": "single-fidelity GP regression (thesis section 2.2.1) fitted to a user's table",
         "high_fidelity": f"user-supplied data: {path.name} (nearsub did not compute it)",
-        "data": str(path),
+        "data": tr.file_reference(path)["file"],  # relative to the working directory, or the name alone
         "data_sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
         "rows": int(len(X)),
         "command": command_line(f"nearsub train --data {path}"),
@@ -192,9 +335,7 @@ def fit_from_data(path: Path, out: Path, seed: int = 0, n_restarts: int = FINAL_
 
 def data_command(args) -> int:
     if args.out is None:
-        print(
-            "nearsub train: --data needs --out MODEL.npz", file=sys.stderr
-        )
+        print("nearsub train: --data needs --out MODEL.npz", file=sys.stderr)
         return 2
     try:
         rows = fit_from_data(Path(args.data), Path(args.out), seed=args.seed)
@@ -223,5 +364,29 @@ def add_parser(subparsers) -> None:
         help="fit a GP to your own table instead of training: columns as the shipped samples CSV "
         f"({', '.join((*domain.INPUT_NAMES, *domain.OUTPUT_NAMES))})",
     )
+    p.add_argument(
+        "--envelope",
+        action="append",
+        metavar="SPEC",
+        help="with --design envelope: an envelope to aim at, KEY=VALUE,... with the keys of nearsub envelope "
+        "(vehicle=sdv,behaviour=waypoints,grid=20x10; ranges as LO:HI); at most twice",
+    )
+    p.add_argument(
+        "--samples", type=int, default=8, metavar="K", help="posterior samples per envelope round (default 8)"
+    )
+    p.add_argument(
+        "--pool", nargs="+", metavar="CSV", help="pick among these HF values instead of running the HF (pool mode)"
+    )
+    p.add_argument(
+        "--compare",
+        metavar="DIR",
+        help="with --pool and --envelope: run every design on the pool at --budgets and score its envelopes "
+        "against a reference fitted to the whole pool; tables into DIR",
+    )
+    p.add_argument(
+        "--reference", nargs="+", metavar="CSV", help="with --compare: fit the reference to these (default: the pool)"
+    )
+    p.add_argument("--budgets", nargs="+", type=int, default=[25, 50, 100], help="with --compare (default 25 50 100)")
+    p.add_argument("--designs", nargs="+", choices=tr.DESIGNS, help="with --compare: these designs only (default all)")
     p.add_argument("--progress", action="store_true", help="show the progress bar even when not on a terminal")
     p.set_defaults(func=train_command)

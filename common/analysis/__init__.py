@@ -2,6 +2,7 @@
 
 - batch: the vectorised engine, N UUVs through the very functions the apps call.
 - envelope: operating envelopes (thesis 5.11, 6.4) and sweeps.
+- envelope_design: HF samples aimed at named envelopes, pool mode's comparison of the designs.
 - scenarios: figures of merit of the thesis scenarios.
 - fleet: figures of merit of a mission of several vehicles.
 - validation: the thesis section 5.10 validation cases.

@@ -458,11 +458,13 @@ def compute_sampled(
     members: np.ndarray | None = None,
     surrogate: Surrogate | None = None,
     on_step: Callable[[int, int], None] | None = None,
+    on_delta: Callable[[np.ndarray, np.ndarray], None] | None = None,
 ) -> SampledEnvelope:
     """Every cell under the samples `members` (default: all) as one batch in the batch engine: the
     UUV of (sample k, cell) sees sample k's delta wherever the mean envelope uses the mean. All K
     samples are drawn (from the seed) whatever `members` is, so a split over workers flies the
-    same fields."""
+    same fields. `on_delta(x_c, rows)` sees every query of delta (the envelope design's record
+    of where the trajectories ask it; rows index the batch, sample-major)."""
     surrogate = surrogate or cached_surrogate(config.model)
     started = time.perf_counter()
     members = np.arange(sampling.samples) if members is None else np.asarray(members, dtype=int)
@@ -471,6 +473,12 @@ def compute_sampled(
     starts, ends, feasible = starts_and_tracks(config, x, y)
     member = np.repeat(members, len(x))  # the sample of each batch row
     offsets = wave_time_offsets(config, sampling)
+
+    def sampled_delta(X: np.ndarray, uuvs: np.ndarray) -> np.ndarray:
+        if on_delta is not None:
+            on_delta(X, uuvs)
+        return samples.rows(X, member[uuvs])
+
     result = run_batch(
         cell_mission(config, 0.0, 0.0),
         np.tile(starts, (len(members), 1)),
@@ -478,7 +486,7 @@ def compute_sampled(
         surrogate,
         np.tile(feasible, len(members)),
         on_step,
-        delta=lambda X, uuvs: samples.rows(X, member[uuvs]),
+        delta=sampled_delta,
         time_offset=None if offsets is None else offsets[member],
     )
     r_long, r_lat = grid_axes(config)

@@ -13,10 +13,17 @@ designs choose where the HF runs (docs/design.md, "Hydrodynamic fidelities"):
   look-ahead LF GP of Algorithm 1 is the LF itself and the HF point maximises
   q_AD = |y_HF - y_MF| (2.17) with y_MF = LF + delta and y_HF the HF-only GP, over the training
   std of each output (2.31); seeded like residual-us.
+* "envelope": the HF point that most reduces the doubt about the outcome classes of the
+  envelopes a user names (`learning.envelope_design`, docs/hydro/envelope-design.md); the
+  envelopes are flown by `analysis.envelope_design`, which hands `run_design` its `acquire`.
+  Seeded like residual-us.
 
 Every design draws its candidates from the feasible set, so all HF samples satisfy (4.4)-(4.7).
 The held-out test set (`validation.HELD_OUT_SEED`, a Latin hypercube) is never a design: a design
 seed equal to it is refused and the samples are checked against the held-out points.
+
+Pool mode (`pool_store`, `pool_candidates`) runs a design on HF values that already exist: the
+store holds the pool, any other HF run is refused, and the candidates are the pool's unpicked rows.
 
 HF runs go through an `HFStore`, a CSV appended row by row as results arrive, so a killed run
 resumes (the designs are deterministic given the HF values, and replay the stored ones).
@@ -25,6 +32,7 @@ resumes (the designs are deterministic given the HF values, and replay the store
 from __future__ import annotations
 
 import csv
+import hashlib
 import os
 import time
 from collections.abc import Callable, Iterator
@@ -38,6 +46,7 @@ import numpy as np
 from nearsub.common.hydro import high_fidelity as hydro_hf
 from nearsub.common.hydro import low_fidelity as hydro_lf
 from nearsub.common.learning.active import candidate_set, initial_design
+from nearsub.common.learning.envelope_design import condition_on_mean
 from nearsub.common.learning.gp import FINAL_FIT_RESTARTS, MultiOutputGP
 from nearsub.common.learning.testproblems import Problem
 from nearsub.common.runtime.processes import completed, task_client
@@ -46,7 +55,7 @@ from nearsub.common.surrogate.modelfile import LFInLoopModel
 from nearsub.common.surrogate.validation import HELD_OUT_POINTS, HELD_OUT_SEED, latin_hypercube_feasible
 from nearsub.common.surrogate.warping import DEFAULT_WARPING, Warping
 
-DESIGNS = ("nmmf", "sobol", "residual-us")
+DESIGNS = ("nmmf", "sobol", "residual-us", "envelope")
 DEFAULT_SEED = 1  # seed 0 is the held-out set's (validation.HELD_OUT_SEED)
 DEFAULT_N_SEED = 20  # space-filling HF points that seed the adaptive designs
 # Optimiser starts of the refits inside an adaptive design (warm-started from the previous
@@ -200,6 +209,47 @@ def evaluate_hf(X: np.ndarray, store: HFStore, run: Runner, on_row: Callable[[],
     return np.vstack([store.get(x) for x in X])
 
 
+def file_reference(path: Path) -> dict[str, Any]:
+    """A file as a model's provenance names it: its path relative to the working directory when it
+    lies below it, else its name alone (never a temporary folder's path), and its SHA-256."""
+    path = Path(path)
+    try:
+        name = str(path.resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        name = path.name
+    digest = hashlib.sha256(path.read_bytes()).hexdigest() if path.is_file() else None
+    return {"file": name, "sha256": digest}
+
+
+# ------------------------------------------------------------------------------ pool mode
+class NotInPoolError(ValueError):
+    """A pool-mode design asked for an HF value the pool does not hold."""
+
+
+def pool_store(X: np.ndarray, Y: np.ndarray) -> HFStore:
+    """An in-memory HF store holding the pool's rows (no HF run behind them: 0 s each)."""
+    store = HFStore(None)
+    for x, y in zip(np.asarray(X, dtype=float), np.asarray(Y, dtype=float), strict=True):
+        store.add(x, y, 0.0)
+    return store
+
+
+def pool_runner(X: np.ndarray, done: Callable[[int, np.ndarray, float], None]) -> None:
+    """The runner of pool mode: every HF value must come from the pool."""
+    raise NotInPoolError(f"pool mode: {len(X)} HF run(s) asked for outside the pool (first at {X[0].tolist()})")
+
+
+def pool_candidates(pool: np.ndarray) -> Callable[[int, np.ndarray], np.ndarray]:
+    """candidates(draw, chosen): the pool rows not yet in `chosen` (in pool order)."""
+    pool = np.asarray(pool, dtype=float)
+
+    def candidates(draw: int, chosen: np.ndarray) -> np.ndarray:
+        taken = {np.ascontiguousarray(x).tobytes() for x in chosen}
+        return pool[[np.ascontiguousarray(x).tobytes() not in taken for x in pool]]
+
+    return candidates
+
+
 # ------------------------------------------------------------------------------ the final fit
 def finite_rows(X: np.ndarray, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The samples whose HF and LF are both defined (the HF is NaN where the hulls touch, the LF
@@ -235,13 +285,16 @@ def provenance(design: str, model: LFInLoopModel, command: str, **extra: Any) ->
 class DesignSettings:
     """design: one of DESIGNS; budget: HF samples in all; seed: the design's seed (never the
     held-out set's); n_seed: space-filling seed points of the adaptive designs; batch:
-    residual-us picks per round (nmmf picks one: q_AD has no batch form)."""
+    picks per round of residual-us and envelope (nmmf picks one: q_AD has no batch form); stops:
+    HF sample counts where a round ends early, so that a prefix of the design is the design of
+    that budget (the comparison's 25, 50 and 100)."""
 
     design: str = "sobol"
     budget: int = 100
     seed: int = DEFAULT_SEED
     n_seed: int = DEFAULT_N_SEED
     batch: int = 10
+    stops: tuple[int, ...] = ()
 
     def __post_init__(self):
         if self.design not in DESIGNS:
@@ -258,6 +311,10 @@ class DesignSettings:
 def _candidates(seed: int, draw: int) -> np.ndarray:
     """A fresh feasible candidate set (scrambled Sobol, constraints (4.4)-(4.7))."""
     return candidate_set(PROBLEM, _CANDIDATES_PER_DIM, [seed, 1, draw])
+
+
+# acquire(delta, warping, candidates, k, X, Y) -> k new points: the envelope design's picks.
+Acquire = Callable[[MultiOutputGP, Warping, np.ndarray, int, np.ndarray, np.ndarray], np.ndarray]
 
 
 def _refit(delta: MultiOutputGP | None, warping: Warping, X: np.ndarray, Y: np.ndarray, seed: int) -> MultiOutputGP:
@@ -280,18 +337,12 @@ def residual_us_picks(delta: MultiOutputGP, warping: Warping, candidates: np.nda
     (placeholder outputs: the posterior mean; sigma does not depend on them)."""
     W = warping.forward(candidates)
     scale = _scaled(delta)
-    thetas = np.stack([gp.theta_ for gp in delta.gps])
-    X_train = delta.gps[0].X_train_
-    Y_train = np.column_stack([gp.y_train_ for gp in delta.gps])
     look, picks = delta, []
     for _ in range(k):
         std = look.predict(W, return_std=True)[1]
         best = int(np.argmax(np.max((std / scale) ** 2, axis=1)))
         picks.append(best)
-        extra = W[picks]
-        look = MultiOutputGP(bounds=warping.bounds, seed=delta.seed).fit(
-            np.vstack([X_train, extra]), np.vstack([Y_train, delta.predict(extra)]), theta=thetas
-        )
+        look = condition_on_mean(delta, W[picks])
     return candidates[picks]
 
 
@@ -311,10 +362,16 @@ def run_design(
     run: Runner,
     warping: Warping | None = None,
     on_row: Callable[[], None] | None = None,
+    candidates: Callable[[int, np.ndarray], np.ndarray] | None = None,
+    acquire: Acquire | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The HF samples (X, Y) of a design (module doc); HF runs through `store` (reused if there)."""
+    """The HF samples (X, Y) of a design (module doc); HF runs through `store` (reused if there).
+    `candidates(draw, chosen)` replaces the fresh Sobol candidates (pool mode, `pool_candidates`);
+    `acquire` makes the envelope design's picks (`analysis.envelope_design.acquisition`)."""
     warping = warping or Warping(DEFAULT_WARPING)
     s = settings
+    if s.design == "envelope" and acquire is None:
+        raise ValueError("--design envelope: name the envelope(s) to aim at (--envelope SPEC)")
     if s.design == "sobol":
         X = sobol_design(s.budget, s.seed)
         return X, evaluate_hf(X, store, run, on_row)
@@ -325,9 +382,12 @@ def run_design(
     while len(X) < s.budget:
         draw += 1
         delta = _refit(delta, warping, X, Y, s.seed)
-        candidates = _candidates(s.seed, draw)
+        pool = _candidates(s.seed, draw) if candidates is None else candidates(draw, X)
+        k = min([s.batch, s.budget - len(X), *(stop - len(X) for stop in s.stops if stop > len(X))])
         if s.design == "residual-us":
-            new = residual_us_picks(delta, warping, candidates, min(s.batch, s.budget - len(X)))
+            new = residual_us_picks(delta, warping, pool, k)
+        elif s.design == "envelope":
+            new = acquire(delta, warping, pool, k, X, Y)
         else:
             keep = np.all(np.isfinite(Y), axis=1)
             if hf_only is None:
@@ -335,7 +395,7 @@ def run_design(
                 hf_only.fit(warping.forward(X[keep]), Y[keep])
             else:
                 hf_only.fit(warping.forward(X[keep]), Y[keep], warm_start=True)
-            new = nmmf_pick(delta, hf_only, warping, candidates)
+            new = nmmf_pick(delta, hf_only, warping, pool)
         X = np.vstack([X, new])
         Y = np.vstack([Y, evaluate_hf(new, store, run, on_row)])
     return X, Y
