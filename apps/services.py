@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
-from nearsub.common.runtime.bus import Bus, ReplyError
+from nearsub.common.runtime.bus import Bus, PendingReply, ReplyError
 from nearsub.common.runtime.messages import MessageError
 from nearsub.common.surrogate import query as sg
 from nearsub.common.surrogate.query import ServiceError
@@ -34,7 +36,7 @@ def kind_key(community: str) -> str:
 class RemoteSurrogate:
     """The surrogate server, asked over the bus (one query per call, the whole batch in it).
     It answers with the numbers `Surrogate.predict` and `Surrogate.discrepancy` give in-process,
-    bit for bit (msgpack carries the doubles unchanged)."""
+    bit for bit (the reply carries the doubles as their bytes)."""
 
     def __init__(self, bus: Bus, community: str, timeout: float = QUERY_TIMEOUT):
         self.key = sg.surrogate_key(community)
@@ -43,29 +45,38 @@ class RemoteSurrogate:
         self._kind_querier = bus.querier(kind_key(community), timeout)
         self._kind: str | None = None
 
-    def _ask(self, querier, payload: bytes) -> bytes:
-        try:
-            return querier.ask(payload)
-        except ReplyError as exc:
-            raise ServiceError(f"surrogate server at {self.key}: {exc}") from None
-
     @property
     def kind(self) -> str:
         """The served model's kind (asked once)."""
         if self._kind is None:
-            self._kind = self._ask(self._kind_querier, b"").decode()
+            try:
+                self._kind = self._kind_querier.ask(b"").decode()
+            except ReplyError as exc:
+                raise ServiceError(f"surrogate server at {self.key}: {exc}") from None
         return self._kind
 
-    def predict(self, inputs: np.ndarray, return_std: bool = True) -> sg.Prediction:
+    def _reply(self, pending: PendingReply) -> sg.SurrogateReply:
         try:
-            return sg.decode_reply(self._ask(self._querier, sg.encode_query(inputs))).prediction()
-        except MessageError as exc:
+            return sg.decode_reply(pending.result())
+        except (ReplyError, MessageError) as exc:
             raise ServiceError(f"surrogate server at {self.key}: {exc}") from None
+
+    def predict(self, inputs: np.ndarray, return_std: bool = True) -> sg.Prediction:
+        return self._reply(self._querier.send(sg.encode_query(inputs))).prediction()
+
+    def discrepancy_later(
+        self, inputs: np.ndarray, return_std: bool = True
+    ) -> Callable[[], tuple[np.ndarray, np.ndarray | None]]:
+        """Ask the server about delta now; the returned function waits for the answer, so the
+        asker computes the LF while the server predicts (`interaction.lf_in_loop_increment`)."""
+        pending = self._discrepancy.send(sg.encode_query(inputs))
+
+        def answer() -> tuple[np.ndarray, np.ndarray | None]:
+            reply = self._reply(pending)
+            return reply.mean, reply.std if return_std else None
+
+        return answer
 
     def discrepancy(self, inputs: np.ndarray, return_std: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
         """The residual GP's mean and std (n, 3) (`Surrogate.discrepancy`; the std is always sent)."""
-        try:
-            answer = sg.decode_reply(self._ask(self._discrepancy, sg.encode_query(inputs))).prediction()
-        except MessageError as exc:
-            raise ServiceError(f"surrogate server at {self.key}: {exc}") from None
-        return answer.mean, answer.std if return_std else None
+        return self.discrepancy_later(inputs, return_std)()

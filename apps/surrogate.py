@@ -3,9 +3,10 @@
     python -m nearsub.apps.surrogate [--model PATH] --community NAME --connect ENDPOINT [--instance NAME]
     python -m nearsub.apps.surrogate [--model PATH] --run RUNFILE [--instance NAME]
 
-Each query is a `SurrogateQuery` (common/surrogate/model.py) with a batch of points; the whole batch
+Each query is a `SurrogateQuery` (common/surrogate/query.py) with a batch of points; the whole batch
 is predicted at once and answered with a `SurrogateReply`; a batch of more than
-`services.MAX_BATCH` points is refused with an error reply that says the cap. The same queryable answers
+`services.MAX_BATCH` points is refused with an error reply that says the cap, before its values are
+checked or predicted. The same queryable answers
 nearsub/<community>/surrogate/discrepancy with the residual GP alone (the LF-in-the-loop kind's
 delta, which the increment mode adds to the LF it evaluates itself; `apps.services`) and
 nearsub/<community>/surrogate/kind with the model's kind. A malformed query gets an error reply
@@ -20,21 +21,18 @@ import argparse
 import sys
 from typing import NoReturn
 
-import msgpack
-import numpy as np
-
 from nearsub.apps.services import MAX_BATCH, discrepancy_key, kind_key
 from nearsub.common.mission.schema import MissionError, RunConfig
 from nearsub.common.runtime import keys
 from nearsub.common.runtime.bus import Bus, Endpoints, signal_self
-from nearsub.common.runtime.messages import MessageError, decode, encode
 from nearsub.common.runtime.processes import leave, prepare_process
 from nearsub.common.surrogate.domain import constraints_ok, in_domain
 from nearsub.common.surrogate.model import (
+    Prediction,
     Surrogate,
-    SurrogateQuery,
-    SurrogateReply,
     answer_query,
+    decode_query,
+    encode_reply,
     load_surrogate,
     surrogate_key,
 )
@@ -45,38 +43,17 @@ from nearsub.common.surrogate.modelfile import ModelFileError
 MAX_ERROR_CHARS = 2000
 
 
-def answer_discrepancy(surrogate: Surrogate, payload: bytes, source: str = "surrogate") -> bytes:
+def answer_discrepancy(
+    surrogate: Surrogate, payload: bytes, source: str = "surrogate", max_points: int = MAX_BATCH
+) -> bytes:
     """`Surrogate.discrepancy` of a query's points, as a `SurrogateReply` (mean and std of delta,
-    the flags of the points). Raises MessageError for a malformed query, TypeError for a model
-    without the LF in the loop."""
-    query = decode(payload, SurrogateQuery, "surrogate discrepancy query")
-    points = np.array(query.points, dtype=float)
+    the flags of the points). Raises MessageError for a malformed or oversized query, TypeError
+    for a model without the LF in the loop."""
+    query = decode_query(payload, max_points, "surrogate discrepancy query")
+    points = query.points
     mean, std = surrogate.discrepancy(points, return_std=True)
-    reply = SurrogateReply(
-        step=query.step,
-        t=query.t,
-        source=source,
-        mean=mean.tolist(),
-        std=std.tolist(),
-        in_domain=in_domain(points, surrogate.bounds).tolist(),
-        constraints_ok=constraints_ok(points).tolist(),
-        output_names=list(surrogate.output_names),
-        model_id=surrogate.model_id,
-    )
-    return encode(reply)
-
-
-def oversized(payload: bytes) -> str | None:
-    """The error text for a query of more than MAX_BATCH points, found before the query is
-    validated or predicted (both cost time per point); None for any other payload, which the
-    decoder then judges."""
-    try:
-        points = msgpack.unpackb(payload).get("points")
-    except Exception:  # not a msgpack map: the decoder names what is wrong
-        return None
-    if isinstance(points, list) and len(points) > MAX_BATCH:
-        return f"points: {len(points)} points in one query; this server answers at most {MAX_BATCH} per query"
-    return None
+    answer = Prediction(mean, std, in_domain(points, surrogate.bounds), constraints_ok(points))
+    return encode_reply(query, answer, surrogate.output_names, surrogate.model_id, source)
 
 
 def serve(bus: Bus, community: str, surrogate: Surrogate, instance: str = "surrogate") -> NoReturn:
@@ -91,17 +68,16 @@ def serve(bus: Bus, community: str, surrogate: Surrogate, instance: str = "surro
         f"({surrogate.loaded.provenance.get('method', 'no method recorded')})",
         flush=True,
     )
+    kind, delta = kind_key(community), discrepancy_key(community)
     while True:
         request = requests.recv()
         try:
-            if too_many := oversized(request.payload):
-                raise MessageError(too_many)
-            if request.key == kind_key(community):
+            if request.key == kind:
                 answer = surrogate.kind.encode()
-            elif request.key == discrepancy_key(community):
+            elif request.key == delta:
                 answer = answer_discrepancy(surrogate, request.payload, instance)
             else:
-                answer = answer_query(surrogate, request.payload, instance)
+                answer = answer_query(surrogate, request.payload, instance, MAX_BATCH)
         # MessageError is a ValueError, as is a prediction the reply refuses (not finite), which
         # must not stop the server either; TypeError: no discrepancy in this kind of model.
         except (TypeError, ValueError) as exc:

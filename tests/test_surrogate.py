@@ -237,6 +237,10 @@ def test_answer_query_round_trip_matches_in_process_prediction(surrogate):
     assert np.array_equal(one.prediction().mean, surrogate.predict(X[:1]).mean)
 
 
+def _rows(*rows) -> bytes:
+    return np.array(rows, dtype="<f8").tobytes()
+
+
 def _query(**fields):
     return msgpack.packb({"step": 0, "t": 0.0, **fields})
 
@@ -246,16 +250,18 @@ def _query(**fields):
     [
         (b"\xc1\xff", "not valid msgpack"),
         (msgpack.packb([1, 2]), "expected a map"),
-        (_query(), "field 'points'"),
-        (_query(points=[]), "field 'points' = []"),
-        (_query(points=[[0.0, 0.07, 3.0, 0.0, 14.0]]), "field 'points.0' = [0.0, 0.07, 3.0, 0.0, 14.0]"),
-        (_query(points=[list(MID), list(MID) + [1.0]]), "field 'points.1'"),
-        (_query(points=[list(MID[:5]) + [float("nan")]]), "field 'points.0.5' = nan"),
-        (_query(points=[[float("inf")] + list(MID[1:])]), "field 'points.0.0' = inf"),
-        (_query(points=[["x"] + list(MID[1:])]), "field 'points.0.0' = 'x'"),
-        (_query(points=list(MID)), "field 'points.0'"),
-        (_query(points=[list(MID)], extra=1), "field 'extra'"),
-        (msgpack.packb({"step": -1, "t": 0.0, "points": [list(MID)]}), "field 'step' = -1"),
+        (_query(), "field 'points' = None"),
+        (_query(points=b""), "field 'points': 0 bytes"),
+        (_query(points=_rows([0.0, 0.07, 3.0, 0.0, 14.0])), "field 'points': 40 bytes"),
+        (_query(points=_rows(MID, MID)[:-8]), "field 'points': 88 bytes"),
+        (_query(points=_rows(list(MID[:5]) + [float("nan")])), "field 'points.0.5' = nan"),
+        (_query(points=_rows(MID, [float("inf")] + list(MID[1:]))), "field 'points.1.0' = inf"),
+        (_query(points=[list(MID)]), "field 'points' = [["),  # the lists of floats of version 1
+        (_query(points=_rows(MID), extra=1), "field 'extra'"),
+        (_query(points=_rows(MID), schema_version=1), "field 'schema_version' = 1: unsupported"),
+        (msgpack.packb({"step": -1, "t": 0.0, "points": _rows(MID)}), "field 'step' = -1"),
+        (msgpack.packb({"step": 0, "t": float("nan"), "points": _rows(MID)}), "field 't' = nan"),
+        (msgpack.packb({"step": 0, "t": 0.0, "source": 3, "points": _rows(MID)}), "field 'source' = 3"),
     ],
 )
 def test_malformed_queries_name_the_field_and_value(surrogate, payload, expected):
@@ -264,22 +270,41 @@ def test_malformed_queries_name_the_field_and_value(surrogate, payload, expected
     assert "surrogate query" in str(info.value) and expected in str(info.value)
 
 
-def test_reply_validation_checks_shapes():
+def test_a_query_over_the_cap_is_refused_before_its_values_are_read(surrogate):
+    rows = np.full((5, 6), np.nan)  # not finite: the cap is said first
+    with pytest.raises(MessageError, match="5 points in one query; this server answers at most 4 per query"):
+        sg.answer_query(surrogate, sg.encode_query(rows), max_points=4)
+
+
+def test_a_non_finite_prediction_is_refused_not_sent():
+    X = domain.sample_feasible(2, seed=3)
+    bad = sg.Prediction(np.array([[1.0, 2.0, 3.0], [1.0, np.inf, 3.0]]), np.zeros((2, 3)), *[np.ones(2, bool)] * 2)
+    with pytest.raises(ValueError, match=r"field 'mean.1.1' = inf"):
+        sg.encode_reply(sg.decode_query(sg.encode_query(X)), bad, list(domain.OUTPUT_NAMES), "x", "srv")
+
+
+def test_reply_checks_shapes():
     good = dict(
         step=0,
         t=0.0,
-        mean=[[1.0, 2.0, 3.0]],
-        std=[[0.1, 0.1, 0.1]],
-        in_domain=[True],
-        constraints_ok=[True],
+        mean=_rows([1.0, 2.0, 3.0]),
+        std=_rows([0.1, 0.1, 0.1]),
+        in_domain=b"\x01",
+        constraints_ok=b"\x00",
         output_names=list(domain.OUTPUT_NAMES),
         model_id="x",
     )
-    assert sg.decode_reply(msgpack.packb(good)).prediction().mean.shape == (1, 3)
+    p = sg.decode_reply(msgpack.packb(good)).prediction()
+    assert p.mean.shape == (1, 3) and p.in_domain.tolist() == [True] and p.constraints_ok.tolist() == [False]
+    assert not p.mean.flags.writeable  # a view of the reply's bytes
     for change, expected in (
-        ({"std": []}, "std has 0"),
-        ({"mean": [[1.0, 2.0]]}, "row 0 of mean"),
-        ({"std": [[0.1, float("nan"), 0.1]]}, "field 'std.0.1' = nan"),
+        ({"std": b""}, "mean 1 and std 0 rows"),
+        ({"mean": _rows([1.0, 2.0])}, "mean 0.666667"),
+        ({"in_domain": b"\x01\x01"}, "in_domain has 2 rows but constraints_ok has 1"),
+        ({"mean": [[1.0, 2.0, 3.0]]}, "must be bytes"),
+        ({"output_names": None}, "field 'output_names' = None"),
+        ({"model_id": 7}, "field 'model_id' = 7"),
+        ({"schema_version": 3}, "field 'schema_version' = 3"),
     ):
         with pytest.raises(MessageError, match="surrogate reply") as info:
             sg.decode_reply(msgpack.packb({**good, **change}))

@@ -83,7 +83,10 @@ def test_a_batch_of_1000_points_with_flags(querier, surrogate):
     [
         (b"\xc1not msgpack", "not valid msgpack"),
         (msgpack.packb({"step": 0, "t": 0.0}), "field 'points'"),
-        (msgpack.packb({"step": 0, "t": 0.0, "points": [[0.1, 0.07, 3.0, float("nan"), 14.0, 7.0]]}), "'points.0.3'"),
+        (
+            msgpack.packb({"step": 0, "t": 0.0, "points": np.array([0.1, 0.07, 3.0, np.nan, 14.0, 7.0]).tobytes()}),
+            "'points.0.3' = nan",
+        ),
     ],
 )
 def test_malformed_queries_get_an_error_and_the_server_keeps_serving(querier, surrogate, payload, expected):

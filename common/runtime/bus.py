@@ -260,6 +260,24 @@ class ReplyError(RuntimeError):
     """A query that got no answer, or an error answer; the text says which and from where."""
 
 
+class PendingReply:
+    """A query sent and not yet answered: `result` waits for the first reply (the asker works
+    meanwhile; the replies queue in Zenoh's channel without this thread)."""
+
+    __slots__ = ("_replies", "_key", "_timeout")
+
+    def __init__(self, replies, key: str, timeout: float):
+        self._replies, self._key, self._timeout = replies, key, timeout
+
+    def result(self) -> bytes:
+        """The first reply's payload; ReplyError when nobody answers or the answer is an error."""
+        for reply in self._replies:
+            if reply.ok is not None:
+                return reply.ok.payload.to_bytes()
+            raise ReplyError(f"{self._key}: {reply.err.payload.to_bytes().decode(errors='replace')}")
+        raise ReplyError(f"{self._key}: no reply within {self._timeout:g} s (is the server running?)")
+
+
 class Querier:
     """Repeated queries to one key (the sim asking the surrogate server every step)."""
 
@@ -268,13 +286,13 @@ class Querier:
         self.key = key
         self.timeout = timeout
 
+    def send(self, payload: bytes) -> PendingReply:
+        """Send a query now and take its reply later (`PendingReply.result`)."""
+        return PendingReply(self._querier.get(payload=payload), self.key, self.timeout)
+
     def ask(self, payload: bytes) -> bytes:
         """The first reply's payload; ReplyError when nobody answers or the answer is an error."""
-        for reply in self._querier.get(payload=payload):
-            if reply.ok is not None:
-                return reply.ok.payload.to_bytes()
-            raise ReplyError(f"{self.key}: {reply.err.payload.to_bytes().decode(errors='replace')}")
-        raise ReplyError(f"{self.key}: no reply within {self.timeout:g} s (is the server running?)")
+        return self.send(payload).result()
 
 
 def signal_self(signum: int = signal.SIGTERM) -> Callable[[Any], None]:

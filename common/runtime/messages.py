@@ -238,14 +238,20 @@ def describe_validation_error(error: ValidationError, where: str, name=None) -> 
     return f"{where}: " + "; ".join(parts)
 
 
-def decode(data: bytes, model: type[Message], where: str = "message") -> Message:
-    """Parse and validate msgpack bytes as `model`; raise MessageError naming the problem."""
+def unpack_map(data: bytes, where: str = "message") -> dict:
+    """msgpack bytes as a map of fields; raise MessageError naming the problem."""
     try:
         raw = msgpack.unpackb(data, raw=False, strict_map_key=True)
     except Exception as exc:  # msgpack raises several unrelated exception types
         raise MessageError(f"{where}: not valid msgpack ({exc})") from None
     if not isinstance(raw, dict):
         raise MessageError(f"{where}: expected a map of fields, got {type(raw).__name__}")
+    return raw
+
+
+def decode(data: bytes, model: type[Message], where: str = "message") -> Message:
+    """Parse and validate msgpack bytes as `model`; raise MessageError naming the problem."""
+    raw = unpack_map(data, where)
     try:
         return model.model_validate(raw)
     except ValidationError as exc:

@@ -21,7 +21,8 @@ server answers only delta (`discrepancy`).
 A force model is anything with `predict(inputs) -> surrogate.Prediction` (and, for the LF in the
 loop, `kind` and `discrepancy`): the in-process `surrogate.Surrogate`, or
 `apps.services.RemoteSurrogate`, which asks the surrogate server over the bus. Both compute the
-same numbers.
+same numbers. The server is asked about delta before the LF is evaluated and answered after it
+(`discrepancy_later`), so its round trip overlaps the LF's work.
 """
 
 from __future__ import annotations
@@ -362,6 +363,19 @@ def interaction_at(
     )
 
 
+def discrepancy_later(
+    model: ForceModel, inputs: np.ndarray, with_std: bool
+) -> Callable[[], tuple[np.ndarray, np.ndarray | None]]:
+    """Ask about delta at inputs now and take the answer when it is needed: the surrogate server
+    (`apps.services.RemoteSurrogate.discrepancy_later`) predicts while the asker computes the LF;
+    an in-process model answers at once. The same numbers either way."""
+    later = getattr(model, "discrepancy_later", None)
+    if later is not None:
+        return later(inputs, return_std=with_std)
+    found = model.discrepancy(inputs, return_std=with_std)
+    return lambda: found
+
+
 def lf_in_loop_increment(
     model: ForceModel,
     inputs: np.ndarray,
@@ -396,21 +410,24 @@ def lf_in_loop_increment(
     n = len(inputs)
     reach = lf_reach_weight(x, y)
     delta_weight = discrepancy_weight(inputs)
+    near = reach > 0.0
+    asked = near & (delta_weight > 0.0) if weighted_only else np.ones(n, dtype=bool)
+    if any_asked := asked.any():
+        clamped = discrepancy_inputs(inputs[asked])
+        if delta is None:  # asked first, answered after the LF below (`discrepancy_later`)
+            answer = discrepancy_later(model, clamped, with_std)
     lf = np.zeros((n, 3))
     held = np.zeros(n, dtype=bool)
-    near = reach > 0.0
     if near.any():
         with_sub, alone, held[near] = hydro_lf.lf_increment_terms(inputs[near])
         lf[near] = with_sub - alone
-    asked = near & (delta_weight > 0.0) if weighted_only else np.ones(n, dtype=bool)
     mean, spread, free = np.zeros((n, 3)), np.full((n, 3), np.nan), np.zeros((n, 3))
-    if asked.any():
-        clamped = discrepancy_inputs(inputs[asked])
+    if any_asked:
+        free[asked] = free_stream.coefficients(clamped) - hydro_lf.lf_free_stream(clamped)
         if delta is None:
-            mean[asked], std = model.discrepancy(clamped, return_std=with_std)
+            mean[asked], std = answer()
         else:  # a sample of delta in place of its mean (`interaction_at`); a sample has no std
             mean[asked], std = delta(clamped, np.flatnonzero(asked)), np.nan
-        free[asked] = free_stream.coefficients(clamped) - hydro_lf.lf_free_stream(clamped)
         if with_std:
             spread[asked] = std
     correction = np.where(delta_weight[:, None] > 0.0, delta_weight[:, None] * (mean - free), 0.0)

@@ -37,7 +37,6 @@ import numpy as np
 import nearsub
 from nearsub.common.learning.gp import MultiOutputGP
 from nearsub.common.physics.hull import D_SUB, L_SUB
-from nearsub.common.runtime.messages import decode, encode
 from nearsub.common.surrogate.domain import (
     BOUNDS,
     CONSTRAINTS,
@@ -71,8 +70,10 @@ from nearsub.common.surrogate.query import (  # noqa: F401
     Prediction,
     SurrogateQuery,
     SurrogateReply,
+    decode_query,
     decode_reply,
     encode_query,
+    encode_reply,
     surrogate_key,
 )
 
@@ -258,20 +259,12 @@ def load_surrogate(path: str | os.PathLike | None = None) -> Surrogate:
     return Surrogate(analytic_model(), source=f"analytic test fixture (no model at {shipped})")
 
 
-def answer_query(surrogate: Surrogate, payload: bytes, source: str = "surrogate") -> bytes:
-    """The server's work for one query: validate, predict the whole batch, encode the reply.
-    Raises MessageError (naming the field and value) for a malformed query."""
-    query = decode(payload, SurrogateQuery, "surrogate query")
-    p = surrogate.predict(np.array(query.points, dtype=float), return_std=True)
-    reply = SurrogateReply(
-        step=query.step,
-        t=query.t,
-        source=source,
-        mean=p.mean.tolist(),
-        std=p.std.tolist(),
-        in_domain=p.in_domain.tolist(),
-        constraints_ok=p.constraints_ok.tolist(),
-        output_names=list(surrogate.output_names),
-        model_id=surrogate.model_id,
-    )
-    return encode(reply)
+def answer_query(
+    surrogate: Surrogate, payload: bytes, source: str = "surrogate", max_points: int = MAX_QUERY_POINTS
+) -> bytes:
+    """The server's work for one query: check it, predict the whole batch, encode the reply.
+    Raises MessageError (naming the field and value) for a malformed query or one of more than
+    `max_points` points."""
+    query = decode_query(payload, max_points)
+    prediction = surrogate.predict(query.points, return_std=True)
+    return encode_reply(query, prediction, surrogate.output_names, surrogate.model_id, source)
