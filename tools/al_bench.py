@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -169,6 +170,7 @@ def al_bench_command(args) -> int:
             test_points=args.test_points,
             reference_counts=tuple(args.reference),
             on_task_done=lambda done, total: bar.update(job, completed=done, total=total),
+            time_limit=None if args.time_limit is None else 60.0 * args.time_limit,
             **settings,
         )
     summary = summarise(result)
@@ -180,6 +182,18 @@ def al_bench_command(args) -> int:
     paths = write_outputs(result, summary, out)
     _print_report(result, summary, paths)
     return 0
+
+
+def _minutes(text: str) -> float:
+    import argparse
+
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not value > 0.0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a positive number of minutes")
+    return value
 
 
 def _counts(text: str) -> list[int]:
@@ -222,5 +236,11 @@ def add_parser(subparsers) -> None:
         "method's training sets",
     )
     p.add_argument("--learn-rho", action="store_true", help="ablation: learn rho instead of 1")
+    p.add_argument(
+        "--time-limit",
+        type=_minutes,
+        metavar="MIN",
+        help="begin no repeat after MIN minutes (the repeats begun finish); write those",
+    )
     p.add_argument("-o", "--out", default="al-bench", help="output folder (default: al-bench)")
     p.set_defaults(func=al_bench_command)

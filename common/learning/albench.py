@@ -144,6 +144,7 @@ def run_benchmark(
     test_points: int = 2000,
     reference_counts: tuple[int, ...] = (),
     on_task_done: Callable[[int, int], None] | None = None,
+    time_limit: float | None = None,
     **settings: Any,
 ) -> dict[str, Any]:
     """Run the paired comparison and return raw results: per method, an array (repeats, n_hf
@@ -153,6 +154,9 @@ def run_benchmark(
     campaign's data; its MAPE is under "reference" (arrays (repeats, counts, outputs)).
     settings: further `CampaignSettings` fields (n_lookahead, n_restarts, n_polish, rho, ...).
     on_task_done(done, total) is called as each campaign finishes.
+    time_limit: seconds after which no further repeat starts (the repeats begun finish); the
+    result then holds fewer repeats ("repeats") than asked ("repeats_requested"). Each repeat's
+    numbers depend only on its seed, so they are the same as in a run without the limit.
     """
     problem = get_problem(problem_name)
     methods, n_lf0, n_hf0 = check_request(problem_name, hf_samples, n_lf0, n_hf0, methods, reference_counts)
@@ -160,6 +164,7 @@ def run_benchmark(
     counts = list(range(n_hf0, hf_samples + 1))
     single_blas_thread()  # inherited by the spawned workers
     start = time.perf_counter()
+    deadline = None if time_limit is None else start + time_limit
     ctx = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(max_workers=max(1, jobs), mp_context=ctx) as pool:
         X_test, Y_test = _test_set(problem, test_points, seed, pool, max(1, jobs))
@@ -168,7 +173,8 @@ def run_benchmark(
             for r in range(repeats)
             for method in methods
         ]
-        results = _run_all(pool, tasks, on_task_done)
+        results = _run_all(pool, tasks, on_task_done, deadline)
+    requested, repeats = repeats, 1 + max(r for _, r, *_ in results)  # begun repeats are a prefix
     ref_counts = sorted(reference_counts)
 
     def empty(n):
@@ -187,6 +193,8 @@ def run_benchmark(
         "outputs": list(problem.output_names),
         "methods": list(methods),
         "repeats": repeats,
+        "repeats_requested": requested,
+        "time_limit_seconds": time_limit,
         "hf_samples": hf_samples,
         "seed": seed,
         "jobs": jobs,
@@ -230,13 +238,23 @@ def check_request(
     return tuple(methods), max(n_lf0, n_hf0), n_hf0
 
 
-def _run_all(pool, tasks, on_task_done):
+def _run_all(pool, tasks, on_task_done, deadline=None):
+    """Results of the tasks (submitted repeat by repeat). After `deadline` (perf_counter) the
+    tasks of repeats that have not begun are cancelled, so every repeat run is whole; checked as
+    each task finishes, which is when a worker takes the next."""
     futures = [pool.submit(_run_task, task) for task in tasks]
     results = []
     for future in as_completed(futures):
+        if future.cancelled():
+            continue
         results.append(future.result())
         if on_task_done is not None:
             on_task_done(len(results), len(tasks))
+        if deadline is not None and time.perf_counter() > deadline:
+            begun = {t.repeat for f, t in zip(futures, tasks, strict=True) if f.running() or f.done()}
+            for f, t in zip(futures, tasks, strict=True):
+                if t.repeat not in begun:
+                    f.cancel()
     return results
 
 
