@@ -45,6 +45,10 @@ VARIANTS: dict[str, Callable[[dict[str, Any]], dict[str, Any]]] = {
 }
 # Every single-output method, the fair comparison (`--methods fair`); the reference first.
 FAIR_METHODS = ("nmmf", "myopic", "myopic-matched", "nmmf-keep", "nmmf-exact-lf", "myopic-exact-lf", "hf-us")
+# Algorithm 1 against its baseline, and the pairs that differ only in how the HF points are
+# chosen (equal LF data kept, or the exact LF): their paired win rates are the fair comparison's
+# verdicts. Every MF method is also paired with HF-only US.
+FAIR_PAIRS = (("nmmf", "myopic"), ("nmmf-keep", "myopic-matched"), ("nmmf-exact-lf", "myopic-exact-lf"))
 
 
 def mape(Y_pred: np.ndarray, Y_true: np.ndarray) -> np.ndarray:
@@ -271,7 +275,10 @@ def crossover(counts: list[int], ref: np.ndarray, other: np.ndarray) -> int | No
 
 
 def summarise(result: dict[str, Any]) -> dict[str, Any]:
-    """Median, quartiles, mean +/- 95 % CI, paired win rates and crossovers per output."""
+    """Median, quartiles, mean +/- 95 % CI, paired win rates and crossovers per output.
+
+    "pairs" holds the paired win rates P(a < b) of the fair pairs (`FAIR_PAIRS`, and each MF
+    method against HF-only US) whose methods were both run, keyed "a<b"."""
     from scipy import stats
 
     methods, counts = result["methods"], result["n_hf"]
@@ -289,19 +296,24 @@ def summarise(result: dict[str, Any]) -> dict[str, Any]:
     mapes = per_output(result["mape"])
     ref_gp = result.get("reference")
     ref_mapes = per_output(ref_gp["mape"]) if ref_gp else None
+    pairs = [p for p in FAIR_PAIRS if set(p) <= set(methods)]
+    if "hf-us" in methods:
+        pairs += [(m, "hf-us") for m in methods if m != "hf-us"]
     summary: dict[str, Any] = {"reference": reference, "outputs": {}}
     for j, name in enumerate(outputs):
         per_method = {m: _stats(mapes[m][:, :, j], stats) for m in methods}
         ref = mapes[reference][:, :, j]
         win = {b: np.mean(ref < mapes[b][:, :, j], axis=0).tolist() for b in baselines}
         cross = {b: crossover(counts, per_method[reference]["median"], per_method[b]["median"]) for b in baselines}
-        summary["outputs"][name] = {"stats": per_method, "win_rate": win, "crossover": cross}
+        pair_win = {f"{a}<{b}": np.mean(mapes[a][:, :, j] < mapes[b][:, :, j], axis=0).tolist() for a, b in pairs}
+        summary["outputs"][name] = {"stats": per_method, "win_rate": win, "crossover": cross, "pairs": pair_win}
         if ref_mapes:  # the same training sets, refitted by the reference GP
             a = {m: ref_mapes[m][:, :, j] for m in methods}
             summary["outputs"][name]["reference_gp"] = {
                 "counts": ref_gp["counts"],
                 "stats": {m: _stats(a[m], stats) for m in methods},
                 "win_rate": {b: np.mean(a[reference] < a[b], axis=0).tolist() for b in baselines},
+                "pairs": {f"{x}<{y}": np.mean(a[x] < a[y], axis=0).tolist() for x, y in pairs},
             }
     return summary
 
