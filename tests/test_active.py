@@ -261,3 +261,14 @@ def test_reference_gp_refits_the_same_training_sets():
     assert ref["nmmf"] < ref["hf-us"] and ref["myopic-exact-lf"] < ref["hf-us"], ref
     with pytest.raises(LookupError, match="outside the HF counts"):
         run_benchmark("park", repeats=1, hf_samples=12, reference_counts=(40,))
+
+
+def test_time_limit_runs_whole_repeats_only():
+    """Past the limit no repeat begins; those begun finish, and equal an unlimited run's."""
+    kw = dict(hf_samples=7, methods=("hf-us", "myopic-exact-lf", "nmmf-exact-lf"), test_points=200, **FAST)
+    limited = run_benchmark("park", repeats=6, time_limit=1e-9, **kw)
+    full = run_benchmark("park", repeats=1, **kw)
+    assert 1 <= limited["repeats"] < 6 and limited["repeats_requested"] == 6
+    for method, a in limited["mape"].items():
+        assert a.shape[0] == limited["repeats"] and np.all(np.isfinite(a))
+        np.testing.assert_array_equal(a[0], full["mape"][method][0])

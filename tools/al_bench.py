@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -143,21 +144,118 @@ def _print_report(result: dict[str, Any], summary: dict[str, Any], paths: dict[s
         console.print(f"  {p}")
 
 
-def al_bench_command(args) -> int:
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
+def read_outputs(problem: str, out: Path) -> dict[str, Any]:
+    """The result `write_outputs` wrote to `out` (CSVs and JSON), to summarise and draw it again."""
+    import numpy as np
 
-    from nearsub.common.learning.albench import check_request, run_benchmark, summarise
+    stem = out / problem
+    try:
+        meta = json.loads(stem.with_suffix(".json").read_text())
+        tables = [_read_csv(stem.with_suffix(".csv"))]
+        if meta.get("reference_counts"):
+            tables.append(_read_csv(out / f"{problem}-reference.csv"))
+    except FileNotFoundError as exc:
+        raise LookupError(f"--from-files: no {exc.filename}") from None
+    outputs, methods = meta["outputs"], meta["methods"]
+
+    def arrays(rows, counts):
+        a = {m: np.full((meta["repeats"], len(counts), len(outputs)), np.nan) for m in methods}
+        for m, r, n_hf, name, value in rows:
+            a[m][r, counts.index(n_hf), outputs.index(name)] = value
+        return a
+
+    result = {k: v for k, v in meta.items() if k not in ("summary", "reference_counts", "thesis_claim")}
+    result["mape"] = arrays(tables[0], meta["n_hf"])
+    result["reference"] = None
+    if len(tables) > 1:
+        result["reference"] = {"counts": meta["reference_counts"], "mape": arrays(tables[1], meta["reference_counts"])}
+    return result
+
+
+def _read_csv(path: Path) -> list[tuple[str, int, int, str, float]]:
+    with open(path, newline="") as fh:
+        return [
+            (row["method"], int(row["repeat"]), int(row["n_hf"]), row["output"], float(row["mape_percent"]))
+            for row in csv.DictReader(fh)
+        ]
+
+
+def markdown_tables(result: dict[str, Any], summary: dict[str, Any]) -> str:
+    """Median MAPE (interquartile range) every 10 HF samples and at the reference counts, and the
+    paired win rates of the fair pairs, as markdown tables (the docs' tables)."""
+    ref_counts = result["reference"]["counts"] if result.get("reference") else []
+    counts = result["n_hf"]
+    shown = sorted({n for n in counts if n % 10 == 0} | set(ref_counts) | {counts[-1]})
+
+    def g(v):
+        return f"{v:.3g}"
+
+    lines = []
+    for name, out in summary["outputs"].items():
+        methods = result["methods"]
+        head = "| HF | " + " | ".join(_LABELS.get(m, m) for m in methods) + " |"
+        lines += [f"{result['problem']} / {name}, {result['repeats']} repeats: median MAPE [%] (IQR)", "", head]
+        lines.append("|---" * (len(methods) + 1) + "|")
+        blocks = [("", out["stats"], counts, shown)]
+        if gp := out.get("reference_gp"):
+            blocks.append((", reference GP", gp["stats"], gp["counts"], gp["counts"]))
+        for suffix, stats, at, rows in blocks:
+            for n in rows:
+                i = at.index(n)
+                cells = [
+                    f"{g(stats[m]['median'][i])} ({g(stats[m]['q25'][i])}-{g(stats[m]['q75'][i])})" for m in methods
+                ]
+                lines.append(f"| {n}{suffix} | " + " | ".join(cells) + " |")
+        if out.get("pairs"):
+            pairs = list(out["pairs"])
+            lines += ["", "Paired win rates P(a < b):", ""]
+            lines.append("| HF | " + " | ".join(p.replace("<", " < ") for p in pairs) + " |")
+            lines.append("|---" * (len(pairs) + 1) + "|")
+            for suffix, wins, at, rows in [("", out["pairs"], counts, shown)] + (
+                [(", reference GP", gp["pairs"], gp["counts"], gp["counts"])] if gp else []
+            ):
+                for n in rows:
+                    i = at.index(n)
+                    lines.append(f"| {n}{suffix} | " + " | ".join(f"{wins[p][i]:.2f}" for p in pairs) + " |")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def al_bench_command(args) -> int:
+    from nearsub.common.learning.albench import check_request, summarise
 
     methods = tuple(args.methods.split(",")) if args.methods else None
-    # Bad input is reported in one line before the progress bar starts.
-    check_request(args.problem, args.hf_samples, args.n_lf0, args.n_hf0, methods, tuple(args.reference))
+    out = Path(args.out)
+    if args.learn_rho:
+        out = out / "learned-rho"
+    if args.methods:
+        out = out / args.methods.replace(",", "_")  # "fair" names its own folder
+    if args.from_files:
+        result = read_outputs(args.problem, out)
+    else:
+        # Bad input is reported in one line before the progress bar starts.
+        check_request(args.problem, args.hf_samples, args.n_lf0, args.n_hf0, methods, tuple(args.reference))
+        result = _run(args, methods)
+    summary = summarise(result)
+    paths = write_outputs(result, summary, out)
+    _print_report(result, summary, paths)
+    if args.markdown:
+        print(markdown_tables(result, summary))
+    return 0
+
+
+def _run(args, methods) -> dict[str, Any]:
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
+
+    from nearsub.common.learning.albench import run_benchmark
+
     settings = {"n_lookahead": args.lookahead, "n_restarts": args.restarts, "n_polish": args.polish}
     if args.learn_rho:
         settings["rho"] = None
     columns = ("[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
     with Progress(*columns) as bar:
         job = bar.add_task(f"al-bench {args.problem}", total=None)
-        result = run_benchmark(
+        return run_benchmark(
             args.problem,
             args.repeats,
             args.hf_samples,
@@ -169,17 +267,21 @@ def al_bench_command(args) -> int:
             test_points=args.test_points,
             reference_counts=tuple(args.reference),
             on_task_done=lambda done, total: bar.update(job, completed=done, total=total),
+            time_limit=None if args.time_limit is None else 60.0 * args.time_limit,
             **settings,
         )
-    summary = summarise(result)
-    out = Path(args.out)
-    if args.learn_rho:
-        out = out / "learned-rho"
-    if args.methods:
-        out = out / args.methods.replace(",", "_")  # "fair" names its own folder
-    paths = write_outputs(result, summary, out)
-    _print_report(result, summary, paths)
-    return 0
+
+
+def _minutes(text: str) -> float:
+    import argparse
+
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not value > 0.0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a positive number of minutes")
+    return value
 
 
 def _counts(text: str) -> list[int]:
@@ -222,5 +324,17 @@ def add_parser(subparsers) -> None:
         "method's training sets",
     )
     p.add_argument("--learn-rho", action="store_true", help="ablation: learn rho instead of 1")
+    p.add_argument(
+        "--time-limit",
+        type=_minutes,
+        metavar="MIN",
+        help="begin no repeat after MIN minutes (the repeats begun finish); write those",
+    )
+    p.add_argument(
+        "--from-files",
+        action="store_true",
+        help="run nothing: summarise and draw again the CSVs a run wrote in the output folder",
+    )
+    p.add_argument("--markdown", action="store_true", help="also print the docs' markdown tables")
     p.add_argument("-o", "--out", default="al-bench", help="output folder (default: al-bench)")
     p.set_defaults(func=al_bench_command)

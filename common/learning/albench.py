@@ -45,6 +45,10 @@ VARIANTS: dict[str, Callable[[dict[str, Any]], dict[str, Any]]] = {
 }
 # Every single-output method, the fair comparison (`--methods fair`); the reference first.
 FAIR_METHODS = ("nmmf", "myopic", "myopic-matched", "nmmf-keep", "nmmf-exact-lf", "myopic-exact-lf", "hf-us")
+# Algorithm 1 against its baseline, and the pairs that differ only in how the HF points are
+# chosen (equal LF data kept, or the exact LF): their paired win rates are the fair comparison's
+# verdicts. Every MF method is also paired with HF-only US.
+FAIR_PAIRS = (("nmmf", "myopic"), ("nmmf-keep", "myopic-matched"), ("nmmf-exact-lf", "myopic-exact-lf"))
 
 
 def mape(Y_pred: np.ndarray, Y_true: np.ndarray) -> np.ndarray:
@@ -144,6 +148,7 @@ def run_benchmark(
     test_points: int = 2000,
     reference_counts: tuple[int, ...] = (),
     on_task_done: Callable[[int, int], None] | None = None,
+    time_limit: float | None = None,
     **settings: Any,
 ) -> dict[str, Any]:
     """Run the paired comparison and return raw results: per method, an array (repeats, n_hf
@@ -153,6 +158,9 @@ def run_benchmark(
     campaign's data; its MAPE is under "reference" (arrays (repeats, counts, outputs)).
     settings: further `CampaignSettings` fields (n_lookahead, n_restarts, n_polish, rho, ...).
     on_task_done(done, total) is called as each campaign finishes.
+    time_limit: seconds after which no further repeat starts (the repeats begun finish); the
+    result then holds fewer repeats ("repeats") than asked ("repeats_requested"). Each repeat's
+    numbers depend only on its seed, so they are the same as in a run without the limit.
     """
     problem = get_problem(problem_name)
     methods, n_lf0, n_hf0 = check_request(problem_name, hf_samples, n_lf0, n_hf0, methods, reference_counts)
@@ -160,6 +168,7 @@ def run_benchmark(
     counts = list(range(n_hf0, hf_samples + 1))
     single_blas_thread()  # inherited by the spawned workers
     start = time.perf_counter()
+    deadline = None if time_limit is None else start + time_limit
     ctx = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(max_workers=max(1, jobs), mp_context=ctx) as pool:
         X_test, Y_test = _test_set(problem, test_points, seed, pool, max(1, jobs))
@@ -168,7 +177,8 @@ def run_benchmark(
             for r in range(repeats)
             for method in methods
         ]
-        results = _run_all(pool, tasks, on_task_done)
+        results = _run_all(pool, tasks, on_task_done, deadline)
+    requested, repeats = repeats, 1 + max(r for _, r, *_ in results)  # begun repeats are a prefix
     ref_counts = sorted(reference_counts)
 
     def empty(n):
@@ -187,6 +197,8 @@ def run_benchmark(
         "outputs": list(problem.output_names),
         "methods": list(methods),
         "repeats": repeats,
+        "repeats_requested": requested,
+        "time_limit_seconds": time_limit,
         "hf_samples": hf_samples,
         "seed": seed,
         "jobs": jobs,
@@ -230,13 +242,23 @@ def check_request(
     return tuple(methods), max(n_lf0, n_hf0), n_hf0
 
 
-def _run_all(pool, tasks, on_task_done):
+def _run_all(pool, tasks, on_task_done, deadline=None):
+    """Results of the tasks (submitted repeat by repeat). After `deadline` (perf_counter) the
+    tasks of repeats that have not begun are cancelled, so every repeat run is whole; checked as
+    each task finishes, which is when a worker takes the next."""
     futures = [pool.submit(_run_task, task) for task in tasks]
     results = []
     for future in as_completed(futures):
+        if future.cancelled():
+            continue
         results.append(future.result())
         if on_task_done is not None:
             on_task_done(len(results), len(tasks))
+        if deadline is not None and time.perf_counter() > deadline:
+            begun = {t.repeat for f, t in zip(futures, tasks, strict=True) if f.running() or f.done()}
+            for f, t in zip(futures, tasks, strict=True):
+                if t.repeat not in begun:
+                    f.cancel()
     return results
 
 
@@ -253,7 +275,10 @@ def crossover(counts: list[int], ref: np.ndarray, other: np.ndarray) -> int | No
 
 
 def summarise(result: dict[str, Any]) -> dict[str, Any]:
-    """Median, quartiles, mean +/- 95 % CI, paired win rates and crossovers per output."""
+    """Median, quartiles, mean +/- 95 % CI, paired win rates and crossovers per output.
+
+    "pairs" holds the paired win rates P(a < b) of the fair pairs (`FAIR_PAIRS`, and each MF
+    method against HF-only US) whose methods were both run, keyed "a<b"."""
     from scipy import stats
 
     methods, counts = result["methods"], result["n_hf"]
@@ -271,19 +296,24 @@ def summarise(result: dict[str, Any]) -> dict[str, Any]:
     mapes = per_output(result["mape"])
     ref_gp = result.get("reference")
     ref_mapes = per_output(ref_gp["mape"]) if ref_gp else None
+    pairs = [p for p in FAIR_PAIRS if set(p) <= set(methods)]
+    if "hf-us" in methods:
+        pairs += [(m, "hf-us") for m in methods if m != "hf-us"]
     summary: dict[str, Any] = {"reference": reference, "outputs": {}}
     for j, name in enumerate(outputs):
         per_method = {m: _stats(mapes[m][:, :, j], stats) for m in methods}
         ref = mapes[reference][:, :, j]
         win = {b: np.mean(ref < mapes[b][:, :, j], axis=0).tolist() for b in baselines}
         cross = {b: crossover(counts, per_method[reference]["median"], per_method[b]["median"]) for b in baselines}
-        summary["outputs"][name] = {"stats": per_method, "win_rate": win, "crossover": cross}
+        pair_win = {f"{a}<{b}": np.mean(mapes[a][:, :, j] < mapes[b][:, :, j], axis=0).tolist() for a, b in pairs}
+        summary["outputs"][name] = {"stats": per_method, "win_rate": win, "crossover": cross, "pairs": pair_win}
         if ref_mapes:  # the same training sets, refitted by the reference GP
             a = {m: ref_mapes[m][:, :, j] for m in methods}
             summary["outputs"][name]["reference_gp"] = {
                 "counts": ref_gp["counts"],
                 "stats": {m: _stats(a[m], stats) for m in methods},
                 "win_rate": {b: np.mean(a[reference] < a[b], axis=0).tolist() for b in baselines},
+                "pairs": {f"{x}<{y}": np.mean(a[x] < a[y], axis=0).tolist() for x, y in pairs},
             }
     return summary
 

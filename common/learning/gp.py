@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 from scipy.linalg import solve_triangular
-from scipy.linalg.lapack import dpotrf, dpotrs
+from scipy.linalg.lapack import dpotrf, dpotri, dpotrs
 from scipy.optimize import minimize
 
 __all__ = ["FINAL_FIT_RESTARTS", "DegenerateFitError", "GaussianProcess", "MultiOutputGP"]
@@ -99,9 +99,15 @@ def _lml(theta: np.ndarray, D2: np.ndarray, y: np.ndarray, eval_gradient: bool) 
     inv_l2 = np.exp(-2.0 * theta[:d])
     s2 = math.exp(theta[d])
     sn2 = math.exp(theta[d + 1])
-    # ARD RBF, thesis (2.5) with lambda = diag(l^2), times the signal variance s2.
-    Kf = s2 * np.exp(-0.5 * (inv_l2 @ D2)).reshape(n, n)
-    K = Kf + sn2 * np.eye(n)
+    # ARD RBF, thesis (2.5) with lambda = diag(l^2), times the signal variance s2; in place,
+    # since the (n, n) temporaries cost as much as the factorisation at a few hundred points.
+    Kf = inv_l2 @ D2
+    Kf *= -0.5
+    np.exp(Kf, out=Kf)
+    Kf *= s2
+    Kf = Kf.reshape(n, n)
+    K = Kf.copy()
+    K.flat[:: n + 1] += sn2
     fact = _cholesky(K)
     if fact is None:
         return -math.inf, None
@@ -112,13 +118,23 @@ def _lml(theta: np.ndarray, D2: np.ndarray, y: np.ndarray, eval_gradient: bool) 
         return -math.inf, None
     if not eval_gradient:
         return lml, None
-    Kinv, _ = dpotrs(L, np.eye(n), lower=1)
-    W = np.outer(alpha, alpha) - Kinv  # dLML/dtheta_j = 0.5 tr(W dK/dtheta_j)
-    WKf = (W * Kf).ravel()
+    # K^-1 from the factor (LAPACK potri: a third of the flops of solving K X = I), as its lower
+    # triangle. W = alpha alpha^T - K^-1 (dLML/dtheta_j = 0.5 tr(W dK/dtheta_j)) only enters
+    # sums against symmetric matrices, so W's lower triangle carries K^-1 twice and its upper
+    # triangle not at all: the same sums, without mirroring K^-1.
+    Kinv_low, _ = dpotri(L, lower=1)
+    Kinv_diag = np.diag(Kinv_low).copy()
+    Kinv_low *= 2.0
+    W = np.outer(alpha, alpha)
+    W -= Kinv_low
+    W.flat[:: n + 1] += Kinv_diag
+    trace_W = np.trace(W)
+    W *= Kf
+    WKf = W.ravel()
     grad = np.empty(d + 2)
     grad[:d] = 0.5 * (D2 @ WKf) * inv_l2  # dK/dlog l_k = Kf * (dx_k / l_k)^2
     grad[d] = 0.5 * WKf.sum()  # dK/dlog s2 = Kf
-    grad[d + 1] = 0.5 * sn2 * np.trace(W)  # dK/dlog sn2 = sn2 * I
+    grad[d + 1] = 0.5 * sn2 * trace_W  # dK/dlog sn2 = sn2 * I
     return lml, grad
 
 
