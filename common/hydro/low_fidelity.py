@@ -441,10 +441,13 @@ def lf_increment_terms(inputs, *, n_strips: int = N_STRIPS, n_frusta: int = N_FR
 
 
 def compile_kernels() -> None:
-    """Evaluate every path of the LF once, so numba compiles its kernels into its on-disk cache
-    now (seconds, once per install) and not in the first processes of a mission (tools/run.sh
-    and tools/test.sh call it after installing)."""
+    """Evaluate every path of the LF, and the event geometry the LF's cut-off reads, once, so numba
+    compiles their kernels into its on-disk cache now (seconds, once per install) and not in the
+    first processes of a mission (tools/run.sh and tools/test.sh call it after installing)."""
+    from nearsub.common.physics import proximity
+
     row = np.array([[0.0, 0.08, 3.0, 1.0, 8.0, 7.0]])  # any valid row: R_long, R_lat, kn, deg, ratios
     lf_coefficients(row)
     lf_free_stream(row)
     lf_increment_terms(row)
+    proximity.classify(np.zeros(1), np.full(1, 5.5), np.zeros(1), 1.0, 0.2)  # a pose 0.3 m off the hull

@@ -5,4 +5,5 @@
 - waves: deep-water linear waves for sea states 0-6 (thesis 5.22/5.23).
 - hull: SUBOFF and Explorer hull shapes, outlines, profiles and panel meshes.
 - proximity: collision, close-call and large-stray geometry (thesis 5.11.2).
+- proximity_kernel: its compiled grid reader and outline clearance (numba).
 """
