@@ -168,3 +168,46 @@ def test_batch_equals_single_poses():
         single = events.classify(x[i], y[i], psi[i], REMUS_L, REMUS_D)
         assert bool(single.collision) == batch.collision[i] == (d[i] <= 0)
         assert bool(single.close_call) == batch.close_call[i]
+
+
+def _numpy_grid_distance(x, y):
+    """The numpy implementation the compiled grid reader replaced (bilinear interpolation of the
+    finest grid that trusts its value, closed form beside the middle body, exact elsewhere), kept
+    as its reference."""
+    x, y = np.asarray(x, dtype=float).ravel(), np.abs(np.asarray(y, dtype=float)).ravel()
+    x_bow_joint, x_aft_joint = events._joints_x()
+    beside = (x <= x_bow_joint) & (x >= x_aft_joint)
+    dist = y - R
+    todo = np.flatnonzero(~beside | ((y < R) & (R - y > np.minimum(x_bow_joint - x, x - x_aft_joint))))
+    for grid in events._distance_grids():
+        fx, fy = (x[todo] - grid.x0) / grid.h, y[todo] / grid.h
+        i, j = np.floor(fx), np.floor(fy)
+        covered = (i >= 0) & (i < grid.values.size // grid.ny - 1) & (j < grid.ny - 1)
+        i, j = np.where(covered, i, 0), np.where(covered, j, 0)
+        tx, ty = fx - i, fy - j
+        k = (i * grid.ny + j).astype(np.intp)
+        v = grid.values
+        low = v[k] + tx * (v[k + grid.ny] - v[k])
+        high = v[k + 1] + tx * (v[k + grid.ny + 1] - v[k + 1])
+        value = np.where(covered, low + ty * (high - low), np.nan)
+        found = value >= grid.trusted_from
+        dist[todo[found]] = value[found]
+        todo = todo[~found]
+    dist[todo] = events._exact_signed_distance(x[todo], y[todo])
+    return dist
+
+
+def test_compiled_distances_equal_the_numpy_reference_bit_for_bit():
+    """hull_signed_distance and closest_distance against the numpy arrays they replaced, near the
+    hull (some points inside, some poses touching), far out and beyond every grid."""
+    rng = np.random.default_rng(12)
+    x_near = rng.uniform(hull.SUB_STERN_X - 3.0, hull.SUB_BOW_X + 3.0, 4000)
+    x = np.concatenate([x_near, rng.uniform(-400, 400, 2000)])
+    y = np.concatenate([hull.submarine_half_width(x_near) + rng.uniform(-0.5, 4.0, 4000), rng.uniform(-300, 300, 2000)])
+    np.testing.assert_array_equal(events.hull_signed_distance(x, y), _numpy_grid_distance(x, y))
+    psi = rng.uniform(-np.pi, np.pi, x.size)
+    ox, oy = hull.uuv_outline(x, y, psi, REMUS_L, REMUS_D)
+    expected = _numpy_grid_distance(ox, oy).reshape(ox.shape).min(axis=-1)
+    got = events.closest_distance(x, y, psi, REMUS_L, REMUS_D)
+    assert (got <= 0).any() and (got > 0).any()
+    np.testing.assert_array_equal(got, expected)

@@ -24,10 +24,19 @@ RING_WEIGHTS = (0.25, 0.25, 0.5)  # ring-mean weights of the +eta, -eta, +z poin
 
 @njit(cache=True)
 def _interval(inner, value, guess):
-    """Number of interior breakpoints at or below `value` (searchsorted side="right"), walked from
-    `guess`, the index of a nearby point: neighbouring strips are a few cells apart at most, and
-    the walk ends at the same index as a binary search would."""
+    """Number of interior breakpoints at or below `value` (searchsorted side="right"): walked from
+    `guess`, the index of a nearby point (neighbouring strips are a few cells apart at most), or
+    by bisection when there is none (guess < 0). Either ends at the same index."""
     n = inner.shape[0]
+    if guess < 0:
+        lo, hi = 0, n
+        while lo < hi:
+            mid = (lo + hi) // 2
+            if inner[mid] <= value:
+                lo = mid + 1
+            else:
+                hi = mid
+        return lo
     i = guess
     while i < n and inner[i] <= value:
         i += 1
@@ -104,12 +113,16 @@ def strip_forces(
     x_lo, x_hi, r_lo, r_hi = bounds[0], bounds[1], bounds[2], bounds[3]
     w0, w1, w2 = RING_WEIGHTS
     n_strips = unit_xi.shape[1]
-    guess_a = np.zeros(3, dtype=np.int64)
-    guess_b = np.zeros(3, dtype=np.int64)
+    guess_a = np.empty(3, dtype=np.int64)
+    guess_b = np.empty(3, dtype=np.int64)
     cp = np.empty(3)
     v_xi = np.empty(3)
     v_eta = np.empty(3)
     for n in range(x_c.shape[0]):
+        # Each ring point's cell is searched for at the row's first station, then walked from the
+        # previous station's: rows in any order cost the same.
+        guess_a[:] = -1
+        guess_b[:] = -1
         c, s, d = cos_psi[n], sin_psi[n], diameter[n]
         row = strip_row[n]
         valid = True

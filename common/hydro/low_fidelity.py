@@ -364,22 +364,29 @@ def _explorer_cb_table() -> CubicSpline:
 def _strips(ld_ratio: np.ndarray, n_strips: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Strips of Explorer UUVs of unit diameter: body-frame stations xi (ascending, tail to nose,
     cosine-spaced so the tips are resolved), radius r and meridian arc length, (k, strips) each for
-    the k distinct L/D values, and each input row's index into them. A vehicle has one L/D, so
-    the rows come from `_unit_strips`, computed once per L/D."""
+    the k distinct L/D values, and each input row's index into them. A vehicle has one L/D, whose
+    strips are kept (`_unit_strips`); many hulls at once (training, validation) are computed
+    together, element by element, to the same bits."""
     values, index = np.unique(ld_ratio, return_inverse=True)
-    rows = [_unit_strips(float(ld), n_strips) for ld in values]
-    return (*(np.stack([row[k] for row in rows]) for k in range(3)), index.astype(np.int64))
+    table = _unit_strips(float(values[0]), n_strips) if len(values) == 1 else _strip_table(values, n_strips)
+    return (*table, index.astype(np.int64))
 
 
 @lru_cache(maxsize=256)
 def _unit_strips(ld: float, n_strips: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    t = 0.5 * (1.0 - np.cos(np.linspace(0.0, np.pi, n_strips)))[::-1]
-    s = ld * t
-    r = explorer_radius(s, ld, 1.0)
-    xi = _explorer_cb_table()(np.array([ld]))[0] - s
-    arc = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(xi), np.diff(r)))])
-    for part in (xi, r, arc):
+    parts = _strip_table(np.array([ld]), n_strips)
+    for part in parts:
         part.setflags(write=False)
+    return parts
+
+
+def _strip_table(ld: np.ndarray, n_strips: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """xi, r and arc (len(ld), n_strips) of `_strips` for the L/D values ld."""
+    t = 0.5 * (1.0 - np.cos(np.linspace(0.0, np.pi, n_strips)))[::-1]
+    s = ld[:, None] * t
+    r = explorer_radius(s, ld[:, None], 1.0)
+    xi = _explorer_cb_table()(ld)[:, None] - s
+    arc = np.concatenate([np.zeros((len(ld), 1)), np.cumsum(np.hypot(np.diff(xi), np.diff(r)), axis=1)], axis=1)
     return xi, r, arc
 
 
@@ -441,10 +448,13 @@ def lf_increment_terms(inputs, *, n_strips: int = N_STRIPS, n_frusta: int = N_FR
 
 
 def compile_kernels() -> None:
-    """Evaluate every path of the LF once, so numba compiles its kernels into its on-disk cache
-    now (seconds, once per install) and not in the first processes of a mission (tools/run.sh
-    and tools/test.sh call it after installing)."""
+    """Evaluate every path of the LF, and the event geometry the LF's cut-off reads, once, so numba
+    compiles their kernels into its on-disk cache now (seconds, once per install) and not in the
+    first processes of a mission (tools/run.sh and tools/test.sh call it after installing)."""
+    from nearsub.common.physics import proximity
+
     row = np.array([[0.0, 0.08, 3.0, 1.0, 8.0, 7.0]])  # any valid row: R_long, R_lat, kn, deg, ratios
     lf_coefficients(row)
     lf_free_stream(row)
     lf_increment_terms(row)
+    proximity.classify(np.zeros(1), np.full(1, 5.5), np.zeros(1), 1.0, 0.2)  # a pose 0.3 m off the hull

@@ -1,8 +1,9 @@
 """Gaussian-process regression core: ARD RBF kernel, type-II maximum likelihood, fast prediction.
 
-Pure numpy/scipy (no GPy, no scikit-learn at run time). The thesis builds its surrogates from
-one independent GP per output (thesis section 2.5, used again in section 4.4); this module
-provides the single-output `GaussianProcess` and the `MultiOutputGP` container.
+Numpy/scipy (no GPy, no scikit-learn at run time), and one numba kernel for row-wise prediction
+(`gp_kernel`). The thesis builds its surrogates from one independent GP per output (thesis
+section 2.5, used again in section 4.4); this module provides the single-output `GaussianProcess`
+and the `MultiOutputGP` container.
 
 Conventions (see docs in the classes):
 
@@ -146,6 +147,14 @@ def _neg_lml(theta: np.ndarray, D2: np.ndarray, y: np.ndarray) -> tuple[float, n
     return -lml, -grad
 
 
+def _kernel():
+    """The compiled distances of `_Predictor.rows` (`gp_kernel`), imported on first use: a process
+    that only fits GPs does not pay numba's import."""
+    from nearsub.common.learning import gp_kernel
+
+    return gp_kernel
+
+
 class _Predictor:
     """Posterior mean/std of m GPs sharing training inputs, precomputed for speed.
 
@@ -172,6 +181,9 @@ class _Predictor:
         self.LinvT_s = np.ascontiguousarray(self.Linv_s.transpose(0, 2, 1))
         self.y_mean = np.array([gp.y_mean_ for gp in gps])
         self.y_std = np.array([gp.y_std_ for gp in gps])
+        # Load (the first time after an install, compile) the kernel of `rows` with the model, so
+        # that a server's or a sim's first prediction costs no more than the next.
+        _kernel().neg_sq_distances(np.empty((0, self.A.shape[1])), self.A, self.B, self.ZT)
 
     def point(self, x: np.ndarray, return_std: bool) -> tuple[np.ndarray, np.ndarray | None]:
         """Mean and std (m,) at one point x (d,): the hot path, ~a dozen small numpy calls."""
@@ -197,13 +209,8 @@ class _Predictor:
         mean = np.empty((N, m))
         std = np.empty((N, m)) if return_std else None
         for start in range(0, N, _ROW_CHUNK):
-            Xb = X[start : start + _ROW_CHUNK]
-            zb = Xb[None, :, :] * self.A[:, None, :] + self.B[:, None, :]  # (m, a, d)
-            sq = np.zeros((m, len(Xb), self.Z.shape[1]))
-            for k in range(self.Z.shape[2]):  # one input at a time, always in the same order
-                diff = self.ZT[:, None, k, :] - zb[:, :, k, None]  # (m, a, n)
-                sq += diff * diff
-            e = np.exp(-sq)  # (m, a, n)
+            Xb = np.ascontiguousarray(X[start : start + _ROW_CHUNK])
+            e = np.exp(_kernel().neg_sq_distances(Xb, self.A, self.B, self.ZT))  # (m, a, n)
             mean[start : start + _ROW_CHUNK] = (np.sum(e * self.alpha_s[:, None, :], axis=-1)).T  # thesis (2.6)
             if std is not None:
                 for j in range(m):  # 2-D products: numpy's stacked matmul is far slower here

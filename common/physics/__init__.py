@@ -6,4 +6,5 @@
 - hull: SUBOFF and Explorer hull shapes, outlines, profiles and panel meshes.
 - proximity: collision, close-call and large-stray geometry (thesis 5.11.2).
 - encounters: clearance, collision and close call between two UUVs (capsule hulls).
+- proximity_kernel: its compiled grid reader and outline clearance (numba).
 """

@@ -154,10 +154,11 @@ def submarine_outline(n: int = 400) -> tuple[np.ndarray, np.ndarray]:
 # Explorer-shaped UUV, thesis (3.1) bow ellipse and (3.2) stern paraboloid (thesis section 3.2)
 def explorer_radius(s, length: float, diameter: float):
     """Explorer hull radius at s from the nose: ellipse (3.1) over 2R, cylinder, paraboloid (3.2)
-    over 4R with a pointed tail. Requires length >= 3 diameter (L = 6R + L_p, L_p >= 0)."""
+    over 4R with a pointed tail. Requires length >= 3 diameter (L = 6R + L_p, L_p >= 0); length
+    may be an array that broadcasts with s (one hull per row)."""
     radius = 0.5 * diameter
     parallel = length - 6.0 * radius  # L_p (L = 6R + L_p)
-    if parallel < 0.0:
+    if np.any(parallel < 0.0):
         raise ValueError(f"Explorer hull needs length >= 3 diameters, got L={length}, D={diameter}")
     s = np.asarray(s, dtype=float)
     bow = radius * np.sqrt(np.maximum(1.0 - ((s - 2.0 * radius) / (2.0 * radius)) ** 2, 0.0))  # (3.1)

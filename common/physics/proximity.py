@@ -125,28 +125,15 @@ def _exact_signed_distance(x: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class _DistanceGrid:
-    """Signed distances on the nodes x0 + i h, j h (y >= 0); NaN at nodes outside its band. It
-    answers only for distances of at least `trusted_from`, where its error is small."""
+    """Signed distances on the nodes x0 + i h, j h (y >= 0); NaN at nodes outside its band. Read
+    by bilinear interpolation (`proximity_kernel`), it answers only for distances of at least
+    `trusted_from`, where its error is small."""
 
     x0: float
     h: float
     ny: int
     values: np.ndarray  # flat, index i * ny + j
     trusted_from: float
-
-    def interpolate(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        """Bilinear interpolation; NaN outside the grid or next to a node outside its band."""
-        fx, fy = (x - self.x0) / self.h, y / self.h
-        i, j = np.floor(fx), np.floor(fy)
-        nx = self.values.size // self.ny
-        covered = (i >= 0) & (i < nx - 1) & (j < self.ny - 1)
-        i, j = np.where(covered, i, 0), np.where(covered, j, 0)
-        tx, ty = fx - i, fy - j
-        k = (i * self.ny + j).astype(np.intp)
-        v = self.values
-        low = v[k] + tx * (v[k + self.ny] - v[k])
-        high = v[k + 1] + tx * (v[k + self.ny + 1] - v[k + 1])
-        return np.where(covered, low + ty * (high - low), np.nan)
 
 
 def _running(reduce, values: np.ndarray, reach: float, h: float) -> np.ndarray:
@@ -181,6 +168,33 @@ def _distance_grids() -> tuple[_DistanceGrid, ...]:
     return tuple(_build_grid(*level) for level in _GRID_LEVELS)
 
 
+def _kernel():
+    """The compiled kernels (`proximity_kernel`), imported on first use: processes that never
+    classify a pose do not pay numba's import."""
+    from nearsub.common.physics import proximity_kernel
+
+    return proximity_kernel
+
+
+@lru_cache(maxsize=1)
+def _kernel_grids() -> tuple:
+    """The joints, R_sub and the grids as the kernels read them: per grid x0, h, ny, nx, its first
+    value's index in one flat array and its trusted distance, then that array."""
+    grids = _distance_grids()
+    sizes = [g.values.size for g in grids]
+    return (
+        np.array(_joints_x()),
+        R_SUB,
+        np.array([g.x0 for g in grids]),
+        np.array([g.h for g in grids]),
+        np.array([g.ny for g in grids], dtype=np.int64),
+        np.array([size // g.ny for size, g in zip(sizes, grids, strict=True)], dtype=np.int64),
+        np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64),
+        np.array([g.trusted_from for g in grids]),
+        np.concatenate([g.values for g in grids]),
+    )
+
+
 def hull_signed_distance(px, py):
     """Signed distance [m] from points to the submarine outline: negative inside the hull.
 
@@ -189,22 +203,13 @@ def hull_signed_distance(px, py):
     if the distance is in its trusted range; points inside or within 1 cm of the hull, and the
     rare ones beyond every grid, get the exact polyline distance.
     """
-    px, py = np.broadcast_arrays(np.asarray(px, dtype=float), np.abs(np.asarray(py, dtype=float)))
-    x, y = px.ravel(), py.ravel()
-    x_bow_joint, x_aft_joint = _joints_x()
-    beside = (x <= x_bow_joint) & (x >= x_aft_joint)
-    dist = y - R_SUB
-    # Inside beside the middle body, the flat is nearest while the joints are farther than it.
-    todo = np.flatnonzero(~beside | ((y < R_SUB) & (R_SUB - y > np.minimum(x_bow_joint - x, x - x_aft_joint))))
-    for grid in _distance_grids():
-        if todo.size == 0:
-            break
-        value = grid.interpolate(x[todo], y[todo])
-        found = value >= grid.trusted_from  # False for NaN: not covered
-        dist[todo[found]] = value[found]
-        todo = todo[~found]
+    px, py = np.broadcast_arrays(np.asarray(px, dtype=float), np.asarray(py, dtype=float))
+    x, y = np.ascontiguousarray(px).ravel(), np.ascontiguousarray(py).ravel()
+    dist = np.empty(x.size)
+    _kernel().signed_distances(x, y, *_kernel_grids(), dist)
+    todo = np.flatnonzero(np.isnan(dist))
     if todo.size:
-        dist[todo] = _exact_signed_distance(x[todo], y[todo])
+        dist[todo] = _exact_signed_distance(x[todo], np.abs(y[todo]))
     return dist.reshape(px.shape)
 
 
@@ -214,8 +219,20 @@ def closest_distance(x, y, psi, length: float, diameter: float, n: int = 64):
     Positive when apart; zero or negative when touching or overlapping (a collision). Shape is the
     broadcast shape of x, y, psi.
     """
-    ox, oy = uuv_outline(x, y, psi, length, diameter, n)
-    return hull_signed_distance(ox, oy).min(axis=-1)
+    x, y, psi = np.broadcast_arrays(*(np.asarray(a, dtype=float) for a in (x, y, psi)))
+    flat = [np.ascontiguousarray(a).ravel() for a in (x, y, psi)]
+    bx, by = uuv_body_outline(length, diameter, n)
+    clearance = np.empty(flat[0].size)
+    _kernel().outline_clearances(
+        flat[0], flat[1], np.cos(flat[2]), np.sin(flat[2]), bx, by, *_kernel_grids(), clearance
+    )
+    # A pose with a point no grid answers for (touching, inside, or beyond every grid): its whole
+    # outline through hull_signed_distance, which takes the exact distance there.
+    exact = np.flatnonzero(np.isnan(clearance))
+    if exact.size:
+        ox, oy = uuv_outline(flat[0][exact], flat[1][exact], flat[2][exact], length, diameter, n)
+        clearance[exact] = hull_signed_distance(ox, oy).min(axis=-1)
+    return clearance.reshape(x.shape)
 
 
 @lru_cache(maxsize=64)
