@@ -5,6 +5,7 @@
     nearsub envelope --compare A.json B.json -o compare.png
     nearsub envelope --vehicle sdv --cell-mission=-0.3,0.065 -o cell.toml   # replay one cell
     nearsub envelope --thesis-figures [--scheduler tcp://HOST:8786]
+    nearsub envelope --thesis-figures --reuse   # draw from OUT/data, flying only what is missing
     nearsub envelope --vehicle sdv --samples 32 [--sample-seed 0] [--wave-phase random]   # P(outcome)
 
 Every option that describes the conditions takes several values; their combinations make a sweep,
