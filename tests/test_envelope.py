@@ -211,6 +211,35 @@ def test_thesis_figures_subset_and_unknown_figure(tmp_path):
     assert bad.returncode == 2 and "5-99" in bad.stderr
 
 
+def test_thesis_figures_reuse_flies_only_the_missing_configurations(tmp_path):
+    small = ("--grid", "3x2", "--duration", "1", "-o", str(tmp_path))
+    assert nearsub("envelope", "--thesis-figures", "--figure", "5-11", *small).returncode == 0
+    deleted = tmp_path / "data" / "remus100_waypoints_dlead1L_ss0-50m.json"
+    deleted.unlink()
+    stored = {p.name: p.read_text() for p in (tmp_path / "data").glob("*.json")}
+    done = nearsub("envelope", "--thesis-figures", "--reuse", "--figure", "5-11", "6-8", *small)
+    assert done.returncode == 0, done.stderr
+    timing = json.loads((tmp_path / "timing.json").read_text())
+    assert (timing["configurations"], timing["reused"]) == (4, 2)  # 6-8's three gammas and the deleted one
+    now = {p.name: p.read_text() for p in (tmp_path / "data").glob("*.json")}
+    assert len(now) == 6 and all(now[name] == text for name, text in stored.items())
+    assert sorted(p.name for p in tmp_path.glob("figure-*.png")) == ["figure-5-11.png", "figure-6-8.png"]
+    other_grid = nearsub(
+        "envelope",
+        "--thesis-figures",
+        "--reuse",
+        "--figure",
+        "5-11",
+        "--grid",
+        "2x2",
+        "--duration",
+        "1",
+        "-o",
+        str(tmp_path),
+    )
+    assert other_grid.returncode == 0 and json.loads((tmp_path / "timing.json").read_text())["reused"] == 0
+
+
 def test_bench_envelope_prints_its_figures():
     done = nearsub(
         "bench", "envelope", "--grid", "4x2", "--duration", "2", "--repeats", "1", "--sample", "2", "--skip-thesis",

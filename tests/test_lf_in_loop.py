@@ -254,14 +254,15 @@ def test_lf_increment_is_a_small_fraction_of_the_vehicles_own_forces_where_it_is
 def test_guard_keeps_the_tip_clearance_that_unguarded_compensation_would_break():
     """The SDV 0.6 m off the middle body on a track parallel to it; (6.1) asks for 15 deg of bow
     towards the hull (or away, which swings the stern in). Unguarded, a tip comes within the
-    clearance; guarded, it stays at it, and the offset is the largest that does."""
+    clearance; guarded, it stays at it, and the offset is the largest that does (the pose turned in
+    place: horizon 0)."""
     clearance = SDV.diameter
     y = R_SUB + SDV.diameter / 2 + 0.6
     for commanded in (math.radians(-15.0), math.radians(15.0)):
         unguarded = behaviours.tip_clearance(0.0, y, commanded, SDV.length, SDV.diameter)
         assert unguarded < clearance
         guard = behaviours.guard_heading_offset(
-            0.0, y, 0.0, commanded, commanded, SDV.length, SDV.diameter, clearance, math.inf
+            0.0, y, 0.0, commanded, commanded, SDV.length, SDV.diameter, clearance, math.inf, 1.5, 1.5, 0.0
         )
         assert guard.active and guard.saturated
         assert abs(guard.delta_psi) < abs(commanded) and np.sign(guard.delta_psi) == np.sign(commanded)
@@ -269,16 +270,69 @@ def test_guard_keeps_the_tip_clearance_that_unguarded_compensation_would_break()
         assert kept >= clearance - 2e-3  # the limit is interpolated between samples 0.6 deg apart
         wider = behaviours.tip_clearance(0.0, y, guard.delta_psi * 1.05, SDV.length, SDV.diameter)
         assert wider < clearance  # and it is (nearly) the largest offset that keeps it
-    far = behaviours.guard_heading_offset(-30.0, 20.0, 0.0, 0.3, 0.3, SDV.length, SDV.diameter, clearance, math.inf)
+    far = behaviours.guard_heading_offset(
+        -30.0, 20.0, 0.0, 0.3, 0.3, SDV.length, SDV.diameter, clearance, math.inf, 1.5, 1.5, 0.0
+    )
     assert not far.active and not far.saturated and far.delta_psi == 0.3 and math.isinf(far.limit)
 
 
 def test_guard_rate_limits_the_offset():
     step = math.radians(5.0) * 0.25  # 5 deg/s at a 4 Hz helm
-    guard = behaviours.guard_heading_offset(-30.0, 20.0, 0.0, 0.3, 0.0, SDV.length, SDV.diameter, 0.53, step)
+    guard = behaviours.guard_heading_offset(
+        -30.0, 20.0, 0.0, 0.3, 0.0, SDV.length, SDV.diameter, 0.53, step, 1.5, 1.5, 0.0
+    )
     assert guard.delta_psi == pytest.approx(step) and guard.saturated and not guard.active
-    safe = behaviours.guard_heading_offset(-30.0, 20.0, 0.0, 0.3, 0.28, SDV.length, SDV.diameter, 0.53, step)
+    safe = behaviours.guard_heading_offset(
+        -30.0, 20.0, 0.0, 0.3, 0.28, SDV.length, SDV.diameter, 0.53, step, 1.5, 1.5, 0.0
+    )
     assert safe.delta_psi == 0.3 and not safe.saturated
+
+
+def test_course_lag_of_the_library_vehicles():
+    """The guard's horizon: how long each vehicle's heading loop keeps it on its old course."""
+    lags = [float(behaviours.course_lag(v, 1.5)) for v in (REMUS100, NPS_AUV_II, SDV)]
+    assert lags == pytest.approx([1.9, 2.2, 6.3], abs=0.05)
+    assert behaviours.course_lag(SDV, [1.0, 1.5, 1.52]).tolist() == pytest.approx([8.2, lags[2], lags[2]], abs=0.05)
+
+
+def test_guard_sees_the_course_an_offset_sets():
+    """The SDV 1.4 m (tips) off the bow shoulder (envelope cell R_long 0.39, R_lat 0.076, 15 s in),
+    (6.1) asking for 12.3 deg of bow towards the hull: turned in place its tips stay clear, so a
+    guard that looked only at the pose let it fly the offset into the hull. Flown along, the course
+    brings a tip within the clearance inside the SDV's course lag; the guard cuts the offset to the
+    largest whose course keeps it."""
+    x, y, track, commanded = 34.41, 5.554, math.radians(4.24), math.radians(-12.34)
+    clearance, lag = SDV.diameter, float(behaviours.course_lag(SDV, 1.5))
+    args = (x, y, track, commanded, commanded, SDV.length, SDV.diameter, clearance, math.inf, 1.5, 1.5)
+    in_place = behaviours.guard_heading_offset(*args, 0.0)
+    assert not in_place.active and in_place.delta_psi == commanded
+
+    def course(offset):
+        return behaviours.course_tip_clearance(x, y, track + offset, 1.5, 1.5, lag, SDV.length, SDV.diameter)
+
+    assert course(commanded).min() < clearance
+    guard = behaviours.guard_heading_offset(*args, lag)
+    assert guard.active and guard.saturated and commanded < guard.delta_psi < 0.0
+    assert course(guard.delta_psi).min() >= clearance - 2e-3
+    assert course(guard.delta_psi * 1.05).min() < clearance
+
+
+def test_guard_engages_before_the_compensation_reaches_the_hull(model):
+    """The compensated SDV envelope cell at R_long 0.39, R_lat 0.076 (2.1 m off the bow shoulder),
+    where (6.1) turns the bow towards the hull: the guard engages while the tips are still more than
+    the clearance off, and the SDV no longer hits the hull at 23 s."""
+    from nearsub.common.analysis import envelope as env
+    from nearsub.common.physics.hull import L_SUB
+
+    config = env.EnvelopeConfig(vehicle="sdv", behaviour="nuv_compensation", duration=30.0)
+    r_long, r_lat = env.grid_axes(env.EnvelopeConfig(vehicle="sdv"))
+    result = run_mission(env.cell_mission(config, r_long[29] * L_SUB, r_lat[7] * L_SUB), model)
+    assert result.outcome == "time_limit"
+    states = {m.step: m for m in result.topic("state")}
+    engaged = [m for m in result.topic("helm") if m.guard_active]
+    assert engaged
+    first = states[engaged[0].step]
+    assert behaviours.tip_clearance(first.x, first.y, first.psi, SDV.length, SDV.diameter) > SDV.diameter
 
 
 def test_guarded_compensation_mission_keeps_the_tip_clearance(model):

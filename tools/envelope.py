@@ -5,6 +5,7 @@
     nearsub envelope --compare A.json B.json -o compare.png
     nearsub envelope --vehicle sdv --cell-mission=-0.3,0.065 -o cell.toml   # replay one cell
     nearsub envelope --thesis-figures [--scheduler tcp://HOST:8786]
+    nearsub envelope --thesis-figures --reuse   # draw from OUT/data, flying only what is missing
     nearsub envelope --vehicle sdv --samples 32 [--sample-seed 0] [--wave-phase random]   # P(outcome)
 
 Every option that describes the conditions takes several values; their combinations make a sweep,
@@ -67,6 +68,12 @@ def add_parser(sub) -> None:
         help="write the mission file of the cell starting there (to replay it with nearsub launch) and stop",
     )
     p.add_argument("--figure", nargs="+", metavar="N", help="with --thesis-figures: only these (e.g. 5-10 6-7)")
+    p.add_argument(
+        "--reuse",
+        action="store_true",
+        help="with --thesis-figures: read the configurations stored in OUT/data instead of flying them "
+        "(delete a JSON to fly it again)",
+    )
     p.add_argument("--scheduler", metavar="ADDRESS", help="run the sweep on this Dask scheduler (tcp://host:8786)")
     p.add_argument("--workers", type=int, metavar="N", help="run the sweep on a local Dask cluster of N processes")
     p.add_argument("--json", action="store_true", help="print the summaries (fractions) as JSON lines")
@@ -166,7 +173,7 @@ def _edges(centres):
 
 def draw_envelope(ax, summary: dict, title: str | None = None) -> None:
     """Cells coloured by outcome over the submarine's outline, in R_long, R_lat, with the window
-    where the surrogate's interaction acts drawn dashed."""
+    where the residual GP corrects the LF drawn dashed (the LF acts at every cell)."""
     import numpy as np
     from matplotlib.colors import BoundaryNorm, ListedColormap
 
@@ -191,7 +198,7 @@ def draw_envelope(ax, summary: dict, title: str | None = None) -> None:
 
     window = surrogate_window(summary["config"]["vehicle"])
     if window is None:
-        note = "the surrogate never acts on this hull: it fails constraint (4.6) or (4.7)"
+        note = "the residual GP never corrects the LF on this hull: it fails constraint (4.6) or (4.7)"
         ax.text(
             0.5,
             0.96,
@@ -222,7 +229,7 @@ def legend_handles() -> list:
     handles = [Patch(facecolor=c, edgecolor="grey", label=label) for c, label in zip(COLOURS, LABELS, strict=True)]
     handles.append(Patch(facecolor=HULL_COLOUR, label="submarine (SUBOFF, D = 10.4 m)"))
     handles.append(
-        Patch(facecolor="none", edgecolor="black", linestyle="--", label="surrogate acts (table 4.2, 4.4-4.5)")
+        Patch(facecolor="none", edgecolor="black", linestyle="--", label="residual GP trained (table 4.2, 4.4-4.5)")
     )
     return handles
 
@@ -501,10 +508,11 @@ def thesis_command(args) -> int:
         return 2
     figures = [f for f in figures if not args.figure or f.number in args.figure]
     configs = env.unique_configs(figures, **overrides)
+    summaries = stored_summaries(configs, out / "data") if args.reuse else {}
+    flown = [config for config in configs if config not in summaries]
     started = time.perf_counter()
-    envelopes = run_configs(configs, args)
+    envelopes = run_configs(flown, args) if flown else []
     total = time.perf_counter() - started
-    summaries = {}
     for envelope in envelopes:
         summary = envelope.summary()
         summaries[envelope.config] = summary
@@ -521,17 +529,33 @@ def thesis_command(args) -> int:
         )
         print(f"wrote {path}")
     write_fractions(rows, out)
-    steps = sum(s["vehicle_steps"] for s in summaries.values())
+    steps = sum(s["vehicle_steps"] for s in (e.summary() for e in envelopes))
     timing = {
-        "configurations": len(configs),
+        "configurations": len(flown),
+        "reused": len(configs) - len(flown),
         "wall_time": round(total, 1),
         "vehicle_steps": steps,
-        "vehicle_steps_per_second": round(steps / total),
+        "vehicle_steps_per_second": round(steps / total) if flown else 0,
         "scheduler": args.scheduler or (f"local cluster, {args.workers} workers" if args.workers else "this process"),
     }
     (out / "timing.json").write_text(json.dumps(timing, indent=1) + "\n")
-    print(f"{len(configs)} envelopes in {total:.1f} s ({timing['vehicle_steps_per_second']} vehicle-steps/s)")
+    reused = f", {timing['reused']} read from {out / 'data'}" if timing["reused"] else ""
+    print(f"{len(flown)} envelopes in {total:.1f} s ({timing['vehicle_steps_per_second']} vehicle-steps/s){reused}")
     return 0
+
+
+def stored_summaries(configs: list, folder: Path) -> dict:
+    """The summaries in `folder` (SLUG.json) whose configuration is one of `configs`."""
+    from nearsub.common.analysis import envelope as env
+
+    found = {}
+    for config in configs:
+        path = folder / f"{config.slug()}.json"
+        if path.exists():
+            summary = env.load_summary(path)
+            if env.EnvelopeConfig(**summary["config"]) == config:
+                found[config] = summary
+    return found
 
 
 def write_fractions(rows: list[tuple[str, str, dict]], out: Path) -> None:

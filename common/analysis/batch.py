@@ -154,6 +154,9 @@ def run_batch(
                     vehicle.diameter,
                     clearance,
                     guard_step,
+                    speed,
+                    mission.environment.u_sub,
+                    behaviours.course_lag(vehicle, speed),
                 ).delta_psi
                 heading = heading + delta_psi
             u_d = np.broadcast_to(np.asarray(speed, dtype=float), heading.shape).copy()

@@ -20,8 +20,10 @@ from typing import Annotated
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from nearsub.common.physics import proximity
+from nearsub.common.autonomy import control
+from nearsub.common.physics import dynamics, proximity
 from nearsub.common.physics.hull import uuv_body_outline
+from nearsub.common.physics.vehicles import Vehicle
 
 # Positions in a mission lie within this range of the submarine [m]: a nearsub choice that turns
 # a slip of the exponent (1e12) into an error; the largest envelope reaches about 1.5 L_sub.
@@ -254,6 +256,20 @@ def nuv_heading_offset(n_s, u_d, n_uv, gamma):
 # is then placed by linear interpolation between the last safe and the first unsafe one. 24 steps
 # of a 20 deg offset are 0.8 deg apart: nearsub's choice, a small fraction of the offsets (6.1) asks.
 GUARD_SAMPLES = 24
+# An offset also sets the course, and a cut offset takes effect only as fast as the heading loop
+# turns the UUV back: the guard checks each candidate's course for the vehicle's course lag
+# (`course_lag`), at its start, middle and end. The hull outline is convex, so along a straight
+# course the clearance is convex in time and can dip between samples only where the course passes
+# the hull's nearest point.
+GUARD_COURSE_POINTS = 3
+# The course lag is measured on a LAG_STEP heading step (a typical (6.1) offset) from straight flight
+# in still water, at the speed rounded to LAG_SPEED_RESOLUTION, with the positional PID at the alpha
+# mission's step LAG_DT, over LAG_DURATION (the SDV's lag peaks 12-16 s after the step): nearsub's
+# choices.
+LAG_STEP = math.radians(10.0)
+LAG_SPEED_RESOLUTION = 0.1  # [m/s]
+LAG_DT = 0.05  # [s]
+LAG_DURATION = 60.0  # [s]
 
 
 @dataclass(frozen=True)
@@ -287,32 +303,94 @@ def _tips(length: float, diameter: float) -> tuple[float, float]:
     return float(bx.max()), float(bx.min())
 
 
-def guard_heading_offset(x, y, psi_track, commanded, previous, length: float, diameter: float, clearance, max_step):
+def course_lag(vehicle: Vehicle, speed) -> np.ndarray:
+    """How long [s] the vehicle keeps flying its old course after its heading command changes: the
+    largest distance by which its path lags the new course, over speed sin(step), for a LAG_STEP
+    step of its own heading loop (`control.pid_step`, (5.10) through `dynamics.step`). Element-wise
+    over speeds [m/s]; 1.9 s for the REMUS 100, 2.2 s for the NPS AUV II and 6.3 s for the SDV at
+    1.5 m/s."""
+    speed = np.asarray(speed, dtype=float)
+    quantised = np.maximum(np.round(speed / LAG_SPEED_RESOLUTION), 1.0) * LAG_SPEED_RESOLUTION
+    key = vehicle.model_dump_json()  # a Vehicle is not hashable (its PID tuning is mutable)
+    lags = {u: _course_lag(key, u) for u in np.unique(quantised).tolist()}
+    return np.vectorize(lags.__getitem__, otypes=[float])(quantised)
+
+
+@lru_cache(maxsize=64)
+def _course_lag(vehicle_json: str, speed: float) -> float:
+    vehicle = Vehicle.model_validate_json(vehicle_json)
+    state = np.array([speed, 0.0, 0.0, 0.0, 0.0, 0.0])
+    memory = replace(control.PidState.zeros(), thrust=np.asarray(-vehicle.X_uu * speed * speed))
+    still = dynamics.Environment()
+    worst = 0.0
+    for _ in range(int(round(LAG_DURATION / LAG_DT))):
+        memory, out = control.pid_step(memory, speed, LAG_STEP, state, vehicle, vehicle.pid, LAG_DT)
+        state = dynamics.step(state, np.array([out.thrust, out.rudder]), vehicle, still, LAG_DT)
+        behind = state[dynamics.X] * math.sin(LAG_STEP) - state[dynamics.Y] * math.cos(LAG_STEP)
+        worst = max(worst, behind)
+    return worst / (speed * math.sin(LAG_STEP))
+
+
+def course_tip_clearance(x, y, psi, speed, u_sub: float, horizon, length: float, diameter: float):
+    """Tip clearance [m] of a UUV at (x, y) flying heading psi at `speed` through the water for
+    `horizon` seconds, at GUARD_COURSE_POINTS times from 0 (the pose turned in place) to `horizon`
+    along a new last axis: over the hull frame it moves at (speed cos psi - U_sub, speed sin psi)
+    (docs/design.md, "Frames, units and signs"; no sway)."""
+    x, y, psi, speed, horizon = (np.asarray(a, dtype=float)[..., None] for a in (x, y, psi, speed, horizon))
+    tau = np.linspace(0.0, 1.0, GUARD_COURSE_POINTS) * horizon
+    return tip_clearance(x + (speed * np.cos(psi) - u_sub) * tau, y + speed * np.sin(psi) * tau, psi, length, diameter)
+
+
+def guard_heading_offset(
+    x,
+    y,
+    psi_track,
+    commanded,
+    previous,
+    length: float,
+    diameter: float,
+    clearance,
+    max_step,
+    speed,
+    u_sub: float,
+    horizon,
+):
     """Limit (6.1)'s offset `commanded` [rad] in rate, to `max_step` [rad] (the rate limit times the
     helm's period) from `previous`, and saturate it so that the UUV at (x, y), flying psi_track +
-    offset, keeps its tips `clearance` [m] off the hull. Element-wise over vehicles; the clearance
-    wins over the rate limit (an offset that is no longer safe is cut at once).
+    offset at `speed` [m/s] for `horizon` [s] (`course_lag`) beside the submarine moving at `u_sub`,
+    keeps its tips `clearance` [m] off the hull (`course_tip_clearance`). Element-wise over vehicles;
+    the clearance wins over the rate limit (an offset that is no longer safe is cut at once).
 
-    The offset is allowed from 0 towards the command while the tips' clearance stays at least
-    min(clearance, its value at no offset): where the track itself already brings a tip closer
-    than `clearance`, the compensation may not bring it closer still."""
-    x, y, psi_track, commanded, previous = np.broadcast_arrays(
-        *(np.asarray(a, dtype=float) for a in (x, y, psi_track, commanded, previous))
+    The offset is allowed from 0 towards the command while the tips' clearance at each point of the
+    course stays at least min(clearance, its value there at no offset): where the track itself
+    already brings a tip closer than `clearance`, the compensation may not bring it closer still."""
+    x, y, psi_track, commanded, previous, speed, horizon = np.broadcast_arrays(
+        *(np.asarray(a, dtype=float) for a in (x, y, psi_track, commanded, previous, speed, horizon))
     )
     fractions = np.linspace(0.0, 1.0, GUARD_SAMPLES + 1)
     offsets = commanded[..., None] * fractions
-    gap = tip_clearance(x[..., None], y[..., None], psi_track[..., None] + offsets, length, diameter)
-    floor = np.minimum(clearance, gap[..., :1])
-    unsafe = gap < floor
+    gap = course_tip_clearance(
+        x[..., None],
+        y[..., None],
+        psi_track[..., None] + offsets,
+        speed[..., None],
+        u_sub,
+        horizon[..., None],
+        length,
+        diameter,
+    )
+    # Each point of a candidate's course against min(clearance, the course without offset there).
+    margin = (gap - np.minimum(clearance, gap[..., :1, :])).min(axis=-1)
+    unsafe = margin < 0.0
     first = np.where(unsafe.any(axis=-1), np.argmax(unsafe, axis=-1), GUARD_SAMPLES + 1)
     active = first <= GUARD_SAMPLES
     last = np.clip(first - 1, 0, GUARD_SAMPLES)
     after = np.clip(first, 0, GUARD_SAMPLES)
-    g0 = np.take_along_axis(gap, last[..., None], axis=-1)[..., 0]
-    g1 = np.take_along_axis(gap, after[..., None], axis=-1)[..., 0]
+    m0 = np.take_along_axis(margin, last[..., None], axis=-1)[..., 0]
+    m1 = np.take_along_axis(margin, after[..., None], axis=-1)[..., 0]
     f0, f1 = fractions[last], fractions[after]
-    drop = np.where(g0 > g1, g0 - g1, 1.0)
-    crossing = f0 + (f1 - f0) * np.clip((g0 - floor[..., 0]) / drop, 0.0, 1.0)
+    drop = np.where(m0 > m1, m0 - m1, 1.0)
+    crossing = f0 + (f1 - f0) * np.clip(m0 / drop, 0.0, 1.0)
     limit = np.where(active, commanded * crossing, np.copysign(np.inf, commanded))
     rated = np.clip(commanded, previous - max_step, previous + max_step)
     beyond = active & (np.abs(rated) > np.abs(limit)) & (np.sign(rated) == np.sign(commanded))

@@ -149,6 +149,9 @@ class HelmCore:
                 self.vehicle.diameter,
                 self.guard_clearance,
                 self.guard_step,
+                u_d,
+                self.helm.u_sub,
+                behaviours.course_lag(self.vehicle, u_d),
             )
             delta_psi = float(guard.delta_psi)
             psi_d = psi_d + delta_psi

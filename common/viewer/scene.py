@@ -81,7 +81,7 @@ def acting_band(mission) -> dict:
         {"x0": round(x0, 3), "x1": round(x1, 3), "y0": round(y_min, 3), "y1": round(y_max, 3)},
         {"x0": round(x0, 3), "x1": round(x1, 3), "y0": round(-y_max, 3), "y1": round(-y_min, 3)},
     ]
-    return {"rects": rects, "note": f"surrogate acts for {y_min:.2f} m <= |y| <= {y_max:.2f} m"}
+    return {"rects": rects, "note": f"residual GP trained for {y_min:.2f} m <= |y| <= {y_max:.2f} m"}
 
 
 def force_reference(mission) -> float:
