@@ -196,7 +196,7 @@ def surrogate_window(vehicle: str) -> tuple[float, float] | None:
     """R_lat range where the vehicle feels the submarine: table 4.2 cut by (4.4) and (4.5), at the
     hull ratios the interaction uses (clipped to the trained range, `interaction_at`). None when
     the hull fails (4.6) or (4.7) (the NPS AUV II fails (4.6)): the blend weight is then zero at
-    every position, and the surrogate never acts on that vehicle."""
+    every position, and the residual GP never corrects the LF on that vehicle."""
     v = get_vehicle(vehicle)
     d_ratio = float(np.clip(D_SUB / v.diameter, *domain.BOUNDS[4]))
     ld_ratio = float(np.clip(v.length / v.diameter, *domain.BOUNDS[5]))

@@ -2,7 +2,7 @@
 
 Two parts, both plain JSON-ready dicts:
 - `static_scene(mission)`: what does not change during a run: the submarine's outline to scale,
-  the waypoints and track-lines of every leg, the band where the surrogate acts, the vehicle's
+  the waypoints and track-lines of every leg, the band where the residual GP is trained, the vehicle's
   size and the scale of the force arrows;
 - `SceneModel`: fed every message of the run in arrival order (live) or log order (replay), it
   gives a `frame(t)`: the UUV's outline at its heading, its trail, the interaction force as an

@@ -257,7 +257,7 @@ function draw() {
   const followed = frame ? selectedOf(frame) : null;
   if (state.follow && followed && followed.vehicle) { state.view.cx = followed.vehicle.x; state.view.cy = followed.vehicle.y; }
   drawGrid(w, h);
-  for (const r of scene.band.rects) {  // where the surrogate acts
+  for (const r of scene.band.rects) {  // where the residual GP is trained
     const [ax, ay] = toScreen(r.x0, r.y1), [bx, by] = toScreen(r.x1, r.y0);
     ctx.fillStyle = "rgba(80, 220, 140, 0.18)";
     ctx.fillRect(ax, ay, bx - ax, by - ay);
