@@ -261,7 +261,7 @@ def test_cell_mission_option_writes_a_launchable_mission(tmp_path):
 
 @pytest.mark.parametrize("vehicle", ["remus100", "nps_auv_ii", "sdv"])
 def test_drawn_surrogate_window_is_where_the_blend_weight_is_positive(vehicle):
-    """The dashed box of the figures is where the interaction acts; no box for a hull that fails
+    """The dashed box of the figures is where the residual GP is trained; no box for a hull that fails
     (4.6) or (4.7) (the NPS AUV II fails (4.6), so the residual GP never corrects the LF on it)."""
     from nearsub.common.surrogate.interaction import interaction_at
 
