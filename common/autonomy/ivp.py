@@ -21,6 +21,11 @@ from functools import lru_cache
 
 import numpy as np
 
+try:  # np.interp's compiled core: np.interp adds ~7 us of Python checks a call, a third of a decision
+    from numpy._core.multiarray import interp as _interp
+except ImportError:  # numpy < 2
+    from numpy.core.multiarray import interp as _interp
+
 HEADING_STEP_DEG = 1.0  # the decision grid: 1 deg x 0.05 m/s (docs/design.md, "The helm")
 SPEED_STEP = 0.05
 
@@ -43,8 +48,8 @@ class Zaic:
             d = (d + math.pi) % (2.0 * math.pi) - math.pi
         low = 1.0 - self.summit_delta
         if math.isinf(self.base_width):
-            return np.interp(np.abs(d), (0.0, self.peak_width), (1.0, low))
-        return np.interp(np.abs(d), (0.0, self.peak_width, self.peak_width + self.base_width), (1.0, low, 0.0))
+            return _interp(np.abs(d), (0.0, self.peak_width), (1.0, low))
+        return _interp(np.abs(d), (0.0, self.peak_width, self.peak_width + self.base_width), (1.0, low, 0.0))
 
 
 @dataclass(frozen=True)
@@ -56,30 +61,51 @@ class Table:
     speeds: np.ndarray
     values: np.ndarray
 
-    def _columns(self, psi: np.ndarray) -> np.ndarray:
-        """Each speed column read at the headings psi: (..., n_speeds)."""
+    def _columns(self, psi) -> np.ndarray:
+        """Each speed column read at the headings psi: (..., n_speeds). np.interp's periodic
+        reading (the same steps, so the same bits), with the headings sorted and wrapped once for
+        all columns rather than once a column."""
         period = 2.0 * math.pi
-        return np.stack([np.interp(psi, self.headings, column, period=period) for column in self.values.T], axis=-1)
+        x = np.asarray(psi, dtype=float) % period
+        xp = np.asarray(self.headings, dtype=float) % period
+        order = np.argsort(xp)
+        xp = xp[order]
+        xp = np.concatenate((xp[-1:] - period, xp, xp[0:1] + period))
+        fp = np.asarray(self.values, dtype=float)[order]
+        fp = np.concatenate((fp[-1:], fp, fp[0:1]))
+        out = np.empty(x.shape + (fp.shape[1],))
+        for j in range(fp.shape[1]):
+            out[..., j] = _interp(x, xp, fp[:, j])
+        return out
+
+    def _blend(self, columns: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """The columns read linearly at the speeds u (columns[..., j] at each u's point)."""
+        j0, wj = _speed_index(self.speeds, u)
+        flat = columns.reshape(-1, columns.shape[-1])
+        rows = np.arange(len(flat))
+        low = flat[rows, j0.ravel()].reshape(j0.shape)
+        high = flat[rows, j0.ravel() + 1].reshape(j0.shape)
+        return (1 - wj) * low + wj * high
 
     def __call__(self, psi, u):
         psi, u = np.broadcast_arrays(np.asarray(psi, dtype=float), np.asarray(u, dtype=float))
-        columns = self._columns(psi)
-        j0, wj = _speed_index(self.speeds, u)
-        low = np.take_along_axis(columns, j0[..., None], axis=-1)[..., 0]
-        high = np.take_along_axis(columns, j0[..., None] + 1, axis=-1)[..., 0]
-        return (1 - wj) * low + wj * high
+        return self._blend(self._columns(psi), u)
+
+    def _spread(self, columns: np.ndarray, max_speed: float) -> np.ndarray:
+        """Columns read at the grid's headings, spread over the grid's speeds by the speed
+        interpolation weights, which depend only on the two speed grids (cached)."""
+        return columns @ _speed_weights(tuple(self.speeds), max_speed)
 
     def on_grid(self, max_speed: float) -> np.ndarray:
-        """The table read on the whole decision grid: the columns at the grid's headings times the
-        speed interpolation weights, which depend only on the two speed grids (cached)."""
+        """The table read on the whole decision grid."""
         grid_psi, _ = decision_grid(max_speed)
-        return self._columns(grid_psi) @ _speed_weights(tuple(self.speeds), max_speed)
+        return self._spread(self._columns(grid_psi), max_speed)
 
 
 def _speed_index(coarse: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The coarse interval of each speed (clamped at the ends) and the weight of its upper end."""
-    uu = np.clip(u, coarse[0], coarse[-1])
-    j0 = np.clip(np.searchsorted(coarse, uu, side="right") - 1, 0, len(coarse) - 2)
+    uu = np.minimum(np.maximum(u, coarse[0]), coarse[-1])  # np.clip's values, without its wrapper's cost
+    j0 = np.minimum(np.maximum(np.searchsorted(coarse, uu, side="right") - 1, 0), len(coarse) - 2)
     return j0, (uu - coarse[j0]) / (coarse[j0 + 1] - coarse[j0])
 
 
@@ -165,32 +191,41 @@ def arbitrate(
     if not objectives:
         return None
     headings, speeds = decision_grid(max_speed)
+    n_psi, n_u = len(headings), len(speeds)
     peaks = [(i, o.peak) for i, (_, o) in enumerate(objectives) if o.peak is not None]
     if current is not None:
         peaks.append((-1, current))
-    pk_psi = np.array([p[0] for _, p in peaks])
-    pk_u = np.array([p[1] for _, p in peaks])
+    # each function is evaluated once on the grid's values and the peaks' together (np.interp
+    # reads every point alone, so the bits are those of two calls), then split
+    all_psi = np.concatenate((headings, [p[0] for _, p in peaks]))
+    all_u = np.concatenate((speeds, [p[1] for _, p in peaks]))
+    pk_psi, pk_u = all_psi[n_psi:], all_u[n_u:]
     pk_total = np.zeros(len(peaks))
-    h_sum = np.zeros(len(headings))
-    s_sum = np.zeros(len(speeds))
+    h_sum = np.zeros(n_psi)
+    s_sum = np.zeros(n_u)
     grid = None
     for weight, objective in objectives:
-        if len(peaks):
-            pk_total += weight * objective(pk_psi, pk_u)
         if objective.table is not None:
-            part = weight * objective.table.on_grid(max_speed)
+            columns = objective.table._columns(all_psi)
+            if len(peaks):
+                pk_total += weight * objective.table._blend(columns[n_psi:], pk_u)
+            part = weight * objective.table._spread(columns[:n_psi], max_speed)
             grid = part if grid is None else grid + part
             continue
-        h, s = objective.separable(headings, speeds)
-        h_sum += weight * h
-        s_sum += weight * s
+        h, s = objective.separable(all_psi, all_u)
+        h_grid, h_pk = (h, h) if objective.heading is None else (h[:n_psi], h[n_psi:])
+        s_grid, s_pk = (s, s) if objective.speed is None else (s[:n_u], s[n_u:])
+        if len(peaks):
+            pk_total += weight * (np.asarray(h_pk) + np.asarray(s_pk))
+        h_sum += weight * h_grid
+        s_sum += weight * s_grid
     if grid is None:
         i, j = int(np.argmax(h_sum)), int(np.argmax(s_sum))
         best_value = float(h_sum[i] + s_sum[j])
     else:
         grid += h_sum[:, None]
         grid += s_sum[None, :]
-        i, j = divmod(int(np.argmax(grid)), len(speeds))
+        i, j = divmod(int(np.argmax(grid)), n_u)
         best_value = float(grid[i, j])
     if len(peaks):
         k = int(np.argmax(pk_total))
