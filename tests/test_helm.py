@@ -89,6 +89,32 @@ def test_a_table_read_on_the_grid_equals_its_pointwise_reading():
     assert np.allclose(table.on_grid(2.48), table(headings[:, None], speeds[None, :]), rtol=0, atol=1e-12)
 
 
+def test_the_arbitration_scores_its_choice_as_the_objectives_themselves_do():
+    """Tables and ZAICs mixed: the chosen decision's utility is the weighted sum of each objective
+    read at it alone (to the bit for a peak, summed in the same order), and no grid cell or peak
+    scores more."""
+    rng = np.random.default_rng(7)
+    headings, speeds = ivp.decision_grid(2.48)
+    for _ in range(40):
+        table = ivp.Table(rng.uniform(-math.pi, math.pi, 9), np.array([1.24, 2.48]), rng.uniform(0, 1, (9, 2)))
+        objectives = [
+            (rng.uniform(1, 300), ivp.Objective(None, table=table)),
+            (rng.uniform(1, 300), ivp.peak_objective(rng.uniform(-4, 4), rng.uniform(0, 2.4))),
+            (rng.uniform(1, 300), ivp.Objective((0.2, 1.0), heading=ivp.Zaic(0.2, 0.1, 1.0, 0.3, circular=True))),
+        ]
+        current = (rng.uniform(-3, 3), rng.uniform(0, 2.4))
+        choice = ivp.arbitrate(objectives, 2.48, current)
+        total = sum(w * o(np.array([choice.psi]), np.array([choice.u])) for w, o in objectives)[0]
+        if choice.winner == -1 and (choice.psi, choice.u) != current:
+            assert choice.utility == pytest.approx(total, rel=0, abs=1e-9)
+        else:
+            assert choice.utility == total
+        grid = sum(w * o(headings[:, None], speeds[None, :]) for w, o in objectives)
+        peaks = [o.peak for _, o in objectives if o.peak is not None] + [current]
+        best = max(grid.max(), *(sum(w * o(*p) for w, o in objectives) for p in peaks))
+        assert choice.utility >= best - 1e-9
+
+
 def test_hull_avoidance_predicts_that_turning_in_beside_the_hull_collides():
     """1.2 m off the parallel middle body at U_sub: heading in scores 0, heading along or out 1."""
     situation = helm.Situation(np.array([1.5, 0.0, 0.0, -3.44, 6.5, 0.0]), 0.0, {}, REMUS, 1.5)
