@@ -110,3 +110,25 @@ def poke_while_paused(launches, path: Path, community: str, assignment: str):
     assert "remus100/helm: operator poke from step 100" in poked.stdout  # the vehicle, the app, the step
     assert nearsub("clock", community, "resume").returncode == 0
     return mission, process
+
+
+def helm_decisions(mission_path: Path) -> dict:
+    """A mission's helm decisions as tests/data/helm-decisions.json pins them: the SHA-256 of the
+    (step, u_d, psi_d) rows of its desired topic, their count, and how the run ended.
+    `python tests/pin_helm_decisions.py NAME...` writes them after a deliberate physics change."""
+    import hashlib
+
+    import numpy as np
+
+    from nearsub.common.mission.cores import run_mission
+    from nearsub.common.mission.schema import load_mission
+
+    result = run_mission(load_mission(mission_path))
+    desired = np.array([[m.step, m.u_d, m.psi_d] for m in result.topic("desired")])
+    return {
+        "n": len(desired),
+        "sha256": hashlib.sha256(desired.tobytes()).hexdigest(),
+        "outcome": result.outcome,
+        "reason": result.reason,
+        "steps": result.steps,
+    }
