@@ -165,6 +165,7 @@ def test_resume_checks_the_problem(tmp_path):
         Campaign.resume(path, get_problem("borehole"))
 
 
+@pytest.mark.timeout(600)  # CPU-bound, ~64 s on a lightly loaded machine: the timeout catches a hang, not slowness
 def test_mf_beats_hf_only_on_park_at_30():
     """The reduced benchmark: both MF methods beat HF-only US at 30 HF samples (median of 10
     paired repeats). A coarser acquisition search keeps it under a minute."""
