@@ -132,3 +132,16 @@ def helm_decisions(mission_path: Path) -> dict:
         "reason": result.reason,
         "steps": result.steps,
     }
+
+
+def run_with_poke(mission, values: dict, at_step: int):
+    """The mission in-process with an operator's poke of `values` due at `at_step`."""
+    from nearsub.common.mission.cores import build_cores
+    from nearsub.common.runtime.lifecycle import Schedule, run_inprocess
+    from nearsub.common.runtime.messages import Poke
+
+    poke = Poke(step=0, t=0.0, source="operator", values=values)
+    schedule = Schedule(mission.periods())
+    return run_inprocess(
+        build_cores(mission), schedule, mission.dt, mission.max_steps, operator=[("helm", "poke", at_step, poke)]
+    )

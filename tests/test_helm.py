@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from conftest import ROOT, nearsub
-from helpers import finish, helm_decisions, log_path, per_topic, poke_while_paused
+from helpers import finish, helm_decisions, log_path, per_topic, poke_while_paused, run_with_poke
 from nearsub.common.autonomy import helm, ivp, logic
 from nearsub.common.mission.cores import build_cores, run_mission
 from nearsub.common.mission.schema import MissionError, load_mission, mission_from_dict
@@ -173,14 +173,7 @@ def test_a_poke_switches_behaviours_at_the_next_helm_step_and_replays():
         ],
         variables={"DIRECTION": "east"},
     )
-    poke = Poke(step=0, t=0.0, source="operator", values={"DIRECTION": "north"})
-    result = run_inprocess(
-        build_cores(mission),
-        Schedule(mission.periods()),
-        mission.dt,
-        mission.max_steps,
-        operator=[("helm", "poke", 101, poke)],
-    )
+    result = run_with_poke(mission, {"DIRECTION": "north"}, at_step=101)
     headings = {m.step: m.psi_d for m in result.topic("desired")}
     assert headings[100] == 0.0 and headings[105] == pytest.approx(math.pi / 2)
     winners = {m.step: m.winner for m in result.topic("helm")}

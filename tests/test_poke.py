@@ -1,12 +1,9 @@
 """`nearsub poke MISSION=complete` ends the mission through the clock's normal end request, at the
 step the helm applies the poke (MOOS-IvP: uPokeDB posting the variable uQueryDB waits for)."""
 
-from helpers import finish, log_path, poke_while_paused
-from nearsub.common.mission.cores import build_cores
+from helpers import finish, log_path, poke_while_paused, run_with_poke
 from nearsub.common.mission.schema import load_mission
-from nearsub.common.runtime.lifecycle import Schedule, run_inprocess
 from nearsub.common.runtime.logfile import read_log
-from nearsub.common.runtime.messages import Poke
 
 MISSION = """
 name = "pokeend"
@@ -25,14 +22,7 @@ heading_deg = 0.0
 
 def test_a_poke_of_mission_complete_ends_the_mission_at_the_helm_step_in_process(tmp_path):
     mission = load_mission_text(tmp_path)
-    poke = Poke(step=0, t=0.0, source="operator", values={"MISSION": "complete"})
-    result = run_inprocess(
-        build_cores(mission),
-        Schedule(mission.periods()),
-        mission.dt,
-        mission.max_steps,
-        operator=[("helm", "poke", 101, poke)],
-    )
+    result = run_with_poke(mission, {"MISSION": "complete"}, at_step=101)
     # The helm runs every 5 steps: the poke due at 101 is applied at 105, the last step run.
     assert (result.outcome, result.steps) == ("completed", 106)
     assert "MISSION = complete (poked)" in result.reason
