@@ -3,7 +3,7 @@
     nearsub train [--design sobol|residual-us|nmmf] [--budget 300] [--workers 2 | --scheduler ADDRESS]
     nearsub train --design envelope --envelope vehicle=sdv [--envelope vehicle=remus100] [--samples 8]
     nearsub train --design D --pool A.csv [B.csv]        # pick among HF values that exist; no HF runs
-    nearsub train --compare DIR --pool A.csv B.csv --envelope SPEC [--envelope SPEC]   # designs.md table
+    nearsub train --compare DIR --pool A.csv B.csv --envelope CONDITIONS [--envelope CONDITIONS]   # designs.md table
 
 The model is the exact low fidelity (the one-way slender-body model, `common/hydro/low_fidelity.py`)
 plus a residual GP on HF - LF at the HF samples (the two-way panel model,
@@ -200,7 +200,7 @@ def compare_command(args, specs: list) -> int:
     from nearsub.common.analysis import envelope_design as ed
 
     if not args.pool or not specs:
-        raise ValueError("--compare needs --pool CSV... and at least one --envelope SPEC")
+        raise ValueError("--compare needs --pool CSV... and at least one --envelope CONDITIONS")
     budgets = sorted(set(args.budgets))
     if budgets[0] <= ed.COMPARE_N_SEED:
         raise ValueError(f"--budgets {budgets[0]}: each budget must exceed the {ed.COMPARE_N_SEED} seed points")
@@ -367,7 +367,7 @@ def add_parser(subparsers) -> None:
     p.add_argument(
         "--envelope",
         action="append",
-        metavar="SPEC",
+        metavar="CONDITIONS",
         help="with --design envelope: an envelope to aim at, KEY=VALUE,... with the keys of nearsub envelope "
         "(vehicle=sdv,behaviour=waypoints,grid=20x10; ranges as LO:HI); at most twice",
     )

@@ -35,7 +35,7 @@ TARGETS_PER_CELL = 8  # points of each cell's trajectories that stand for it in 
 MAX_SPECS = 2
 _OUTCOME_CLASSES = len(OUTCOMES) - 1  # infeasible cells never fly
 
-# The keys of an --envelope SPEC and how each value is read.
+# The keys of an --envelope CONDITIONS and how each value is read.
 _RANGE = lambda text: tuple(float(v) for v in text.split(":"))  # noqa: E731  LO:HI (a comma separates keys)
 SPEC_KEYS: dict[str, Callable[[str], object]] = {
     "vehicle": lambda text: get_vehicle(text).name,

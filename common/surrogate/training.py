@@ -371,7 +371,7 @@ def run_design(
     warping = warping or Warping(DEFAULT_WARPING)
     s = settings
     if s.design == "envelope" and acquire is None:
-        raise ValueError("--design envelope: name the envelope(s) to aim at (--envelope SPEC)")
+        raise ValueError("--design envelope: name the envelope(s) to aim at (--envelope CONDITIONS)")
     if s.design == "sobol":
         X = sobol_design(s.budget, s.seed)
         return X, evaluate_hf(X, store, run, on_row)
