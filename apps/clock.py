@@ -27,7 +27,7 @@ import msgpack
 from nearsub.apps.shell import wait_for_roles
 from nearsub.common.mission.schema import RunConfig
 from nearsub.common.runtime import keys
-from nearsub.common.runtime.bus import Bus, Endpoints, signal_self
+from nearsub.common.runtime.bus import Bus, app_endpoints, signal_self
 from nearsub.common.runtime.clock import ClockCore, Reply
 from nearsub.common.runtime.lifecycle import DONE_TOPIC, ENCOUNTERS
 from nearsub.common.runtime.messages import (
@@ -157,7 +157,7 @@ def main(argv=None) -> int:
     prepare_process()
     run = RunConfig.load(args.run)
     try:
-        with Bus(Endpoints("client", tuple(run.connect))) as bus:
+        with Bus(app_endpoints(run.connect)) as bus:
             clock = Clock(run, bus)
             bus.token(keys.alive(run.mission.name, "clock", args.instance))
             return clock.run()

@@ -17,7 +17,7 @@ from pathlib import Path
 from nearsub import __version__
 from nearsub.common.mission.schema import RunConfig
 from nearsub.common.runtime import keys
-from nearsub.common.runtime.bus import Bus, BusError, Endpoints, signal_self
+from nearsub.common.runtime.bus import Bus, BusError, app_endpoints, signal_self
 from nearsub.common.runtime.lifecycle import OPERATOR
 from nearsub.common.runtime.logfile import LogWriter
 from nearsub.common.runtime.messages import (
@@ -94,7 +94,7 @@ def main(argv=None) -> int:
     recorder = Recorder(writer, community)
     code = 0
     try:
-        with Bus(Endpoints("client", tuple(run.connect))) as bus:
+        with Bus(app_endpoints(run.connect)) as bus:
             stream = bus.stream(keys.everything(community))
             bus.on_liveliness_lost(keys.alive(community, "launcher", "*"), signal_self())
             bus.token(keys.alive(community, "logger", args.instance))

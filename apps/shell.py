@@ -31,7 +31,7 @@ from collections.abc import Callable
 
 from nearsub.common.mission.schema import MissionError, RunConfig, apply_overrides, mission_from_dict
 from nearsub.common.runtime import keys
-from nearsub.common.runtime.bus import Bus, DeadlineExceeded, Endpoints, deadline, signal_self
+from nearsub.common.runtime.bus import Bus, DeadlineExceeded, app_endpoints, deadline, signal_self
 from nearsub.common.runtime.lifecycle import (
     ACK,
     EVENTS,
@@ -127,7 +127,7 @@ class AppShell:
     def serve(self, takeover: str | None = None, resume_step: int | None = None, after: list[str] = ()) -> int:
         """`after`: roles started beside this app whose tokens it waits for before it builds its
         core (the surrogate server) and publishes anything (the logger, so the log misses nothing)."""
-        with Bus(Endpoints("client", tuple(self.run.connect))) as bus:
+        with Bus(app_endpoints(self.run.connect)) as bus:
             self.bus = bus
             c = self.community
             mission = self.mission

@@ -24,7 +24,7 @@ from typing import NoReturn
 from nearsub.apps.services import MAX_BATCH, discrepancy_key, kind_key
 from nearsub.common.mission.schema import MissionError, RunConfig
 from nearsub.common.runtime import keys
-from nearsub.common.runtime.bus import Bus, Endpoints, signal_self
+from nearsub.common.runtime.bus import Bus, app_endpoints, signal_self
 from nearsub.common.runtime.processes import leave, prepare_process
 from nearsub.common.surrogate.domain import constraints_ok, in_domain
 from nearsub.common.surrogate.model import (
@@ -116,7 +116,7 @@ def main(argv=None) -> int:
         print(f"[{args.instance}] {exc}", file=sys.stderr)
         return 2
     try:
-        with Bus(Endpoints("client", tuple(connect))) as bus:
+        with Bus(app_endpoints(connect)) as bus:
             serve(bus, community, surrogate, args.instance)
     except KeyboardInterrupt:
         return 130

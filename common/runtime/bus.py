@@ -20,11 +20,22 @@ SIGALRM (`deadline`), which interrupts a blocked `recv` at once.
 
 The launcher and the tools, which see little traffic, use a `Mailbox`: direct callbacks that
 append to a `queue.SimpleQueue`, which allows timeouts and mixes samples, queries and liveliness.
+
+How the apps link (`app_link`, docs/architecture.md, "Links"): on a router of this host every app
+is a Zenoh peer listening on a loopback port of its own; the router's gossip gives each the
+others' locators and they link pairwise, so a message goes app -> app in one hop. The router's
+peers form one subregion in which nobody forwards (Zenoh's regions): a message travels the direct
+link or nowhere, so it is never delivered twice, and the router carries only the traffic of its
+clients (the launcher, the tools). A peer therefore meets every other peer before it declares its
+liveliness token (`Bus.token`): then whoever sees the token can rely on every app knowing the
+subscriptions declared before it. On a router elsewhere (`network.connect`, apps maybe on several
+hosts, where a loopback locator means nothing) every app is the router's client, as the tools are.
 """
 
 from __future__ import annotations
 
 import functools
+import ipaddress
 import json
 import os
 import queue
@@ -48,6 +59,12 @@ ENCODING = "application/msgpack"
 CONNECT_TIMEOUT_VARIABLE = "NEARSUB_CONNECT_TIMEOUT"
 DEFAULT_CONNECT_TIMEOUT = 30.0
 
+# The link of the mission apps (module docstring): "peer" on a router of this host, "client"
+# otherwise; $NEARSUB_LINK=client or =peer overrides the choice (for a comparison, or a fallback).
+LINK_VARIABLE = "NEARSUB_LINK"
+LINKS = ("client", "peer")
+PEER_LISTEN = "tcp/127.0.0.1:0"  # a peer's own listener: loopback, a free port
+
 
 class BusError(RuntimeError):
     """A session that could not be opened; the one-line text names the endpoints."""
@@ -69,6 +86,38 @@ def free_tcp_port(host: str = "127.0.0.1") -> int:
         return sock.getsockname()[1]
 
 
+def is_local(endpoint: str) -> bool:
+    """Whether a Zenoh endpoint is on this host: a loopback address, `localhost` or a Unix socket."""
+    protocol, _, address = endpoint.split("#", 1)[0].split("?", 1)[0].partition("/")
+    if protocol.startswith("unix"):
+        return True
+    host = address.rsplit(":", 1)[0].strip("[]")
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:  # a host name: maybe another host
+        return False
+
+
+def app_link(connect: Iterable[str]) -> str:
+    """How a mission app joins the router at `connect`: "peer" when it is on this host, else
+    "client" (module docstring); $NEARSUB_LINK, when "client" or "peer", decides instead."""
+    forced = os.environ.get(LINK_VARIABLE, "")
+    if forced in LINKS:
+        return forced
+    connect = list(connect)
+    return "peer" if connect and all(is_local(e) for e in connect) else "client"
+
+
+def app_endpoints(connect: Iterable[str]) -> Endpoints:
+    """The endpoints of a mission app (clock, logger, surrogate server, sim, pid, helm) whose
+    router is at `connect`: a listening peer or a client, as `app_link` says."""
+    connect = tuple(connect)
+    mode = app_link(connect)
+    return Endpoints(mode, connect, listen=(PEER_LISTEN,) if mode == "peer" else ())
+
+
 def make_config(
     mode: str,
     connect: Iterable[str] = (),
@@ -87,6 +136,17 @@ def make_config(
     conf.insert_json5("scouting/multicast/enabled", json.dumps(multicast_scouting))
     conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
     conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
+    if mode == "peer":
+        # Gossip from the router (one hop) names the other peers; link to each of them, and of
+        # two peers only the one with the greater Zenoh id dials, so no pair races two handshakes.
+        conf.insert_json5("scouting/gossip/enabled", "true")
+        conf.insert_json5("scouting/gossip/multihop", "false")
+        conf.insert_json5("scouting/gossip/autoconnect", json.dumps(["router", "peer"]))
+        conf.insert_json5(
+            "scouting/gossip/autoconnect_strategy", json.dumps({"to_router": "always", "to_peer": "greater-zid"})
+        )
+        # Its admin space answers `Bus.token`'s round trip in Zenoh itself, without Python.
+        admin_space = True
     if mode != "router":
         # Wait for the router instead of failing at once, so start order does not matter.
         seconds = connect_timeout() if timeout is None else timeout
@@ -98,7 +158,7 @@ def make_config(
         except mission_credentials.CredentialsError as exc:
             raise BusError(str(exc)) from None
         auth = {"user": found.user, "password": found.password}
-        if mode == "router":
+        if mode != "client":  # a router's or a peer's listener admits only holders of the file
             auth["dictionary_file"] = str(found.path)
         conf.insert_json5("transport/auth/usrpwd", json.dumps(auth))
     if admin_space:
@@ -366,6 +426,9 @@ class Bus:
         self._config = endpoints.config() if isinstance(endpoints, Endpoints) else endpoints
         self._session: zenoh.Session | None = None
         self._keep: list[Any] = []
+        self._peer = json.loads(self._config.get_json("mode")) == "peer"
+        timeout = endpoints.timeout if isinstance(endpoints, Endpoints) else None
+        self._meet_timeout = connect_timeout() if timeout is None else timeout
 
     def __enter__(self) -> Bus:
         try:
@@ -429,9 +492,10 @@ class Bus:
 
     def put_reply(self, key: str, payload: bytes) -> None:
         """Answer a request on the requester's reply key at once, never waiting for a match: the
-        requester subscribed to that key before it sent the request, and a client's every put
-        goes to the router, which took the subscription before the request (one link, in order)
-        and so routes the answer. A requester that left meanwhile costs nothing."""
+        requester subscribed to that key before it sent the request, and the subscription came
+        the way the request did, before it (one link, in order: straight from a peer, or from
+        the router, which declares its clients' subscriptions to its peers), so this session
+        knows it. A requester that left meanwhile costs nothing."""
         self.put(key, payload)
 
     def stream(self, key: str, capacity: int = 8192, lossy: bool = False) -> Stream:
@@ -478,7 +542,39 @@ class Bus:
         self._keep.append(self._session.declare_queryable(key, _direct(mailbox.on_query)))
 
     def token(self, key: str) -> None:
+        """Declare a liveliness token; a peer first meets the other peers (`meet_peers`)."""
+        if self._peer:
+            self.meet_peers()
         self._keep.append(self._session.liveliness().declare_token(key))
+
+    def router_peers(self) -> set[str]:
+        """Zenoh ids of the peers the router knows now, from its admin space (empty if it has none)."""
+        found = set()
+        for router in self._session.info.routers_zid():
+            for reply in self._session.get(f"@/{router}/router", timeout=self._meet_timeout):
+                if reply.ok is not None:
+                    sessions = json.loads(reply.ok.payload.to_bytes()).get("sessions", [])
+                    found |= {s["peer"] for s in sessions if s.get("whatami") == "peer"}
+        return found
+
+    def linked_peers(self) -> set[str]:
+        """Zenoh ids of the peers this session has a direct link to."""
+        return {str(zid) for zid in self._session.info.peers_zid()}
+
+    def meet_peers(self) -> None:
+        """Link to every peer the router knows, then make a round trip to each linked peer (its
+        admin space answers, in Zenoh). A link carries its messages in order and declarations
+        outrank queries, so once every answer is in, each of those peers has taken this
+        session's declarations and this session has taken theirs. A peer that joins later
+        meets this one the same way. Gives up waiting after the connect timeout (a peer that
+        never links is a mission that stalls, which the clock reports)."""
+        end = time.monotonic() + self._meet_timeout
+        wanted = self.router_peers() - {str(self._session.zid())}
+        while not wanted <= self.linked_peers() and time.monotonic() < end:
+            time.sleep(0.005)
+        left = max(end - time.monotonic(), 0.1)
+        for _ in self._session.get("@/*/peer", target=zenoh.QueryTarget.ALL, timeout=left):
+            pass
 
     def watch_liveliness(self, key: str, mailbox: Mailbox, history: bool = True) -> None:
         sub = self._session.liveliness().declare_subscriber(key, _direct(mailbox.on_liveliness), history=history)
