@@ -285,7 +285,7 @@ class Launcher:
     def stop_all(self) -> None:
         """Let apps leave on their own (the lock-stepped ones exit on the mission end), then
         escalate; the surrogate server serves until told; the logger closes its file last."""
-        grace = 0.0 if self.router_lost() else 3.0  # without the router the apps never hear the end
+        grace = 0.0 if self.router_lost() else 3.0  # without the router the launcher's end reaches no app
         stop(self.companion_processes, grace=0.0)
         stop([c.process for c in self.children.values() if c.role == "surrogate"], grace=0.0)
         stop([c.process for c in self.children.values() if c.role not in ("logger", "surrogate")], grace=grace)
@@ -519,7 +519,7 @@ class Launcher:
         first: the apps leave because it did); True if the mission ended meanwhile."""
         if self.router_lost():
             code = self.router.returncode
-            raise LaunchError(f"app router exited with code {code}: the apps lost their bus", "router")
+            raise LaunchError(f"app router exited with code {code}: the launcher lost its apps", "router")
         for child in list(self.children.values()):
             code = child.process.poll()
             if code is None or child.retiring or (child.role == "clock" and self.ended(child.instance)):
