@@ -178,6 +178,13 @@ class GrantPolicy:
         return self.wall0 + target * self.dt / self.warp
 
 
+# How long the clock may leave its mail unread (each message would otherwise wake it, a wake-up a
+# message, about 2 a step): while the apps hold at least half a window of granted steps (10 steps,
+# 12 ms at 800 steps/s), NAP; while the warp holds the next grant, until its release, at most
+# PACED_NAP (status requests are answered within it).
+NAP = 0.003
+PACED_NAP = 0.05
+
 # A control reply and the requester it goes to.
 Reply = tuple[str, ControlReply]
 
@@ -198,8 +205,9 @@ class WarpMeter:
             self.samples.append((now, completed))
 
     def achieved(self, now: float, completed: int) -> float | None:
-        """None until a first sample lies in the past."""
-        if not self.samples or now <= self.samples[0][0]:
+        """None until the first sample is WARP_SAMPLE old (a status line's first figure is not a
+        0 measured over no time)."""
+        if not self.samples or now - self.samples[0][0] < WARP_SAMPLE:
             return None
         then, before = self.samples[0]
         return (completed - before) * self.dt / (now - then)
@@ -370,6 +378,20 @@ class ClockCore:
         if self.owed_since is not None:
             wait = min(wait, self.owed_since + self.step_timeout - now)
         return max(wait, 0.0)
+
+    def nap(self, now: float) -> float:
+        """Wall seconds the clock may sleep without reading its mail, no more than `wake_in`: 0
+        when progress may be due a grant at once (a fleet's one-step window), when paused (a
+        resume is answered at once) or when a hard cap holds the grant (the end is near)."""
+        if self.paused:
+            return 0.0
+        policy, completed = self.policy, self.progress.completed
+        if policy.release(completed, self.granted, self.pause_before, self.progress.end) is not None:
+            return min(self.wake_in(now), PACED_NAP)
+        lead = self.granted - completed
+        if lead >= policy.window // 2 > 0 and self.granted < policy.hard_cap(self.pause_before, self.progress.end):
+            return min(self.wake_in(now), NAP)
+        return 0.0
 
     def grant(self, completed: int, now: float) -> Tick | None:
         limit = self.policy.extend(completed, self.granted, now, self.pause_before, self.progress.end)
