@@ -2,7 +2,6 @@ import math
 
 import msgpack
 import pytest
-
 from pydantic import BaseModel
 
 from nearsub.common.runtime.messages import (
@@ -83,10 +82,30 @@ def test_encode_writes_the_bytes_of_model_dump_for_every_kind_of_message():
         state(),
         State.model_construct(**state().model_dump()),
         state().model_copy(update={"x": 7.0}),
-        HelmProgress(step=5, t=0.25, behaviour="waypoints", leg=0, waypoint_index=1, waypoints_reached=0, psi_d=0.1,
-                     active=["survey"]),
-        Forces(step=1, t=0.05, X_s=1.0, Y_s=2.0, N_s=3.0, std_X=0.1, std_Y=0.1, std_N=0.1, weight=1.0,
-               in_domain=True, constraints_ok=False, outside=["psi"]),
+        HelmProgress(
+            step=5,
+            t=0.25,
+            behaviour="waypoints",
+            leg=0,
+            waypoint_index=1,
+            waypoints_reached=0,
+            psi_d=0.1,
+            active=["survey"],
+        ),
+        Forces(
+            step=1,
+            t=0.05,
+            X_s=1.0,
+            Y_s=2.0,
+            N_s=3.0,
+            std_X=0.1,
+            std_Y=0.1,
+            std_N=0.1,
+            weight=1.0,
+            in_domain=True,
+            constraints_ok=False,
+            outside=["psi"],
+        ),
         Event(step=2, t=0.1, kind="info", detail="d", data={"a": [1, 2.5], "b": {"c": None}}),
         Control(step=0, t=0.0, cmd="pause", args={"at": 3}, request_id="r", reply_to="tool"),
     ]
