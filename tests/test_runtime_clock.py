@@ -2,7 +2,7 @@
 
 import pytest
 
-from nearsub.common.runtime.clock import MAX_LAG, WARP_SAMPLE, ClockCore, GrantPolicy
+from nearsub.common.runtime.clock import MAX_LAG, NAP, PACED_NAP, WARP_SAMPLE, ClockCore, GrantPolicy
 from nearsub.common.runtime.lifecycle import ORDER, Schedule
 from nearsub.common.runtime.messages import Ack, Control
 
@@ -300,3 +300,22 @@ def test_a_clock_behind_its_warp_does_not_spin():
     assert core.wake_in(0.5) == pytest.approx(WARP_SAMPLE)  # not 0: only progress moves the grant
     finish_up_to(core, 9)
     assert granted(core, 0.6) == 29
+
+
+def test_the_clock_naps_through_its_mail_only_while_the_apps_have_granted_steps_to_run():
+    flat_out = clock()
+    assert granted(flat_out, 0.0) == 19
+    assert flat_out.nap(0.0) == pytest.approx(NAP)  # 20 steps granted: their outputs can wait
+    finish_up_to(flat_out, 12)
+    assert flat_out.nap(0.01) == 0.0  # 7 left, a grant is due: read the mail as it comes
+    paced = clock(warp=2.0)
+    granted(paced, 0.0)
+    assert paced.nap(0.0) == pytest.approx(DT / 2.0)  # nothing can be granted before step 1 is due
+    slow = clock(warp=0.5)
+    assert granted(slow, 0.0) == 0 and slow.nap(0.0) == pytest.approx(PACED_NAP)  # step 1 at 0.1 s: answer within
+    short = clock(max_steps=15)
+    assert granted(short, 0.0) == 14 and short.nap(0.0) == 0.0  # the end is near: do not miss it
+    fleet = ClockCore(Schedule({"helm": 5, "pid": 1, "sim": 1}), DT, 0.0, 1000, TIMEOUT)
+    fleet.policy.window = 1  # a fleet's clock grants one step at a time
+    fleet.start(0.0)
+    assert granted(fleet, 0.0) == 0 and fleet.nap(0.0) == 0.0
