@@ -1,9 +1,10 @@
 """The clock app: a thin shell around `runtime.clock.ClockCore`, which grants lock-stepped steps
 to the helm, pid and sim and holds every rule.
 
-The clock is off the critical path and event-driven: it sleeps until mail arrives or until it
-must act on its own (a paced step's release time, the stall deadline; `ClockCore.wake_in`), then
-handles all the mail that is there before deciding, so a burst of outputs costs one decision.
+The clock is off the critical path: it sleeps until mail arrives or until it must act on its own
+(a paced step's release time, the stall deadline; `ClockCore.wake_in`), or, while the apps hold
+enough granted steps, for a nap in which mail does not wake it (`ClockCore.nap`), then handles all
+the mail that is there before deciding, so a burst of outputs costs one wake-up and one decision.
 
 Control requests (messages on nearsub/<community>/control/clock) are answered on the requester's
 reply key:
@@ -142,7 +143,13 @@ class Clock:
                 return 0
             if advance.tick is not None:
                 self.tick_pub.put(encode(advance.tick))
-            item = self.stream.try_recv(self.core.wake_in(time.monotonic()))
+            now = time.monotonic()
+            nap = self.core.nap(now)
+            if nap > 0:
+                time.sleep(nap)
+                item = self.stream.try_recv()
+            else:
+                item = self.stream.try_recv(self.core.wake_in(now))
             while item is not None:
                 self.handle(*item)
                 item = self.stream.try_recv()

@@ -2,8 +2,21 @@ import math
 
 import msgpack
 import pytest
+from pydantic import BaseModel
 
-from nearsub.common.runtime.messages import Input, MessageError, State, decode, encode, model_for_key
+from nearsub.common.runtime.messages import (
+    ALL_MODELS,
+    Control,
+    Event,
+    Forces,
+    HelmProgress,
+    Input,
+    MessageError,
+    State,
+    decode,
+    encode,
+    model_for_key,
+)
 
 
 def state(**overrides):
@@ -57,3 +70,45 @@ def test_models_for_keys():
     assert model_for_key("nearsub/a/remus100/state") is State
     assert model_for_key("nearsub/a/remus100/input") is Input
     assert model_for_key("elsewhere/a/b") is None
+
+
+def test_encode_writes_the_bytes_of_model_dump_for_every_kind_of_message():
+    """`encode` packs the model's fields as they are: right only while no field holds a model."""
+    for model in ALL_MODELS:
+        for name, info in model.model_fields.items():
+            assert "BaseModel" not in repr(info.annotation), (model.__name__, name)
+            assert not (isinstance(info.annotation, type) and issubclass(info.annotation, BaseModel))
+    made = [
+        state(),
+        State.model_construct(**state().model_dump()),
+        state().model_copy(update={"x": 7.0}),
+        HelmProgress(
+            step=5,
+            t=0.25,
+            behaviour="waypoints",
+            leg=0,
+            waypoint_index=1,
+            waypoints_reached=0,
+            psi_d=0.1,
+            active=["survey"],
+        ),
+        Forces(
+            step=1,
+            t=0.05,
+            X_s=1.0,
+            Y_s=2.0,
+            N_s=3.0,
+            std_X=0.1,
+            std_Y=0.1,
+            std_N=0.1,
+            weight=1.0,
+            in_domain=True,
+            constraints_ok=False,
+            outside=["psi"],
+        ),
+        Event(step=2, t=0.1, kind="info", detail="d", data={"a": [1, 2.5], "b": {"c": None}}),
+        Control(step=0, t=0.0, cmd="pause", args={"at": 3}, request_id="r", reply_to="tool"),
+    ]
+    for message in made:
+        assert encode(message) == msgpack.packb(message.model_dump(mode="python"), use_bin_type=True)
+        assert encode(decode(encode(message), type(message))) == encode(message)  # (NaN defaults: bytes, not ==)

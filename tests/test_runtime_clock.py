@@ -2,7 +2,7 @@
 
 import pytest
 
-from nearsub.common.runtime.clock import ClockCore
+from nearsub.common.runtime.clock import MAX_LAG, NAP, PACED_NAP, WARP_SAMPLE, ClockCore, GrantPolicy
 from nearsub.common.runtime.lifecycle import ORDER, Schedule
 from nearsub.common.runtime.messages import Ack, Control
 
@@ -87,8 +87,10 @@ def test_warp_changes_at_run_time_from_the_current_step_and_status_reports_it():
     assert status.data["step"] == 81
     [(_, reply)] = core.on_control(request("warp", warp=10), 2.0)
     assert reply.ok and reply.data["warp"] == 10.0
-    assert granted(core, 2.0) == 81  # rebased on the current step: it is due now, no jump
-    finish_up_to(core, 81)
+    # Rebased on the current step 81, due now; at warp 10 a tick carries at least 2 steps (0.01 s).
+    assert granted(core, 2.0) is None
+    assert granted(core, 2.01) == 83  # no jump: 0.01 s at warp 10 is 0.1 simulated seconds
+    finish_up_to(core, 83)
     assert granted(core, 2.05) == 81 + 10  # 0.05 s at warp 10 is 0.5 simulated seconds, 10 steps
     for bad in (-1, "fast", float("nan"), float("inf"), None, True):
         [(_, refused)] = core.on_control(request("warp", warp=bad), 2.2)
@@ -250,3 +252,70 @@ def test_the_clock_wakes_for_the_next_paced_step_or_the_stall_deadline_whichever
     assert flat_out.wake_in(TIMEOUT - 0.1) == pytest.approx(0.1)  # nothing done: the stall deadline
     finish_up_to(flat_out, 19)
     assert granted(flat_out, 0.5) == 39
+
+
+# -- the grant policy as a pure function of progress and wall time ----------------------------
+
+
+def test_a_warp_the_apps_cannot_hold_grants_up_to_the_window_in_batches_not_one_step():
+    policy = GrantPolicy(DT, warp=50.0, max_steps=10_000, window=20)  # a step is due every 1 ms
+    now = 10.0  # 10 000 steps are due; the apps have completed 100
+    assert policy.extend(100, 110, now, None, None) == 120  # the window, as at warp 0
+    assert policy.extend(105, 120, now, None, None) is None  # 5 steps more: less than a batch
+    assert policy.extend(110, 120, now, None, None) == 130
+    # Held by the window, not the warp: nothing to wake up for but progress.
+    assert policy.release(110, 130, None, None) is None
+
+
+def test_a_warp_the_apps_hold_releases_the_due_steps_a_tick_interval_at_a_time():
+    policy = GrantPolicy(DT, warp=50.0, max_steps=10_000, window=20)
+    assert policy.batch == 10  # 10 ms of wall time at 1 ms a step
+    assert policy.extend(-1, -1, 0.0, None, None) is None  # only step 0 is due
+    assert policy.release(-1, -1, None, None) == pytest.approx(9 * DT / 50.0)
+    assert policy.extend(-1, -1, 9 * DT / 50.0, None, None) == 9
+    assert policy.extend(8, 9, 0.0185, None, None) is None  # 18 due: 9 more, less than a batch
+    assert policy.extend(8, 9, 0.0190, None, None) == 19
+    # The last step is granted once it is due, though the batch is not whole.
+    short = GrantPolicy(DT, 50.0, max_steps=5, window=20)
+    assert short.extend(-1, -1, 0.0039, None, None) is None and short.extend(-1, -1, 0.0040, None, None) == 4
+    slow = GrantPolicy(DT, warp=1.0, max_steps=10_000, window=20)
+    assert slow.batch == 1  # a step every 50 ms: each on its own tick
+
+
+def test_a_schedule_the_apps_fell_behind_slips_so_they_do_not_sprint_afterwards():
+    policy = GrantPolicy(DT, warp=1.0, max_steps=10_000, window=100)  # a window wide enough to see it
+    assert policy.extend(-1, -1, 0.0, None, None) == 0
+    # 10 s later the apps have done 10 steps (200 were due): the schedule slips to MAX_LAG late.
+    limit = policy.limit(9, 10.0, None, None)
+    assert limit == 10 + round(MAX_LAG / DT) and policy.wall0 == pytest.approx(10.0 - MAX_LAG - 10 * DT)
+    # Keeping up from there, at most MAX_LAG of simulated time at warp 1 is granted at once.
+    assert policy.limit(limit, 10.0, None, None) == limit
+
+
+def test_a_clock_behind_its_warp_does_not_spin():
+    core = clock(warp=50.0)
+    assert granted(core, 0.0) is None  # step 0 alone is due: less than a batch
+    assert core.wake_in(0.0) == pytest.approx(9 * DT / 50.0)
+    assert granted(core, 0.5) == 19  # 250 steps are due: the window
+    assert core.wake_in(0.5) == pytest.approx(WARP_SAMPLE)  # not 0: only progress moves the grant
+    finish_up_to(core, 9)
+    assert granted(core, 0.6) == 29
+
+
+def test_the_clock_naps_through_its_mail_only_while_the_apps_have_granted_steps_to_run():
+    flat_out = clock()
+    assert granted(flat_out, 0.0) == 19
+    assert flat_out.nap(0.0) == pytest.approx(NAP)  # 20 steps granted: their outputs can wait
+    finish_up_to(flat_out, 12)
+    assert flat_out.nap(0.01) == 0.0  # 7 left, a grant is due: read the mail as it comes
+    paced = clock(warp=2.0)
+    granted(paced, 0.0)
+    assert paced.nap(0.0) == pytest.approx(DT / 2.0)  # nothing can be granted before step 1 is due
+    slow = clock(warp=0.5)
+    assert granted(slow, 0.0) == 0 and slow.nap(0.0) == pytest.approx(PACED_NAP)  # step 1 at 0.1 s: answer within
+    short = clock(max_steps=15)
+    assert granted(short, 0.0) == 14 and short.nap(0.0) == 0.0  # the end is near: do not miss it
+    fleet = ClockCore(Schedule({"helm": 5, "pid": 1, "sim": 1}), DT, 0.0, 1000, TIMEOUT)
+    fleet.policy.window = 1  # a fleet's clock grants one step at a time
+    fleet.start(0.0)
+    assert granted(fleet, 0.0) == 0 and fleet.nap(0.0) == 0.0

@@ -103,11 +103,20 @@ class Progress:
         return f"app '{culprit}' did not finish step {step} within {timeout:g} s{waiting}"
 
 
+# At a warp the clock releases the due steps in batches of at most TICK_INTERVAL wall seconds (at
+# warp 50 and dt 0.05 s, ten steps a tick instead of one), and the paced schedule is never more
+# than MAX_LAG wall seconds ahead of the apps: a mission that fell behind runs at its top speed
+# and, once it keeps up again, does not sprint for longer than that.
+TICK_INTERVAL = 0.01
+MAX_LAG = 1.0
+
+
 @dataclass
 class GrantPolicy:
     """How far the clock lets the apps run: `window` steps ahead of the completed step at warp 0;
     with warp > 0 no further than the simulated time that has come (step k at wall0 + k dt / warp);
-    never past the time limit, an end request or a pause."""
+    never past the time limit, an end request or a pause. The grant grows in batches (fewer
+    ticks), unless it reaches one of those hard caps."""
 
     dt: float
     warp: float
@@ -120,16 +129,61 @@ class GrantPolicy:
         if self.warp > 0:
             self.wall0 = now - step * self.dt / self.warp
 
-    def limit(self, completed: int, now: float, pause_before: int | None, end: EndRequest | None) -> int:
-        grant = min(completed + self.window, self.max_steps - 1)
-        if self.warp > 0:
-            grant = min(grant, math.floor((now - self.wall0) * self.warp / self.dt + 1e-9))
+    @property
+    def batch(self) -> int:
+        """The fewest new steps worth a tick: half a window, at a warp the steps due in
+        TICK_INTERVAL if fewer (at least one)."""
+        half = max(1, self.window // 2)
+        if self.warp <= 0:
+            return half
+        return max(1, min(half, math.floor(TICK_INTERVAL * self.warp / self.dt)))
+
+    def hard_cap(self, pause_before: int | None, end: EndRequest | None) -> int:
+        cap = self.max_steps - 1
         if pause_before is not None:
-            grant = min(grant, pause_before - 1)
+            cap = min(cap, pause_before - 1)
         if end is not None:
-            grant = min(grant, end.step)
+            cap = min(cap, end.step)
+        return cap
+
+    def limit(self, completed: int, now: float, pause_before: int | None, end: EndRequest | None) -> int:
+        """The furthest step the apps may run now. At a warp this first lets the schedule slip
+        so that the next step to complete is at most MAX_LAG late."""
+        grant = min(completed + self.window, self.hard_cap(pause_before, end))
+        if self.warp > 0:
+            late = now - self.wall0 - (completed + 1) * self.dt / self.warp
+            if late > MAX_LAG:
+                self.wall0 += late - MAX_LAG
+            grant = min(grant, math.floor((now - self.wall0) * self.warp / self.dt + 1e-9))
         return grant
 
+    def extend(
+        self, completed: int, granted: int, now: float, pause_before: int | None, end: EndRequest | None
+    ) -> int | None:
+        """The new grant, or None while it would grow by less than a batch short of a hard cap."""
+        limit = self.limit(completed, now, pause_before, end)
+        if limit > granted and (limit - granted >= self.batch or limit == self.hard_cap(pause_before, end)):
+            return limit
+        return None
+
+    def release(self, completed: int, granted: int, pause_before: int | None, end: EndRequest | None) -> float | None:
+        """The wall time at which the warp lets `extend` grant more, or None when the warp is not
+        what holds the grant (warp 0, the window, a hard cap: then only progress or a request
+        can move it, and the clock has nothing to wake up for)."""
+        if self.warp <= 0:
+            return None
+        target = min(granted + self.batch, self.hard_cap(pause_before, end))
+        if target <= granted or target > completed + self.window:
+            return None
+        return self.wall0 + target * self.dt / self.warp
+
+
+# How long the clock may leave its mail unread (each message would otherwise wake it, a wake-up a
+# message, about 2 a step): while the apps hold at least half a window of granted steps (10 steps,
+# 12 ms at 800 steps/s), NAP; while the warp holds the next grant, until its release, at most
+# PACED_NAP (status requests are answered within it).
+NAP = 0.003
+PACED_NAP = 0.05
 
 # A control reply and the requester it goes to.
 Reply = tuple[str, ControlReply]
@@ -151,8 +205,9 @@ class WarpMeter:
             self.samples.append((now, completed))
 
     def achieved(self, now: float, completed: int) -> float | None:
-        """None until a first sample lies in the past."""
-        if not self.samples or now <= self.samples[0][0]:
+        """None until the first sample is WARP_SAMPLE old (a status line's first figure is not a
+        0 measured over no time)."""
+        if not self.samples or now - self.samples[0][0] < WARP_SAMPLE:
             return None
         then, before = self.samples[0]
         return (completed - before) * self.dt / (now - then)
@@ -310,23 +365,40 @@ class ClockCore:
 
     def wake_in(self, now: float) -> float:
         """Wall seconds until the clock must act with no mail arriving: the release of the next
-        paced step, the stall deadline, or the warp meter's next sample, whichever is first."""
+        paced batch, the stall deadline, or the warp meter's next sample, whichever is first.
+        A paced step that is due but held by the window waits for progress: waking for it would
+        spin (the cause of warp 50 running slower than warp 25 on a machine that cannot hold it)."""
         wait = WARP_SAMPLE
-        policy = self.policy
-        if policy.warp > 0 and not self.paused and self.granted + 1 != self.pause_before:
-            wait = min(wait, policy.wall0 + (self.granted + 1) * self.dt / policy.warp - now)
+        release = None
+        if not self.paused:
+            completed = self.progress.completed
+            release = self.policy.release(completed, self.granted, self.pause_before, self.progress.end)
+        if release is not None:
+            wait = min(wait, release - now)
         if self.owed_since is not None:
             wait = min(wait, self.owed_since + self.step_timeout - now)
         return max(wait, 0.0)
 
+    def nap(self, now: float) -> float:
+        """Wall seconds the clock may sleep without reading its mail, no more than `wake_in`: 0
+        when progress may be due a grant at once (a fleet's one-step window), when paused (a
+        resume is answered at once) or when a hard cap holds the grant (the end is near)."""
+        if self.paused:
+            return 0.0
+        policy, completed = self.policy, self.progress.completed
+        if policy.release(completed, self.granted, self.pause_before, self.progress.end) is not None:
+            return min(self.wake_in(now), PACED_NAP)
+        lead = self.granted - completed
+        if lead >= policy.window // 2 > 0 and self.granted < policy.hard_cap(self.pause_before, self.progress.end):
+            return min(self.wake_in(now), NAP)
+        return 0.0
+
     def grant(self, completed: int, now: float) -> Tick | None:
-        """Extend the grant in chunks of half the window (fewer ticks), or up to a cap."""
-        limit = self.policy.limit(completed, now, self.pause_before, self.progress.end)
-        window = self.policy.window
-        if limit > self.granted and (limit - self.granted >= window // 2 or limit - completed < window):
-            self.granted = self.progress.granted = limit
-            return Tick(step=limit, t=limit * self.dt, source="clock")
-        return None
+        limit = self.policy.extend(completed, self.granted, now, self.pause_before, self.progress.end)
+        if limit is None:
+            return None
+        self.granted = self.progress.granted = limit
+        return Tick(step=limit, t=limit * self.dt, source="clock")
 
     def stalled(self, completed: int, now: float) -> bool:
         """True once a granted step has been owed for `step_timeout` without progress. The timer
