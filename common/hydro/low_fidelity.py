@@ -248,8 +248,8 @@ class FieldTable:
         return self.cells, self.x_inner, self.r_inner, self.x_left, self.r_left
 
 
-# The kernel's table arguments when it reads no table (the UUV alone): typed placeholders.
-_NO_TABLE = (np.zeros((1, 1, 2, 4, 4)), np.zeros(0), np.zeros(0), np.zeros(1), np.zeros(1))
+# The kernel's table arguments when it reads no table (the UUV alone): typed placeholders, and bounds.
+_NO_TABLE = (np.zeros((1, 1, 2, 4, 4)), np.zeros(0), np.zeros(0), np.zeros(1), np.zeros(1), np.zeros(4))
 
 
 def _kernel():
@@ -270,9 +270,12 @@ class SubmarineField:
     x_range: tuple[float, float]
     r_range: tuple[float, float]
     table: FieldTable = dataclasses.field(init=False, repr=False, compare=False)
+    # The strip kernel's table arguments: the table's arrays and its bounds (x_min, x_max, R_min, R_max).
+    kernel_table: tuple = dataclasses.field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
         object.__setattr__(self, "table", FieldTable(self.ux, self.ur))
+        object.__setattr__(self, "kernel_table", (*self.table.arrays(), np.array([*self.x_range, *self.r_range])))
         _load_kernels(self.table)
 
 
@@ -284,7 +287,7 @@ def _load_kernels(table: FieldTable) -> None:
     table.values(empty, empty)
     no_rows = (empty,) * 7 + (np.empty(0, dtype=np.int64), strips, strips, strips)
     outputs = (np.empty((0, 3)), np.empty((0, 3)), np.empty(0, dtype=bool))
-    _kernel().strip_forces(*no_rows, *table.arrays(), np.zeros(4), True, True, *outputs)
+    _kernel().strip_forces(*no_rows, *table.arrays(), _NO_TABLE[-1], True, True, *outputs)
 
 
 def submarine_field(n_frusta: int = N_FRUSTA) -> SubmarineField:
@@ -367,6 +370,8 @@ def _strips(ld_ratio: np.ndarray, n_strips: int) -> tuple[np.ndarray, np.ndarray
     the k distinct L/D values, and each input row's index into them. A vehicle has one L/D, whose
     strips are kept (`_unit_strips`); many hulls at once (training, validation) are computed
     together, element by element, to the same bits."""
+    if ld_ratio.size and (ld_ratio == ld_ratio[0]).all():  # one hull (a vehicle): skip the sort
+        return (*_unit_strips(float(ld_ratio[0]), n_strips), np.zeros(ld_ratio.size, dtype=np.int64))
     values, index = np.unique(ld_ratio, return_inverse=True)
     table = _unit_strips(float(values[0]), n_strips) if len(values) == 1 else _strip_table(values, n_strips)
     return (*table, index.astype(np.int64))
@@ -410,13 +415,10 @@ def _strip_model(inputs, n_strips: int, n_frusta: int | None, hold: bool):
     n = len(x_c)
     lf, free, held = np.empty((n, 3)), np.empty((n, 3)), np.empty(n, dtype=bool)
     with_submarine = n_frusta is not None
-    table, bounds = _NO_TABLE, np.zeros(4)
-    if with_submarine:
-        field = submarine_field(n_frusta)
-        table, bounds = field.table.arrays(), np.array([*field.x_range, *field.r_range])
+    table = submarine_field(n_frusta).kernel_table if with_submarine else _NO_TABLE
     _kernel().strip_forces(
         x_c, y_c, np.cos(psi), np.sin(psi), diameter, length, ittc57(speed * length / NU),
-        strip_row, unit_xi, unit_r, unit_arc, *table, bounds, hold, with_submarine, lf, free, held,
+        strip_row, unit_xi, unit_r, unit_arc, *table, hold, with_submarine, lf, free, held,
     )  # fmt: skip
     return (lf if with_submarine else None), free, held
 

@@ -54,6 +54,8 @@ BLEND_FRACTION = 0.02
 # of 0.26 m for the REMUS 100 and 0.7 m for the SDV. nearsub's choice.
 CONSTRAINT_BAND = np.array([0.005, 0.005, 0.1, 0.1])
 GEOMETRY = slice(4, 6)  # D_sub/D_uuv and L/D_uuv: fixed for a vehicle
+# Their trained range (table 4.2), which `interaction_at` clips them to (as np.clip: neither bound is 0).
+_GEOMETRY_LOWER, _GEOMETRY_UPPER = domain.BOUNDS[GEOMETRY, 0].copy(), domain.BOUNDS[GEOMETRY, 1].copy()
 HEADING = 3  # psi_deg: the discrepancy weight of the LF-in-the-loop increment ignores it
 LATERAL = 1  # constraint (4.5), the outer lateral edge of the trained window
 # The discrepancy weight of the LF-in-the-loop increment across (4.5): 1 up to the edge, falling
@@ -92,7 +94,7 @@ class ForceModel(Protocol):
 
 def smoothstep(x: np.ndarray) -> np.ndarray:
     """0 below 0, 1 above 1, x^2 (3 - 2x) between: continuous with a continuous slope."""
-    x = np.clip(x, 0.0, 1.0)
+    x = np.minimum(np.maximum(x, 0.0), 1.0)  # np.clip's bits (x * x drops a zero's sign) at less cost
     return x * x * (3.0 - 2.0 * x)
 
 
@@ -136,7 +138,7 @@ def discrepancy_weight(inputs: np.ndarray) -> np.ndarray:
 def discrepancy_inputs(inputs: np.ndarray) -> np.ndarray:
     """x_c: inputs (n, 6) clamped into table 4.2's box and then, beyond (4.5), R_lat onto its edge
     (where `discrepancy_weight` tapers delta off), so delta is asked only where it was trained."""
-    clamped = np.clip(inputs, domain.BOUNDS[:, 0], domain.BOUNDS[:, 1])
+    clamped = np.minimum(np.maximum(inputs, domain.BOUNDS[:, 0]), domain.BOUNDS[:, 1])  # np.clip: no bound is 0
     beyond = np.minimum(domain.constraint_values(clamped)[:, LATERAL], 0.0)
     clamped[:, 1] += beyond / 8.575  # (4.5) falls by 8.575 (= L_sub / D_sub) per unit of R_lat
     return clamped
@@ -313,7 +315,7 @@ def interaction_at(
     u, x, y, psi = state[:, U], state[:, X], state[:, Y], state[:, PSI]
     raw, mirror = domain.to_inputs(x, y, u, psi, vehicle.length, vehicle.diameter)
     inputs = raw.copy()
-    inputs[:, GEOMETRY] = np.clip(raw[:, GEOMETRY], domain.BOUNDS[GEOMETRY, 0], domain.BOUNDS[GEOMETRY, 1])
+    inputs[:, GEOMETRY] = np.minimum(np.maximum(raw[:, GEOMETRY], _GEOMETRY_LOWER), _GEOMETRY_UPPER)
     n = len(inputs)
     table = None
     if mode == "increment":
@@ -340,10 +342,9 @@ def interaction_at(
         lf, delta_free = np.full((n, 3), np.nan), np.full((n, 3), np.nan)
         delta_weight, held = np.full(n, np.nan), np.zeros(n, dtype=bool)
     # One conversion for the five (n, 3) arrays (element-wise, so each gets its own bits).
-    parts = np.vstack([coefficients, model_mean, spread, lf, delta_free])
-    forces, model_forces, spread_forces, lf_forces, free_forces = np.split(
-        domain.to_forces(parts, np.tile(mirror, 5), np.tile(u, 5), vehicle.length, rho), 5
-    )
+    parts = np.concatenate([coefficients, model_mean, spread, lf, delta_free])
+    converted = domain.to_forces(parts, np.tile(mirror, 5), np.tile(u, 5), vehicle.length, rho)
+    forces, model_forces, spread_forces, lf_forces, free_forces = converted.reshape(5, n, 3)
     safe = np.where(np.isfinite(forces), forces, 0.0)  # weight is 0 wherever they are not finite
     interaction = Interaction(safe[0], weight[0], mode) if single else Interaction(safe, weight, mode)
     flags = outside_mask(raw)
@@ -412,23 +413,34 @@ def lf_in_loop_increment(
     delta_weight = discrepancy_weight(inputs)
     near = reach > 0.0
     asked = near & (delta_weight > 0.0) if weighted_only else np.ones(n, dtype=bool)
-    if any_asked := asked.any():
-        clamped = discrepancy_inputs(inputs[asked])
+    # Every row (the sim's one vehicle, a batch near the hull) needs no masked copies.
+    every_asked, every_near = n > 0 and bool(asked.all()), n > 0 and bool(near.all())
+    if any_asked := every_asked or asked.any():
+        clamped = discrepancy_inputs(inputs if every_asked else inputs[asked])
         if delta is None:  # asked first, answered after the LF below (`discrepancy_later`)
             answer = discrepancy_later(model, clamped, with_std)
-    lf = np.zeros((n, 3))
-    held = np.zeros(n, dtype=bool)
-    if near.any():
-        with_sub, alone, held[near] = hydro_lf.lf_increment_terms(inputs[near])
-        lf[near] = with_sub - alone
-    mean, spread, free = np.zeros((n, 3)), np.full((n, 3), np.nan), np.zeros((n, 3))
+    if every_near:
+        with_sub, alone, held = hydro_lf.lf_increment_terms(inputs)
+        lf = with_sub - alone
+    else:
+        lf, held = np.zeros((n, 3)), np.zeros(n, dtype=bool)
+        if near.any():
+            with_sub, alone, held[near] = hydro_lf.lf_increment_terms(inputs[near])
+            lf[near] = with_sub - alone
     if any_asked:
-        free[asked] = free_stream.coefficients(clamped) - hydro_lf.lf_free_stream(clamped)
+        asked_free = free_stream.coefficients(clamped) - hydro_lf.lf_free_stream(clamped)
         if delta is None:
-            mean[asked], std = answer()
+            asked_mean, std = answer()
         else:  # a sample of delta in place of its mean (`interaction_at`); a sample has no std
-            mean[asked], std = delta(clamped, np.flatnonzero(asked)), np.nan
-        if with_std:
-            spread[asked] = std
+            asked_mean, std = delta(clamped, np.flatnonzero(asked)), np.nan
+    if every_asked:
+        mean, free = asked_mean, asked_free
+        spread = std if with_std and np.shape(std) == (n, 3) else np.full((n, 3), np.nan)
+    else:
+        mean, spread, free = np.zeros((n, 3)), np.full((n, 3), np.nan), np.zeros((n, 3))
+        if any_asked:
+            free[asked], mean[asked] = asked_free, asked_mean
+            if with_std:
+                spread[asked] = std
     correction = np.where(delta_weight[:, None] > 0.0, delta_weight[:, None] * (mean - free), 0.0)
     return lf + correction, reach, mean, spread, lf, free, delta_weight, held
