@@ -10,10 +10,17 @@ cell run here and the same cell run as a mission through the launcher agree (tes
 
 Each UUV follows one track-line from its start; it stops being integrated at a collision (its
 state is frozen there), as the sim ends a mission at a collision.
+
+UUVs given the same start, track-line and clock fly the same numbers until something tells them
+apart: a sampled delta (one posterior sample per UUV). They share one row of the batch until the
+first step at which that row asks delta, and split into one row each there (state, controller
+memory and helm copied). An envelope's K samples of a cell far from the hull, where delta is never
+asked, cost one row, not K.
 """
 
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, fields
@@ -25,7 +32,7 @@ from nearsub.common.mission.cores import guard_clearance, make_helm
 from nearsub.common.mission.schema import Mission
 from nearsub.common.physics import dynamics
 from nearsub.common.physics import proximity as events
-from nearsub.common.surrogate.interaction import ForceModel, interaction_at
+from nearsub.common.surrogate.interaction import ForceModel, InteractionAt, interaction_at
 
 OUTCOMES = ("safe", "large_stray", "close_call", "collision", "infeasible")  # codes 0..4
 
@@ -46,9 +53,28 @@ class BatchResult:
         return [OUTCOMES[code] for code in self.outcome]
 
 
-def _keep(memory: control.PidState, keep: np.ndarray) -> control.PidState:
-    """The controller memory of the UUVs still flying."""
-    return control.PidState(*(np.asarray(getattr(memory, f.name))[keep] for f in fields(memory)))
+def _take(memory: control.PidState, rows: np.ndarray) -> control.PidState:
+    """The controller memory of rows `rows` (a mask or indices)."""
+    return control.PidState(*(np.asarray(getattr(memory, f.name))[rows] for f in fields(memory)))
+
+
+def _joined(first: InteractionAt, second: InteractionAt) -> InteractionAt:
+    """The answers for two sets of rows, one after the other."""
+    a, b = first.interaction, second.interaction
+    joined = dynamics.Interaction(np.concatenate([a.forces, b.forces]), np.concatenate([a.weight, b.weight]), a.mode)
+    names = [f.name for f in fields(first) if f.name != "interaction"]
+    parts = {name: np.concatenate([getattr(first, name), getattr(second, name)]) for name in names}
+    return InteractionAt(interaction=joined, **parts)
+
+
+def _same_inputs(starts: np.ndarray, track_ends: np.ndarray, offsets: np.ndarray | None) -> np.ndarray:
+    """(N,) for each UUV the first UUV with the same start, track end and clock offset, to the bit."""
+    columns = [np.asarray(starts, dtype=float), np.asarray(track_ends, dtype=float)]
+    if offsets is not None:
+        columns.append(offsets[:, None])
+    bits = np.ascontiguousarray(np.hstack(columns)).view(np.uint64)
+    _, first, inverse = np.unique(bits, axis=0, return_index=True, return_inverse=True)
+    return first[inverse.ravel()]
 
 
 def run_batch(
@@ -104,7 +130,15 @@ def run_batch(
     limits_low = np.array([-vehicle.max_thrust, -vehicle.max_rudder])
     limits_high = np.array([vehicle.max_thrust, vehicle.max_rudder])
 
-    flying = np.flatnonzero(active)  # indices of the UUVs still integrated, in order
+    offsets = None if time_offset is None else np.asarray(time_offset, dtype=float)
+    # owner[i]: the UUV whose row carries UUV i (i itself once it flies on a row of its own).
+    owner = np.arange(n)
+    same = _same_inputs(
+        np.asarray(starts)[active], np.asarray(track_ends)[active], None if offsets is None else offsets[active]
+    )
+    owner[active] = np.flatnonzero(active)[same]
+    flying = np.unique(owner[active])  # the UUV of each row still integrated, in order
+    shared = np.bincount(owner[active], minlength=n)[flying] > 1  # rows that carry other UUVs too
     # A behaviour list runs the helm app's own helm, one per UUV (not vectorised: docs/design.md, "The helm").
     helms = [make_helm(mission) for _ in flying] if helm.behaviours else None
     x = final[flying]
@@ -115,23 +149,51 @@ def run_batch(
     psi_d = np.zeros(len(flying))
     delta_psi = np.zeros(len(flying))  # the guarded N_uv offsets of the last helm step
     command = np.zeros((len(flying), 2))
-    offsets = None if time_offset is None else np.asarray(time_offset, dtype=float)
 
-    def ask(x: np.ndarray, sampled: bool):  # one query for the whole batch; sweeps need no std
-        own = (lambda X, rows: delta(X, flying[rows])) if sampled else None  # rows of the UUVs flying now
+    def ask(x: np.ndarray, uuvs: np.ndarray, sampled: bool, asked_shared: list | None = None):
+        """One query for rows x of UUVs uuvs (sweeps need no std); with `sampled` each row's own
+        delta, and the shared rows that asked it appended to `asked_shared` (their answer is that
+        of the row's own UUV, the first of its group)."""
+
+        def own(X: np.ndarray, rows: np.ndarray) -> np.ndarray:
+            if asked_shared is not None:
+                asked_shared.append(rows[shared[rows]])
+            return delta(X, uuvs[rows])
+
         rho, mode = mission.environment.rho, sim.interaction
-        return interaction_at(surrogate, x, vehicle, rho, mode, with_std=False, weighted_only=True, delta=own)
+        return interaction_at(
+            surrogate, x, vehicle, rho, mode, with_std=False, weighted_only=True, delta=own if sampled else None
+        )
 
     for step in range(mission.max_steps):
         if flying.size == 0:
             break
-        t = step * dt if offsets is None else step * dt + offsets[flying]
         helm_runs = step % helm.period == 0
         seen = believed = None
         if interact or (compensate and helm_runs):
-            seen = believed = ask(x, delta is not None)
+            asked_shared: list[np.ndarray] = []
+            seen = believed = ask(x, flying, delta is not None, asked_shared)
+            split = np.concatenate(asked_shared) if asked_shared else np.zeros(0, dtype=int)
+            if split.size:  # rows whose UUVs part here: one row each for the others of their groups
+                joining = np.isin(owner, flying[split]) & (owner != np.arange(n))
+                others = np.flatnonzero(joining)
+                row_of = np.empty(n, dtype=int)
+                row_of[flying] = np.arange(len(flying))
+                parent = row_of[owner[others]]
+                for tally in (steps, closest, max_cross, close_call):
+                    tally[others] = tally[owner[others]]
+                owner[others] = others
+                shared[split] = False
+                rows = np.concatenate([np.arange(len(flying)), parent])
+                flying, shared = np.concatenate([flying, others]), shared[rows]
+                x, track_start, track_end, memory = x[rows], track_start[rows], track_end[rows], _take(memory, rows)
+                u_d, psi_d, delta_psi, command = u_d[rows], psi_d[rows], delta_psi[rows], command[rows]
+                if helms is not None:
+                    helms += [copy.deepcopy(helms[r]) for r in parent]
+                seen = believed = _joined(seen, ask(x[-len(others) :], others, True))
         if compensate and helm_runs and delta is not None:
-            believed = ask(x, False)
+            believed = ask(x, flying, False)
+        t = step * dt if offsets is None else step * dt + offsets[flying]
         if helm_runs:  # helm(x_k)
             if helms is not None:  # a behaviour list: each UUV's own helm
                 speed, heading = _arbitrated(helms, x, t, seen)
@@ -178,13 +240,18 @@ def run_batch(
             final[flying] = x
             collided[flying[found.collision]] = True
             keep = ~found.collision
-            flying, x, track_start, track_end = flying[keep], x[keep], track_start[keep], track_end[keep]
-            memory, u_d, psi_d, command = _keep(memory, keep), u_d[keep], psi_d[keep], command[keep]
+            flying, shared, x = flying[keep], shared[keep], x[keep]
+            track_start, track_end = track_start[keep], track_end[keep]
+            memory, u_d, psi_d, command = _take(memory, keep), u_d[keep], psi_d[keep], command[keep]
             delta_psi = delta_psi[keep]
             helms = None if helms is None else [h for h, k in zip(helms, keep, strict=True) if k]
         if on_step is not None:
             on_step(step + 1, mission.max_steps)
     final[flying] = x
+    # The UUVs still sharing a row end as the row's UUV did.
+    final, collided, close_call, closest, max_cross, steps = (
+        a[owner] for a in (final, collided, close_call, closest, max_cross, steps)
+    )
 
     outcome = np.select(
         [~active, collided, close_call, max_cross > events.STRAY_LIMIT],
