@@ -22,8 +22,8 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from scipy.linalg import solve_triangular
-from scipy.linalg.lapack import dpotrf, dpotri, dpotrs
+from scipy.linalg.blas import dtrmm
+from scipy.linalg.lapack import dpotrf, dpotri, dpotrs, dtrtri
 from scipy.optimize import minimize
 
 __all__ = ["FINAL_FIT_RESTARTS", "DegenerateFitError", "GaussianProcess", "MultiOutputGP"]
@@ -239,8 +239,10 @@ class _Predictor:
         return mean, std
 
     def _batch_std(self, E: np.ndarray, j: int) -> np.ndarray:
-        V = E @ self.LinvT_s[j]
-        var = self.s2[j] - np.einsum("ni,ni->n", V, V)  # thesis (2.7), diagonal
+        """Overwrites E (rows, n) with V^T = L^-1 E^T: a triangular product (BLAS trmm, in place on
+        the Fortran-ordered view E^T), half the flops of a general one."""
+        Vt = dtrmm(1.0, self.LinvT_s[j].T, E.T, side=0, lower=1, overwrite_b=1)
+        var = self.s2[j] - np.einsum("in,in->n", Vt, Vt)  # thesis (2.7), diagonal
         return np.sqrt(np.maximum(var, 0.0))
 
 
@@ -401,7 +403,6 @@ class GaussianProcess:
 
     def _condition(self, theta: np.ndarray) -> None:
         """Factorise K at theta and precompute alpha = K^-1 y and L^-1 for prediction."""
-        n = self._U.shape[0]
         fact = _cholesky(_rbf(theta, self._U))
         if fact is None:
             raise RuntimeError("GP conditioning failed: K is not factorisable even with jitter")
@@ -409,7 +410,7 @@ class GaussianProcess:
         self.theta_ = theta
         self.jitter_ = jitter
         self._alpha = dpotrs(L, self._ys, lower=1)[0]
-        self._L_inv = solve_triangular(L, np.eye(n), lower=True, check_finite=False)
+        self._L_inv = dtrtri(L, lower=1)[0]  # LAPACK triangular inverse: a third of solving L X = I
         self.log_marginal_likelihood_value_ = _lml_of_factor(L, self._alpha, self._ys)  # = _lml's
         self._finish()
 
