@@ -119,7 +119,7 @@ def test_unfactorisable_kernel_gives_minus_inf_not_exception():
     gp = GaussianProcess(bounds=BOUNDS).fit(X, y)
     lml, grad = gp.log_marginal_likelihood(np.full(5, np.nan))
     assert lml == -np.inf and grad is None
-    f, g = gpmod._neg_lml(np.full(5, np.nan), gp._D2, gp._ys)
+    f, g = gpmod._neg_lml(np.full(5, np.nan), gp._U, gp._ys)
     assert f == np.inf and np.array_equal(g, np.zeros(5))
 
 
