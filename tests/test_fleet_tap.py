@@ -3,12 +3,14 @@
 step timeouts."""
 
 import json
+from concurrent.futures import ThreadPoolExecutor
 
 import pytest
 from logsample import write_fleet_log
 from test_log_play import STARTUP, STEP, start_player, wait_registered
 
 from conftest import nearsub
+from nearsub.common.runtime.logfile import read_log
 from nearsub.common.runtime.processes import stop
 
 
@@ -24,17 +26,19 @@ def test_tap_lists_the_vehicles_and_echoes_one_of_them(fleet_log, runtime_dir, c
     player = start_player(fleet_log, "--warp", 1, "--community", community, "--wait", STARTUP)
     try:
         wait_registered(community, player)
-        echo = nearsub(
-            "tap", "echo", f"nearsub/{community}/*/state", "--vehicle", "bravo", "--community", community,
-            "--count", "5", "--json", timeout=STARTUP + STEP,
-        )  # fmt: skip
-        listed = nearsub("tap", "list", "--community", community, "--json", timeout=STARTUP + STEP)
-        hz = nearsub(
-            "tap", "hz", f"nearsub/{community}/**", "--vehicle", "alfa", "--community", community, "--duration", "2",
-            "--json", timeout=STARTUP + STEP,
-        )  # fmt: skip
-        only = nearsub("tap", "list", "--community", community, "--vehicle", "alfa", "--json", timeout=STARTUP + STEP)
-        unknown = nearsub("tap", "list", "--community", community, "--vehicle", "zulu", timeout=STARTUP + STEP)
+        calls = [
+            ("tap", "echo", f"nearsub/{community}/*/state", "--vehicle", "bravo", "--community", community,
+             "--count", "5", "--json"),
+            ("tap", "list", "--community", community, "--json"),
+            ("tap", "hz", f"nearsub/{community}/**", "--vehicle", "alfa", "--community", community, "--duration", "2",
+             "--json"),
+            ("tap", "list", "--community", community, "--vehicle", "alfa", "--json"),
+            ("tap", "list", "--community", community, "--vehicle", "zulu"),
+        ]  # fmt: skip
+        # The taps run at once, each its own process: one start-up timeout per concurrent process.
+        with ThreadPoolExecutor(len(calls)) as pool:
+            runs = pool.map(lambda call: nearsub(*call, timeout=len(calls) * STARTUP + STEP), calls)
+            echo, listed, hz, only, unknown = runs
     finally:
         stop([player])
     assert echo.returncode == 0, echo.stderr
@@ -54,12 +58,15 @@ def test_tap_lists_the_vehicles_and_echoes_one_of_them(fleet_log, runtime_dir, c
 
 
 def test_play_of_one_vehicle_replays_its_keys_and_the_mission_wide_ones(fleet_log, runtime_dir, community):
+    # The echo stops once it has as many messages as the log has outside alfa's keys (the player
+    # waits for it to subscribe), at the latest after STARTUP.
+    expected = sum("/alfa/" not in record.topic for record in read_log(fleet_log).records)
     player = start_player(fleet_log, "--warp", 0, "--vehicle", "bravo", "--community", community, "--wait", STARTUP)
     try:
         wait_registered(community, player)
         tap = nearsub(
             "tap", "echo", f"nearsub/{community}/**", "--community", community, "--timeout", str(STARTUP), "--json",
-            timeout=2 * STARTUP + STEP,
+            "--count", str(expected), timeout=2 * STARTUP + STEP,
         )  # fmt: skip
         player.communicate(timeout=STARTUP + STEP)
     finally:
