@@ -96,6 +96,25 @@ def test_increment_is_continuous_across_the_lateral_edge_of_constraint_4_5(model
     assert np.all(steps <= allowed + 1e-9)
 
 
+@pytest.mark.parametrize("weighted_only", [False, True])
+def test_a_state_alone_gets_the_bits_it_gets_among_others(model, weighted_only):
+    """interaction_at of one vehicle (the sim: every row asked and near) equals its row in a batch
+    whose other rows are out of the LF's reach or of delta's weight (masked rows, the batch
+    engine's `weighted_only`), field by field and bit for bit; the std to rounding (the GP's std
+    uses BLAS, `MultiOutputGP.predict_rows`)."""
+    near = states_at(np.linspace(-60.0, 60.0, 7), 5.6, np.linspace(-3.0, 3.0, 7))
+    far = states_at([0.0, 30.0], [400.0, -9.0], 0.0)  # beyond LF_CUT; beyond (4.5) and its taper
+    batch = np.vstack([far[:1], near, far[1:]])
+    together = interaction_at(model, batch, SDV, RHO, "increment", weighted_only=weighted_only)
+    assert not (together.interaction.weight > 0).all() and not (together.delta_weight > 0).all()
+    for k, state in enumerate(near, start=1):
+        alone = interaction_at(model, state, SDV, RHO, "increment", weighted_only=weighted_only)
+        for name in ("forces", "applied", "model", "lf", "delta_free", "delta_weight", "outside_mask", "lf_held"):
+            np.testing.assert_array_equal(getattr(alone, name)[0], getattr(together, name)[k], err_msg=name)
+        np.testing.assert_allclose(alone.std[0], together.std[k], rtol=1e-12)
+        np.testing.assert_array_equal(alone.interaction.forces, together.interaction.forces[k])
+
+
 def test_blend_weight_of_the_discrepancy_does_not_depend_on_heading():
     rng = np.random.default_rng(3)
     X = domain.sample_feasible(200, seed=5)
