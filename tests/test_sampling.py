@@ -85,3 +85,34 @@ def test_any_lf_in_loop_model_and_bad_requests():
         draw_samples(analytic_model().model, 2)
     with pytest.raises(ValueError, match=r"\(3, n, 6\)"):
         draw_samples(model, 3, n_features=8).delta(np.zeros((2, 4, 6)))
+
+
+def test_per_row_samples_give_the_bits_of_the_numpy_expressions(surrogate):
+    """`rows` (compiled, row by row) against the numpy expressions of pathwise conditioning it
+    replaced, bit for bit: the data update and the prior features of each row's own sample."""
+    import math
+
+    from nearsub.common.surrogate import sampling_kernel
+
+    samples = draw_samples(surrogate, 5, seed=3)
+    X = sample_feasible(40, seed=4)
+    sample = np.random.default_rng(5).integers(0, 5, len(X))
+    W = surrogate.model.warping.forward(X)
+    got = samples.rows(X, sample)
+    for j, out in enumerate(samples._outputs):
+        Z = (W - out.lower) / out.width
+        sq = np.zeros((len(Z), len(out.U)))
+        for i in range(Z.shape[1]):
+            diff = (Z[:, i, None] - out.U[None, :, i]) / out.length[i]
+            sq += diff * diff
+        f = np.sum(out.s2 * np.exp(-0.5 * sq) * out.v[sample], axis=-1)
+        proj = out.phase[sample] + Z[:, 0, None] * out.omega_t[sample, 0]
+        for i in range(1, Z.shape[1]):
+            proj += Z[:, i, None] * out.omega_t[sample, i]
+        n_features = out.weights.shape[1]
+        f += math.sqrt(2.0 * out.s2 / n_features) * np.sum(np.cos(proj) * out.weights[sample], axis=-1)
+        assert (out.y_mean + out.y_std * f).tobytes() == got[:, j].tobytes(), j
+    rng = np.random.default_rng(6)
+    for n in [*range(1, 300), 512, 1000, sampling_kernel.PAIRWISE_MAX]:  # numpy's summation order
+        a = rng.standard_normal(n) * rng.exponential(1.0, n)
+        assert sampling_kernel._pairwise(a, 0, n).hex() == np.sum(a).hex(), n

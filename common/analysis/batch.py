@@ -67,6 +67,14 @@ def _joined(first: InteractionAt, second: InteractionAt) -> InteractionAt:
     return InteractionAt(interaction=joined, **parts)
 
 
+def _rows(at: InteractionAt, rows: np.ndarray) -> InteractionAt:
+    """The answers for rows `rows` of `at`."""
+    a = at.interaction
+    names = [f.name for f in fields(at) if f.name != "interaction"]
+    taken = {name: getattr(at, name)[rows] for name in names}
+    return InteractionAt(interaction=dynamics.Interaction(a.forces[rows], a.weight[rows], a.mode), **taken)
+
+
 def _same_inputs(starts: np.ndarray, track_ends: np.ndarray, offsets: np.ndarray | None) -> np.ndarray:
     """(N,) for each UUV the first UUV with the same start, track end and clock offset, to the bit."""
     columns = [np.asarray(starts, dtype=float), np.asarray(track_ends, dtype=float)]
@@ -184,13 +192,18 @@ def run_batch(
                     tally[others] = tally[owner[others]]
                 owner[others] = others
                 shared[split] = False
-                rows = np.concatenate([np.arange(len(flying)), parent])
-                flying, shared = np.concatenate([flying, others]), shared[rows]
+                extra = ask(x[parent], others, True)
+                # Each row's new rows right after it: rows of one group look up the same LF table
+                # cells (a cache-friendly order; the arithmetic is row by row, so any order gives the same bits).
+                order = np.argsort(np.concatenate([np.arange(len(flying)), parent]), kind="stable")
+                rows = np.concatenate([np.arange(len(flying)), parent])[order]
+                flying, shared = np.concatenate([flying, others])[order], shared[rows]
                 x, track_start, track_end, memory = x[rows], track_start[rows], track_end[rows], _take(memory, rows)
                 u_d, psi_d, delta_psi, command = u_d[rows], psi_d[rows], delta_psi[rows], command[rows]
                 if helms is not None:
                     helms += [copy.deepcopy(helms[r]) for r in parent]
-                seen = believed = _joined(seen, ask(x[-len(others) :], others, True))
+                    helms = [helms[i] for i in order]
+                seen = believed = _rows(_joined(seen, extra), order)
         if compensate and helm_runs and delta is not None:
             believed = ask(x, flying, False)
         t = step * dt if offsets is None else step * dt + offsets[flying]

@@ -36,7 +36,7 @@ from scipy.linalg import cho_factor, cho_solve
 __all__ = ["DEFAULT_FEATURES", "PosteriorSamples", "draw_samples"]
 
 DEFAULT_FEATURES = 256  # random Fourier features per sample and output (the moments are exact at any count)
-_BLOCK = 1 << 20  # (points x features) elements per block: bounds the temporaries
+_BLOCK = 1 << 16  # (rows x training points) elements per block: bounds the temporaries, in cache
 
 
 class _OutputSamples:
@@ -51,6 +51,8 @@ class _OutputSamples:
         self.y_mean, self.y_std = gp.y_mean_, gp.y_std_
         self.U = (gp.X_train_ - gp.lower_) / gp.width_
         n = len(self.U)
+        if max(n, n_features) > _kernels().PAIRWISE_MAX:
+            raise ValueError(f"at most {_kernels().PAIRWISE_MAX} training points and features, got {n}, {n_features}")
         K = self._kernel(self.U, self.U) + (sn2 + getattr(gp, "jitter_", 0.0)) * np.eye(n)
         omega = rng.standard_normal((k, n_features, d)) / self.length  # spectral density draws
         self.omega_t = np.ascontiguousarray(omega.transpose(0, 2, 1))  # (k, d, f)
@@ -58,8 +60,10 @@ class _OutputSamples:
         self.weights = rng.standard_normal((k, n_features))
         ys = (gp.y_train_ - gp.y_mean_) / gp.y_std_
         eps = math.sqrt(sn2) * rng.standard_normal((k, n))
-        residual = ys[None, :] - np.stack([self._prior(i, self.U) for i in range(k)]) - eps
-        self.v = cho_solve(cho_factor(K, lower=True), residual.T).T  # (k, n): K^-1 (y - f(U) - eps)
+        every = np.repeat(np.arange(k), n)
+        residual = ys[None, :] - self._prior(every, np.tile(self.U, (k, 1))).reshape(k, n) - eps
+        # (k, n): K^-1 (y - f(U) - eps)
+        self.v = np.ascontiguousarray(cho_solve(cho_factor(K, lower=True), residual.T).T)
 
     def _kernel(self, Z: np.ndarray, U: np.ndarray) -> np.ndarray:
         """s2 exp(-|z - u_i|^2_l / 2) for Z (n, d) against the training inputs U: (n, n_train)."""
@@ -69,37 +73,53 @@ class _OutputSamples:
             sq += diff * diff
         return self.s2 * np.exp(-0.5 * sq)
 
-    def _prior(self, i: int, Z: np.ndarray) -> np.ndarray:
-        """Prior sample i at Z (n, d): (n,). Element-wise products and last-axis sums only, so a
+    def _prior(self, sample: np.ndarray, Z: np.ndarray) -> np.ndarray:
+        """Prior sample sample[r] at row Z[r] (n, d): (n,). Row by row (`sampling_kernel`), so a
         row's value does not depend on which other rows are asked with it (a batch split over
         workers gets the same bits)."""
         n_features = self.weights.shape[1]
         out = np.empty(len(Z))
-        rows = max(1, _BLOCK // n_features)
         scale = math.sqrt(2.0 * self.s2 / n_features)
-        for start in range(0, len(Z), rows):
-            block = Z[start : start + rows]
-            proj = self.phase[i] + block[:, 0, None] * self.omega_t[i, 0]
-            for j in range(1, block.shape[1]):
-                proj += block[:, j, None] * self.omega_t[i, j]
-            np.cos(proj, out=proj)
-            proj *= self.weights[i]
-            out[start : start + rows] = scale * proj.sum(axis=-1)
+        scratch = np.empty(n_features)
+        Z = np.ascontiguousarray(Z)
+        _kernels().prior_rows(Z, sample, self.omega_t, self.phase, self.weights, scale, scratch, out)
         return out
 
     def __call__(self, W: np.ndarray, sample: np.ndarray | None = None) -> np.ndarray:
         """Warped inputs W (n, d), in output units: every sample at every row (k, n) without
         `sample`, else sample `sample[r]` at row r (n,)."""
         Z = (W - self.lower) / self.width
-        kernel = self._kernel(Z, self.U)  # one kernel matrix serves every sample
         if sample is None:
-            f = np.stack([self._prior(i, Z) for i in range(len(self.v))]) + (kernel @ self.v.T).T
+            kernel = self._kernel(Z, self.U)  # one kernel matrix serves every sample
+            every = np.repeat(np.arange(len(self.v)), len(Z))
+            f = self._prior(every, np.tile(Z, (len(self.v), 1))).reshape(len(self.v), -1) + (kernel @ self.v.T).T
         else:
-            f = np.sum(kernel * self.v[sample], axis=-1)
-            for i in np.unique(sample):
-                rows = sample == i
-                f[rows] += self._prior(i, Z[rows])
+            f = self._update(np.asarray(sample, dtype=np.int64), Z)
+            f += self._prior(np.asarray(sample, dtype=np.int64), Z)
         return self.y_mean + self.y_std * f
+
+    def _update(self, sample: np.ndarray, Z: np.ndarray) -> np.ndarray:
+        """k(z_r, U) v[sample[r]] (n,), row by row, in blocks of rows that bound the temporaries;
+        the exponential is numpy's (`sampling_kernel`)."""
+        kernels = _kernels()
+        Z = np.ascontiguousarray(Z)
+        out = np.empty(len(Z))
+        scratch = np.empty(len(self.U))
+        rows = max(1, _BLOCK // len(self.U))
+        for start in range(0, len(Z), rows):
+            block = slice(start, start + rows)
+            exponent = np.empty((len(Z[block]), len(self.U)))
+            kernels.kernel_exponents(Z[block], self.U, self.length, exponent)
+            np.exp(exponent, out=exponent)
+            kernels.update_rows(exponent, self.s2, sample[block], self.v, scratch, out[block])
+        return out
+
+
+def _kernels():
+    """The compiled kernels (`sampling_kernel`), imported on first use."""
+    from nearsub.common.surrogate import sampling_kernel
+
+    return sampling_kernel
 
 
 class PosteriorSamples:
