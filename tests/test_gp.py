@@ -294,3 +294,18 @@ def test_a_fit_with_all_length_scales_at_a_bound_is_rejected():
     assert gp.n_rejected_ == 9  # 3 rounds of 3 starts
     ok = GaussianProcess(n_restarts=3).fit(X, y)
     assert ok.n_rejected_ == 0 and not all_length_scales_at_bound(ok.theta_[:2], np.log([[0.01, 100.0]] * 2))
+
+
+def test_kernel_matrix_and_stored_lml_agree_with_numpy():
+    """The compiled K is exactly symmetric and equals the numpy formula to rounding; the LML a
+    fit stores (taken from its conditioning factor) is the one _lml computes afresh."""
+    X, y = _data(3, n=40)
+    gp = GaussianProcess(bounds=BOUNDS).fit(X, y)
+    theta, U = gp.theta_, gp._U
+    d = U.shape[1]
+    K = gpmod._rbf(theta, U)
+    sq = (((U[:, None, :] - U[None, :, :]) ** 2) * np.exp(-2.0 * theta[:d])).sum(axis=2)
+    ref = np.exp(theta[d]) * np.exp(-0.5 * sq) + np.exp(theta[d + 1]) * np.eye(len(U))
+    assert np.array_equal(K, K.T)
+    np.testing.assert_allclose(K, ref, rtol=1e-13, atol=0.0)
+    assert gp.log_marginal_likelihood_value_ == gp.log_marginal_likelihood(eval_gradient=False)
