@@ -165,18 +165,19 @@ def test_resume_checks_the_problem(tmp_path):
         Campaign.resume(path, get_problem("borehole"))
 
 
-@pytest.mark.timeout(600)  # CPU-bound, ~64 s on a lightly loaded machine: the timeout catches a hang, not slowness
-def test_mf_beats_hf_only_on_park_at_30():
-    """The reduced benchmark: both MF methods beat HF-only US at 30 HF samples (median of 10
-    paired repeats). A coarser acquisition search keeps it under a minute."""
+@pytest.mark.timeout(600)  # CPU-bound, ~100 s at load 17: the timeout catches a hang, not slowness
+def test_mf_beats_hf_only_on_park_at_20():
+    """The reduced benchmark: both MF methods beat HF-only US at 20 HF samples (median of 10
+    paired repeats; at seed 0 by a factor of 4, and NMMF wins all ten). A coarser acquisition
+    search keeps it short."""
     result = run_benchmark(
         "park",
         repeats=10,
-        hf_samples=30,
+        hf_samples=20,
         jobs=2,
         seed=0,
         test_points=500,
-        candidates_per_dim=250,
+        candidates_per_dim=100,
         n_polish=1,
     )
     summary = summarise(result)["outputs"]["y"]
@@ -252,6 +253,7 @@ def test_reference_gp_refits_the_same_training_sets():
         "park",
         repeats=1,
         hf_samples=12,
+        jobs=2,
         methods=("nmmf", "myopic-exact-lf", "hf-us"),
         test_points=200,
         reference_counts=(12,),
@@ -268,7 +270,7 @@ def test_time_limit_runs_whole_repeats_only():
     """Past the limit no repeat begins; those begun finish, and equal an unlimited run's."""
     kw = dict(hf_samples=7, methods=("hf-us", "myopic-exact-lf", "nmmf-exact-lf"), test_points=200, **FAST)
     limited = run_benchmark("park", repeats=6, time_limit=1e-9, **kw)
-    full = run_benchmark("park", repeats=1, **kw)
+    full = run_benchmark("park", repeats=1, jobs=2, **kw)  # its three campaigns side by side
     assert 1 <= limited["repeats"] < 6 and limited["repeats_requested"] == 6
     for method, a in limited["mape"].items():
         assert a.shape[0] == limited["repeats"] and np.all(np.isfinite(a))

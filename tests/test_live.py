@@ -2,6 +2,7 @@
 
 import json
 import time
+from concurrent.futures import ThreadPoolExecutor
 
 import pytest
 
@@ -19,7 +20,13 @@ pytestmark = pytest.mark.timeout(180)
 def test_tap_echo_and_hz_on_a_running_mission(launches, community):
     process = launches.start(ALPHA, "--set", f"name={community}", "--warp", "5", "--until", "60")
     wait_registered(community)
-    echo = nearsub("tap", "echo", f"nearsub/{community}/*/state", "--count", "5", "--field", "u", "--timeout", "30")
+    calls = [
+        ("tap", "echo", f"nearsub/{community}/*/state", "--count", "5", "--field", "u", "--timeout", "30"),
+        ("tap", "hz", f"nearsub/{community}/**", "--duration", "3", "--json"),
+        ("tap", "list", "--community", community, "--json"),
+    ]
+    with ThreadPoolExecutor(len(calls)) as pool:  # the taps sample the running mission at once
+        echo, hz, listed = pool.map(lambda call: nearsub(*call), calls)
     assert echo.returncode == 0, echo.stderr
     lines = [json.loads(line) for line in echo.stdout.splitlines()]
     assert len(lines) == 5 and all(line["key"] == f"nearsub/{community}/remus100/state" for line in lines)
@@ -27,7 +34,6 @@ def test_tap_echo_and_hz_on_a_running_mission(launches, community):
     times = [line["t"] for line in lines]
     assert times == sorted(times)
 
-    hz = nearsub("tap", "hz", f"nearsub/{community}/**", "--duration", "3", "--json")
     assert hz.returncode == 0, hz.stderr
     rates = {}
     for line in hz.stdout.splitlines():
@@ -36,7 +42,6 @@ def test_tap_echo_and_hz_on_a_running_mission(launches, community):
     assert rates["remus100/state"] == pytest.approx(20.0, rel=0.01)  # dt = 0.05 s of simulated time
     assert rates["remus100/desired"] == pytest.approx(4.0, rel=0.01)  # helm period 5
 
-    listed = nearsub("tap", "list", "--community", community, "--json")
     assert listed.returncode == 0, listed.stderr
     apps = json.loads(listed.stdout)["apps"]
     for role in ("helm", "pid", "sim", "clock", "logger"):
@@ -55,24 +60,30 @@ def subset(data: dict, *names: str) -> dict:
 @pytest.mark.parametrize("wait_for_the_pause", [False, True])
 def test_swap_at_a_fixed_step_keeps_the_trajectory(launches, community, wait_for_the_pause):
     """Swapping the helm for an identical one mid-mission must not change a single bit, whether
-    the swap request reaches the clock before or after it has paused at the step."""
-    process = launches.start(ALPHA, "--set", f"name={community}", "--set", "pause_at_step=1000", "--until", "150")
+    the swap request reaches the clock before or after it has paused at the step. The new helm
+    takes over 45 steps before the first waypoint (step 1045) and flies on to the second leg."""
+    process = launches.start(ALPHA, "--set", f"name={community}", "--set", "pause_at_step=1000", "--until", "60")
+    mission = load_mission(ALPHA, [f"name={community}", "time_limit=60"])
     wait_registered(community)
-    if wait_for_the_pause:
-        assert subset(wait_paused(community), "step", "paused") == {"step": 1000, "paused": True}
-    swap = nearsub("swap", community, "helm", "--at-step", "1000", "--with", "behaviour=waypoints", "--json")
-    assert swap.returncode == 0, swap.stderr
-    result = json.loads(swap.stdout)
-    assert result["step"] == 1000 and result["old"] == "helm-1" and result["new"] == "helm-2"
-    code, summary, err = finish(process)
+    with ThreadPoolExecutor(1) as pool:  # the in-process reference runs while the swap and the run go on
+        reference = pool.submit(
+            run_inprocess, build_cores(mission), Schedule(mission.periods()), mission.dt, mission.max_steps
+        )
+        if wait_for_the_pause:
+            assert subset(wait_paused(community), "step", "paused") == {"step": 1000, "paused": True}
+        swap = nearsub("swap", community, "helm", "--at-step", "1000", "--with", "behaviour=waypoints", "--json")
+        assert swap.returncode == 0, swap.stderr
+        result = json.loads(swap.stdout)
+        assert result["step"] == 1000 and result["old"] == "helm-1" and result["new"] == "helm-2"
+        code, summary, err = finish(process)
+        reference = reference.result()
     assert code == 0, err
     assert summary["swaps"] == [{"old": "helm-1", "new": "helm-2", "step": 1000}]
 
-    mission = load_mission(ALPHA, [f"name={community}", "time_limit=150"])
-    reference = run_inprocess(build_cores(mission), Schedule(mission.periods()), mission.dt, mission.max_steps)
     logged = per_topic(log_path(summary))
     for leaf in ("state", "desired", "input"):
         assert logged[f"remus100/{leaf}"] == [encode(m) for m in reference.topic(leaf)], leaf
+    assert summary["waypoints_reached"] == 1  # by the new helm
     events = [r.value() for r in read_log(log_path(summary)).records if r.topic.endswith("/events/launcher")]
     swaps = [e for e in events if e["kind"] == "swap"]
     assert len(swaps) == 1 and swaps[0]["step"] == 1000 and "helm-1 -> helm-2" in swaps[0]["detail"]
