@@ -16,6 +16,7 @@ from nearsub.common.mission.schema import load_mission
 from nearsub.common.runtime import credentials, keys
 from nearsub.common.runtime.bus import (
     LINK_VARIABLE,
+    PEER_APPS,
     PEER_LISTEN,
     Bus,
     BusError,
@@ -53,6 +54,9 @@ def test_apps_on_a_router_of_this_host_are_peers_and_elsewhere_clients(monkeypat
     assert app_link(["tcp/127.0.0.1:7447"]) == "peer"
     assert app_link(["tcp/127.0.0.1:7447", "tcp/192.0.2.10:7447"]) == "client"
     assert app_link([]) == "client"
+    # A fleet's apps stay clients: a full mesh of its many apps costs more than the hop it saves.
+    assert app_link(["tcp/127.0.0.1:7447"], apps=PEER_APPS) == "peer"
+    assert app_link(["tcp/127.0.0.1:7447"], apps=PEER_APPS + 1) == "client"
     local = app_endpoints(["tcp/127.0.0.1:7447"])
     assert (local.mode, local.listen) == ("peer", (PEER_LISTEN,))
     assert app_endpoints(["tcp/192.0.2.10:7447"]).mode == "client"

@@ -42,7 +42,15 @@ from nearsub.common.mission.schema import (
 )
 from nearsub.common.runtime import credentials as mission_credentials
 from nearsub.common.runtime import keys
-from nearsub.common.runtime.bus import CONNECT_TIMEOUT_VARIABLE, Bus, BusError, Endpoints, Mailbox
+from nearsub.common.runtime.bus import (
+    CONNECT_TIMEOUT_VARIABLE,
+    LINK_VARIABLE,
+    Bus,
+    BusError,
+    Endpoints,
+    Mailbox,
+    app_link,
+)
 from nearsub.common.runtime.lifecycle import ORDER
 from nearsub.common.runtime.messages import (
     Event,
@@ -301,10 +309,13 @@ class Launcher:
         # Every process started from here keeps trying to reach its router this long.
         os.environ[CONNECT_TIMEOUT_VARIABLE] = f"{self.mission.startup_timeout:g}"
         previous_handlers = {s: signal.signal(s, self._on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+        link_given = os.environ.get(LINK_VARIABLE)
         try:
             connect = self.start_router()
             if self.router is not None:
                 self.say(f"started router (pid {self.router.pid}) on {', '.join(connect)}")
+            # How the apps link (bus.app_link), for every app started from here, swaps included.
+            os.environ[LINK_VARIABLE] = app_link(connect, self.app_count())
             RunConfig(mission=self.mission, connect=connect, log_dir=str(self.run_dir)).save(self.run_file)
             log_path = self.run_dir / f"{self.community}.mcap"
             endpoints = Endpoints(
@@ -355,6 +366,10 @@ class Launcher:
             self.stopping = True
             for signum, handler in previous_handlers.items():
                 signal.signal(signum, handler)
+            if link_given is None:  # the next launch in this process chooses afresh
+                os.environ.pop(LINK_VARIABLE, None)
+            else:
+                os.environ[LINK_VARIABLE] = link_given
             self.stop_all()
             if self.router is not None:
                 stop([self.router], grace=0.0)
@@ -394,6 +409,12 @@ class Launcher:
         if self.credentials:
             os.environ[mission_credentials.VARIABLE] = self.credentials
         return list(network.connect) if network.connect else endpoints
+
+    def app_count(self) -> int:
+        """The apps `start_apps` starts: logger, surrogate server, a sim, pid and helm per vehicle, clock."""
+        mission = self.mission
+        services = mission.apps.logger.enabled + mission.needs_surrogate
+        return services + len(ORDER) * (len(mission.vehicle_names) if mission.fleet else 1) + 1
 
     def claim_on_bus(self, bus: Bus, connect: list[str]) -> None:
         """Refuse a name another launcher uses on this bus (missions sharing a router, maybe from

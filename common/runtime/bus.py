@@ -59,11 +59,19 @@ ENCODING = "application/msgpack"
 CONNECT_TIMEOUT_VARIABLE = "NEARSUB_CONNECT_TIMEOUT"
 DEFAULT_CONNECT_TIMEOUT = 30.0
 
-# The link of the mission apps (module docstring): "peer" on a router of this host, "client"
-# otherwise; $NEARSUB_LINK=client or =peer overrides the choice (for a comparison, or a fallback).
+# The link of the mission apps (module docstring): "peer" on a router of this host for a mission
+# of at most PEER_APPS apps, "client" otherwise. The launcher hands its choice to the apps it
+# starts in $NEARSUB_LINK; set by hand to client or peer, that variable decides instead.
 LINK_VARIABLE = "NEARSUB_LINK"
 LINKS = ("client", "peer")
 PEER_LISTEN = "tcp/127.0.0.1:0"  # a peer's own listener: loopback, a free port
+# Peers link pairwise and a publisher sends to each subscriber itself, so a fleet's mesh grows
+# as the square of its apps and the clock's every tick goes out once per app. Measured with
+# `nearsub bench pipeline --vehicles N` as peers against as clients (one run each, load 17-130):
+# 2 vehicles 175 against 222 steps/s, 4 about equal, 16 vehicles 4.39 against 3.90 CPU-ms per
+# vehicle-step and a start-up of 85 against 53 s. One vehicle's apps (logger, surrogate server,
+# sim, pid, helm, clock) gain.
+PEER_APPS = 6
 
 
 class BusError(RuntimeError):
@@ -100,14 +108,16 @@ def is_local(endpoint: str) -> bool:
         return False
 
 
-def app_link(connect: Iterable[str]) -> str:
-    """How a mission app joins the router at `connect`: "peer" when it is on this host, else
-    "client" (module docstring); $NEARSUB_LINK, when "client" or "peer", decides instead."""
+def app_link(connect: Iterable[str], apps: int | None = None) -> str:
+    """How the `apps` apps of a mission join the router at `connect`: "peer" when it is on this
+    host and they are at most PEER_APPS, else "client" (module docstring); $NEARSUB_LINK, when
+    "client" or "peer", decides instead."""
     forced = os.environ.get(LINK_VARIABLE, "")
     if forced in LINKS:
         return forced
     connect = list(connect)
-    return "peer" if connect and all(is_local(e) for e in connect) else "client"
+    local = bool(connect) and all(is_local(e) for e in connect)
+    return "peer" if local and (apps is None or apps <= PEER_APPS) else "client"
 
 
 def app_endpoints(connect: Iterable[str]) -> Endpoints:
