@@ -104,9 +104,10 @@ def run_batch(
     extended both ways: a UUV that drops back behind its start is on its line, not straying
     (`behaviours.track_geometry`, the helm's own geometry).
 
-    Only the UUVs still flying are computed: the arrays shrink when some collide. Every function
+    Only the UUVs still flying are computed: the arrays shrink when some collide, and UUVs with
+    the same inputs share a row until a sampled delta parts them (module doc). Every function
     works row by row (the surrogate's `predict_rows` too), so a UUV's numbers do not depend on
-    which others fly with it.
+    which others fly with it, nor on the order of the rows.
 
     `delta(x_c, uuvs)` replaces the surrogate's mean residual for the sim at those UUVs (indices
     into `starts`): a posterior sample per UUV (`interaction_at`). The helm's N_uv compensation

@@ -50,6 +50,7 @@ class _OutputSamples:
         self.lower, self.width = gp.lower_, gp.width_
         self.y_mean, self.y_std = gp.y_mean_, gp.y_std_
         self.U = (gp.X_train_ - gp.lower_) / gp.width_
+        self.U_t = np.ascontiguousarray(self.U.T)  # (d, n_train), for the compiled kernel
         n = len(self.U)
         if max(n, n_features) > _kernels().PAIRWISE_MAX:
             raise ValueError(f"at most {_kernels().PAIRWISE_MAX} training points and features, got {n}, {n_features}")
@@ -109,7 +110,7 @@ class _OutputSamples:
         for start in range(0, len(Z), rows):
             block = slice(start, start + rows)
             exponent = np.empty((len(Z[block]), len(self.U)))
-            kernels.kernel_exponents(Z[block], self.U, self.length, exponent)
+            kernels.kernel_exponents(Z[block], self.U_t, self.length, exponent)
             np.exp(exponent, out=exponent)
             kernels.update_rows(exponent, self.s2, sample[block], self.v, scratch, out[block])
         return out

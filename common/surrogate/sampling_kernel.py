@@ -107,29 +107,39 @@ def _pairwise(a, lo, n):
 @njit(cache=True)
 def prior_rows(Z, sample, omega_t, phase, weights, scale, scratch, out):
     """out[r] = scale sum_f w_f cos(b_f + sum_j Z[r, j] omega_jf), the features of sample[r]:
-    the projection summed over j in order, then cos, times w, summed pairwise."""
+    the projection summed over j in order, then cos, times w, summed pairwise. The loops over
+    the features are innermost (contiguous, vectorised; each element's operations keep their order)."""
     d = Z.shape[1]
     n_features = phase.shape[1]
     for r in range(Z.shape[0]):
         s = sample[r]
+        z = Z[r, 0]
         for f in range(n_features):
-            p = phase[s, f] + Z[r, 0] * omega_t[s, 0, f]
-            for j in range(1, d):
-                p += Z[r, j] * omega_t[s, j, f]
-            scratch[f] = math.cos(p) * weights[s, f]
+            scratch[f] = phase[s, f] + z * omega_t[s, 0, f]
+        for j in range(1, d):
+            z = Z[r, j]
+            for f in range(n_features):
+                scratch[f] += z * omega_t[s, j, f]
+        for f in range(n_features):
+            scratch[f] = math.cos(scratch[f]) * weights[s, f]
         out[r] = scale * (0.0 + _pairwise(scratch, 0, n_features))
 
 
 @njit(cache=True)
-def kernel_exponents(Z, U, length, out):
-    """out[r, t] = -|Z[r] - U[t]|^2_l / 2, the squares summed over the inputs in order."""
+def kernel_exponents(Z, U_t, length, out):
+    """out[r, t] = -|Z[r] - U[t]|^2_l / 2 (U_t = U transposed, (d, n_train)), the squares summed
+    over the inputs in order, the training points innermost (vectorised)."""
+    n = U_t.shape[1]
     for r in range(Z.shape[0]):
-        for t in range(U.shape[0]):
-            sq = 0.0
-            for j in range(U.shape[1]):
-                diff = (Z[r, j] - U[t, j]) / length[j]
-                sq += diff * diff
-            out[r, t] = -0.5 * sq
+        for t in range(n):
+            out[r, t] = 0.0
+        for j in range(U_t.shape[0]):
+            z, scale = Z[r, j], length[j]
+            for t in range(n):
+                diff = (z - U_t[j, t]) / scale
+                out[r, t] += diff * diff
+        for t in range(n):
+            out[r, t] = -0.5 * out[r, t]
 
 
 @njit(cache=True)
