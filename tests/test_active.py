@@ -242,6 +242,7 @@ def test_fair_benchmark_runs_every_variant_on_paired_designs():
     assert all(np.all(np.isfinite(a)) for a in result["mape"].values())
 
 
+@pytest.mark.timeout(600)  # CPU-bound (>120 s at load 30): the timeout catches a hang
 def test_reference_gp_refits_the_same_training_sets():
     """emukit's linear MF model refits each kind of training set (LF data, exact LF, HF only) at
     the asked HF counts; on Park its MF fits beat its HF-only fit, as nearsub's do."""
@@ -266,6 +267,7 @@ def test_reference_gp_refits_the_same_training_sets():
         run_benchmark("park", repeats=1, hf_samples=12, reference_counts=(40,))
 
 
+@pytest.mark.timeout(600)  # CPU-bound (>120 s at load 30): the timeout catches a hang
 def test_time_limit_runs_whole_repeats_only():
     """Past the limit no repeat begins; those begun finish, and equal an unlimited run's."""
     kw = dict(hf_samples=7, methods=("hf-us", "myopic-exact-lf", "nmmf-exact-lf"), test_points=200, **FAST)

@@ -3,6 +3,7 @@
 import uuid
 
 import pytest
+from test_reliability import run_budget
 
 from conftest import ALPHA, Launches
 from helpers import log_path, per_topic
@@ -12,7 +13,7 @@ from nearsub.common.runtime.lifecycle import Schedule, run_inprocess
 from nearsub.common.runtime.logfile import read_log
 from nearsub.common.runtime.messages import encode
 
-pytestmark = pytest.mark.timeout(180)
+pytestmark = pytest.mark.timeout(300)  # a hang guard, above BUDGET
 
 
 def test_alpha_mission_completes_every_waypoint(launches, community):
@@ -25,6 +26,9 @@ def test_alpha_mission_completes_every_waypoint(launches, community):
     assert contents.metadata["outcome"]["outcome"] == "completed"
 
 
+BUDGET = run_budget(load_mission(ALPHA, ["time_limit=60"]))  # wall seconds a launch of the first minute may take
+
+
 @pytest.fixture(scope="module")
 def first_minute(tmp_path_factory):
     """The summary of one warp-0 launch of alpha's first 60 s, shared by the checks below."""
@@ -34,7 +38,9 @@ def first_minute(tmp_path_factory):
         patch.setenv("NEARSUB_RUNTIME_DIR", str(tmp / "runtime"))
         handle = Launches(tmp / "logs")
         try:
-            code, summary, err = handle.run(ALPHA, "--set", f"name=t{uuid.uuid4().hex[:10]}", "--until", "60")
+            code, summary, err = handle.run(
+                ALPHA, "--set", f"name=t{uuid.uuid4().hex[:10]}", "--until", "60", timeout=BUDGET
+            )
         finally:
             handle.kill_all()
     assert code == 0 and summary["outcome"] == "time_limit", err
@@ -42,7 +48,7 @@ def first_minute(tmp_path_factory):
 
 
 def test_two_runs_log_identical_contents(first_minute, launches, community):
-    code, summary, err = launches.run(ALPHA, "--set", f"name={community}", "--until", "60")
+    code, summary, err = launches.run(ALPHA, "--set", f"name={community}", "--until", "60", timeout=BUDGET)
     assert code == 0, err
     first, second = per_topic(log_path(first_minute)), per_topic(log_path(summary))
     assert first.keys() == second.keys()
@@ -52,7 +58,7 @@ def test_two_runs_log_identical_contents(first_minute, launches, community):
 
 
 def test_warp_zero_and_warp_twenty_give_identical_logs(first_minute, launches, community):
-    _, paced, err = launches.run(ALPHA, "--set", f"name={community}", "--until", "60", "--warp", "20")
+    _, paced, err = launches.run(ALPHA, "--set", f"name={community}", "--until", "60", "--warp", "20", timeout=BUDGET)
     assert paced["outcome"] == "time_limit", err
     assert paced["run_wall_time"] >= 60 / 20 * 0.95  # it really was paced
     a, b = per_topic(log_path(first_minute)), per_topic(log_path(paced))
