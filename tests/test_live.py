@@ -20,13 +20,7 @@ pytestmark = pytest.mark.timeout(180)
 def test_tap_echo_and_hz_on_a_running_mission(launches, community):
     process = launches.start(ALPHA, "--set", f"name={community}", "--warp", "5", "--until", "60")
     wait_registered(community)
-    calls = [
-        ("tap", "echo", f"nearsub/{community}/*/state", "--count", "5", "--field", "u", "--timeout", "30"),
-        ("tap", "hz", f"nearsub/{community}/**", "--duration", "3", "--json"),
-        ("tap", "list", "--community", community, "--json"),
-    ]
-    with ThreadPoolExecutor(len(calls)) as pool:  # the taps sample the running mission at once
-        echo, hz, listed = pool.map(lambda call: nearsub(*call), calls)
+    echo = nearsub("tap", "echo", f"nearsub/{community}/*/state", "--count", "5", "--field", "u", "--timeout", "30")
     assert echo.returncode == 0, echo.stderr
     lines = [json.loads(line) for line in echo.stdout.splitlines()]
     assert len(lines) == 5 and all(line["key"] == f"nearsub/{community}/remus100/state" for line in lines)
@@ -34,6 +28,7 @@ def test_tap_echo_and_hz_on_a_running_mission(launches, community):
     times = [line["t"] for line in lines]
     assert times == sorted(times)
 
+    hz = nearsub("tap", "hz", f"nearsub/{community}/**", "--duration", "3", "--json")
     assert hz.returncode == 0, hz.stderr
     rates = {}
     for line in hz.stdout.splitlines():
@@ -42,6 +37,7 @@ def test_tap_echo_and_hz_on_a_running_mission(launches, community):
     assert rates["remus100/state"] == pytest.approx(20.0, rel=0.01)  # dt = 0.05 s of simulated time
     assert rates["remus100/desired"] == pytest.approx(4.0, rel=0.01)  # helm period 5
 
+    listed = nearsub("tap", "list", "--community", community, "--json")
     assert listed.returncode == 0, listed.stderr
     apps = json.loads(listed.stdout)["apps"]
     for role in ("helm", "pid", "sim", "clock", "logger"):
