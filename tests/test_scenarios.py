@@ -75,9 +75,10 @@ def test_swapping_in_nuv_compensation_mid_run_avoids_the_collision(launches, com
     helm is swapped in at a fixed step. The log equals the in-process run with the same swap."""
     mission_file = MISSIONS / "overtake_stern_standard.toml"
     process = launches.start(mission_file, "--set", f"name={community}", "--set", f"pause_at_step={SWAP_STEP}")
-    wait_registered(community, timeout=60)
-    with ThreadPoolExecutor(1) as pool:  # the in-process reference runs while the swap and the run go on
+    # The in-process reference runs in a thread while the launch starts and flies.
+    with ThreadPoolExecutor(1) as pool:
         reference = pool.submit(swapped_inprocess, mission_file, community)
+        wait_registered(community, timeout=60)
         swap = nearsub(
             "swap", community, "helm", "--at-step", str(SWAP_STEP), "--behaviour", "nuv_compensation", "--json"
         )
