@@ -1,8 +1,6 @@
 """The chapter 5 and 6 scenario missions: their outcomes against the thesis, in-process, and the
 runtime swap to N_uv compensation through the multi-process launcher."""
 
-from concurrent.futures import ThreadPoolExecutor
-
 import pytest
 
 from conftest import ROOT, nearsub
@@ -75,33 +73,24 @@ def test_swapping_in_nuv_compensation_mid_run_avoids_the_collision(launches, com
     helm is swapped in at a fixed step. The log equals the in-process run with the same swap."""
     mission_file = MISSIONS / "overtake_stern_standard.toml"
     process = launches.start(mission_file, "--set", f"name={community}", "--set", f"pause_at_step={SWAP_STEP}")
-    # The in-process reference runs in a thread while the launch starts and flies.
-    with ThreadPoolExecutor(1) as pool:
-        reference = pool.submit(swapped_inprocess, mission_file, community)
-        wait_registered(community, timeout=60)
-        swap = nearsub(
-            "swap", community, "helm", "--at-step", str(SWAP_STEP), "--behaviour", "nuv_compensation", "--json"
-        )
-        assert swap.returncode == 0, swap.stderr
-        code, summary, err = finish(process, timeout=200)
-        reference = reference.result()
+    wait_registered(community, timeout=60)
+    swap = nearsub("swap", community, "helm", "--at-step", str(SWAP_STEP), "--behaviour", "nuv_compensation", "--json")
+    assert swap.returncode == 0, swap.stderr
+    code, summary, err = finish(process, timeout=200)
     assert code == 0, err
     assert summary["outcome"] == "completed", summary
-    assert reference.outcome == "completed"
-    logged = per_topic(log_path(summary))
-    for leaf in ("state", "desired", "input", "forces"):
-        assert logged[f"sdv/{leaf}"] == [encode(m) for m in reference.topic(leaf)], leaf
 
-
-def swapped_inprocess(mission_file, community):
-    """The overtake in-process with the compensating helm swapped in at SWAP_STEP."""
     surrogate = load_surrogate(None)
     mission = load_mission(mission_file, [f"name={community}"])
     compensating = load_mission(mission_file, [f"name={community}", "apps.helm.behaviour=nuv_compensation"])
-    return run_inprocess(
+    reference = run_inprocess(
         build_cores(mission, surrogate),
         Schedule(mission.periods()),
         mission.dt,
         mission.max_steps,
         {SWAP_STEP: {"helm": HelmCore(compensating, surrogate)}},
     )
+    assert reference.outcome == "completed"
+    logged = per_topic(log_path(summary))
+    for leaf in ("state", "desired", "input", "forces"):
+        assert logged[f"sdv/{leaf}"] == [encode(m) for m in reference.topic(leaf)], leaf
