@@ -64,10 +64,11 @@ def processes_under(log_dir) -> dict[int, list[str]]:
 
 
 def process_with(log_dir, marker: str) -> int:
-    """The pid of the process whose command line has the argument `marker` (an instance name,
-    a module) and mentions `log_dir` (so only this test's processes match)."""
+    """The pid of the process started as instance `marker` (`--instance marker`) or as module
+    `marker` (`-m marker`) whose command line mentions `log_dir` (so only this test's processes
+    match). A bare argument would also match `--after surrogate` of the apps that wait for it."""
     for pid, argv in processes_under(log_dir).items():
-        if marker in argv:
+        if any(flag in ("--instance", "-m") and value == marker for flag, value in zip(argv, argv[1:])):
             return pid
     raise AssertionError(f"no process with {marker} under {log_dir}")
 
