@@ -26,7 +26,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 
 from nearsub.common.learning.gp import GaussianProcess, MultiOutputGP
 from nearsub.common.runtime import keys
-from nearsub.common.runtime.bus import Bus, Endpoints, free_tcp_port
+from nearsub.common.runtime.bus import Bus, app_endpoints, free_tcp_port
 from nearsub.common.runtime.processes import single_blas_thread, spawn_app, stop
 from nearsub.common.surrogate.domain import BOUNDS, CONSTRAINT_NAMES, INPUT_NAMES, constraint_values, sample_feasible
 from nearsub.common.surrogate.model import (
@@ -76,9 +76,9 @@ def write_analytic_model(path: str | os.PathLike, n: int = 100, seed: int = 0) -
 
 @contextmanager
 def local_server(model_path: str | os.PathLike, community: str, timeout: float = 30.0) -> Iterator[tuple[Bus, str]]:
-    """A router on a free loopback port and a surrogate server (separate processes); yields a client
-    bus that already sees the server's liveliness token, and the router's endpoint. Both processes
-    are stopped on exit."""
+    """A router on a free loopback port and a surrogate server (separate processes); yields a bus
+    linked as a mission app's (`bus.app_endpoints`) that already sees the server's liveliness
+    token, and the router's endpoint. Both processes are stopped on exit."""
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     started: list[subprocess.Popen] = []
     with tempfile.TemporaryFile() as output:
@@ -88,7 +88,9 @@ def local_server(model_path: str | os.PathLike, community: str, timeout: float =
                 ["surrogate", "--model", str(model_path), "--community", community, "--connect", endpoint],
             ):
                 started.append(spawn_app(argv[0], argv[1:], output))
-            with Bus(Endpoints("client", (endpoint,))) as bus:
+            # The bench's bus joins as the sim does (a peer on this host's router), so its round
+            # trip is the one a mission's sim sees.
+            with Bus(app_endpoints((endpoint,))) as bus:
                 token = keys.alive(community, "surrogate", "*")
                 end = time.monotonic() + timeout
                 while not bus.alive(token, timeout=0.5):
