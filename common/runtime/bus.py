@@ -580,8 +580,12 @@ class Bus:
         never links is a mission that stalls, which the clock reports)."""
         end = time.monotonic() + self._meet_timeout
         wanted = self.router_peers() - {str(self._session.zid())}
+        checked = time.monotonic()
         while not wanted <= self.linked_peers() and time.monotonic() < end:
             time.sleep(0.005)
+            if time.monotonic() - checked > 0.1:  # a peer that left meanwhile (a swapped-out app) is not waited for
+                wanted &= self.router_peers()
+                checked = time.monotonic()
         left = max(end - time.monotonic(), 0.1)
         for _ in self._session.get("@/*/peer", target=zenoh.QueryTarget.ALL, timeout=left):
             pass
