@@ -87,9 +87,18 @@ def test_any_lf_in_loop_model_and_bad_requests():
         draw_samples(model, 3, n_features=8).delta(np.zeros((2, 4, 6)))
 
 
+def _same_cos(a):
+    """The kernels' cos, element by element in Python floats (IEEE double, no FMA): a reference
+    for the compiled, vectorised loop."""
+    from nearsub.common.surrogate import sampling_kernel
+
+    return np.vectorize(sampling_kernel.cos.py_func, otypes=[float])(a)
+
+
 def test_per_row_samples_give_the_bits_of_the_numpy_expressions(surrogate):
     """`rows` (compiled, row by row) against the numpy expressions of pathwise conditioning it
-    replaced, bit for bit: the data update and the prior features of each row's own sample."""
+    replaced, bit for bit: the data update and the prior features of each row's own sample,
+    with the kernels' cos."""
     import math
 
     from nearsub.common.surrogate import sampling_kernel
@@ -110,9 +119,76 @@ def test_per_row_samples_give_the_bits_of_the_numpy_expressions(surrogate):
         for i in range(1, Z.shape[1]):
             proj += Z[:, i, None] * out.omega_t[sample, i]
         n_features = out.weights.shape[1]
-        f += math.sqrt(2.0 * out.s2 / n_features) * np.sum(np.cos(proj) * out.weights[sample], axis=-1)
+        f += math.sqrt(2.0 * out.s2 / n_features) * np.sum(_same_cos(proj) * out.weights[sample], axis=-1)
         assert (out.y_mean + out.y_std * f).tobytes() == got[:, j].tobytes(), j
     rng = np.random.default_rng(6)
     for n in [*range(1, 300), 512, 1000, sampling_kernel.PAIRWISE_MAX]:  # numpy's summation order
         a = rng.standard_normal(n) * rng.exponential(1.0, n)
         assert sampling_kernel._pairwise(a, 0, n).hex() == np.sum(a).hex(), n
+
+
+def _ulps(got, x):
+    import math
+
+    want = np.array([math.cos(v) for v in x])
+    return np.abs(got - want) / np.spacing(np.abs(want))
+
+
+def test_the_features_cos_is_within_one_ulp_of_the_c_library():
+    """`sampling_kernel.cos` against math.cos: random arguments up to the features' range (a few
+    hundred: omega ~ N(0, 1 / l^2) on the unit cube plus the phase) and up to COS_LIMIT, the
+    doubles next to k pi / 2 (where the reduction cancels most), zero and tiny ones. The compiled
+    loop gives the bits of the Python function (no FMA, no dependence on the position)."""
+    from numba import njit
+
+    from nearsub.common.surrogate.sampling_kernel import COS_LIMIT, cos
+
+    @njit
+    def each(x, out):
+        for i in range(x.shape[0]):
+            out[i] = cos(x[i])
+
+    rng = np.random.default_rng(7)
+    near = np.arange(1, 20001) * (np.pi / 2)
+    edges = [0.0, -0.0, 5e-324, 1e-300, 1e-8, -1e-8, np.pi / 4, -np.pi / 4, COS_LIMIT, -COS_LIMIT]
+    x = np.concatenate(
+        [
+            rng.uniform(-700.0, 700.0, 200_000),
+            rng.uniform(-COS_LIMIT, COS_LIMIT, 50_000),
+            np.nextafter(near, 0.0),
+            near,
+            np.nextafter(near, np.inf),
+            edges,
+        ]
+    )
+    got = np.empty_like(x)
+    each(x, got)
+    assert _ulps(got, x).max() <= 1.0
+    assert got[:2000].tobytes() == _same_cos(x[:2000]).tobytes()
+    assert got[-len(edges) :].tobytes() == _same_cos(edges).tobytes()
+
+
+def test_prior_rows_take_the_c_library_cos_beyond_the_limit():
+    """A row whose arguments may pass COS_LIMIT goes element by element: math.cos beyond the
+    limit (and for NaN), the same cos within it; an ordinary row is the vectorised loop."""
+    import math
+
+    from nearsub.common.surrogate import sampling_kernel
+    from nearsub.common.surrogate.sampling_kernel import COS_LIMIT
+
+    rng = np.random.default_rng(8)
+    n_features = 37
+    omega_t = rng.standard_normal((2, 2, n_features))
+    phase = rng.uniform(0.0, 2.0 * np.pi, (2, n_features))
+    weights = rng.standard_normal((2, n_features))
+    bound = np.abs(omega_t).max(axis=2)
+    Z = np.array([[0.3, 0.7], [COS_LIMIT, 0.2], [np.nan, 0.1]])
+    sample = np.array([0, 1, 0])
+    out = np.empty(3)
+    sampling_kernel.prior_rows(Z, sample, omega_t, phase, weights, 1.0, bound, np.empty(n_features), out)
+    for r in range(2):
+        arg = phase[sample[r]] + Z[r, 0] * omega_t[sample[r], 0] + Z[r, 1] * omega_t[sample[r], 1]
+        cos = [sampling_kernel.cos.py_func(a) if abs(a) <= COS_LIMIT else math.cos(a) for a in arg]
+        assert (r == 1) == (np.abs(arg) > COS_LIMIT).any()
+        assert out[r] == 0.0 + sampling_kernel._pairwise(np.array(cos) * weights[sample[r]], 0, n_features)
+    assert np.isnan(out[2])

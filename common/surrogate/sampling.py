@@ -57,6 +57,7 @@ class _OutputSamples:
         K = self._kernel(self.U, self.U) + (sn2 + getattr(gp, "jitter_", 0.0)) * np.eye(n)
         omega = rng.standard_normal((k, n_features, d)) / self.length  # spectral density draws
         self.omega_t = np.ascontiguousarray(omega.transpose(0, 2, 1))  # (k, d, f)
+        self.bound = np.abs(self.omega_t).max(axis=2)  # (k, d): bounds the cosines' arguments
         self.phase = rng.uniform(0.0, 2.0 * math.pi, (k, n_features))
         self.weights = rng.standard_normal((k, n_features))
         ys = (gp.y_train_ - gp.y_mean_) / gp.y_std_
@@ -83,7 +84,7 @@ class _OutputSamples:
         scale = math.sqrt(2.0 * self.s2 / n_features)
         scratch = np.empty(n_features)
         Z = np.ascontiguousarray(Z)
-        _kernels().prior_rows(Z, sample, self.omega_t, self.phase, self.weights, scale, scratch, out)
+        _kernels().prior_rows(Z, sample, self.omega_t, self.phase, self.weights, scale, self.bound, scratch, out)
         return out
 
     def __call__(self, W: np.ndarray, sample: np.ndarray | None = None) -> np.ndarray:
