@@ -112,7 +112,7 @@ def test_per_row_samples_give_the_bits_of_the_numpy_expressions(surrogate):
         Z = (W - out.lower) / out.width
         sq = np.zeros((len(Z), len(out.U)))
         for i in range(Z.shape[1]):
-            diff = (Z[:, i, None] - out.U[None, :, i]) / out.length[i]
+            diff = Z[:, i, None] / out.length[i] - out.U[None, :, i] / out.length[i]
             sq += diff * diff
         f = np.sum(out.s2 * np.exp(-0.5 * sq) * out.v[sample], axis=-1)
         proj = out.phase[sample] + Z[:, 0, None] * out.omega_t[sample, 0]

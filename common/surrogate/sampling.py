@@ -50,11 +50,12 @@ class _OutputSamples:
         self.lower, self.width = gp.lower_, gp.width_
         self.y_mean, self.y_std = gp.y_mean_, gp.y_std_
         self.U = (gp.X_train_ - gp.lower_) / gp.width_
-        self.U_t = np.ascontiguousarray(self.U.T)  # (d, n_train), for the compiled kernel
+        # The inputs over the length scales: a row divides its d inputs, not its d x n differences.
+        self.U_scaled_t = np.ascontiguousarray((self.U / self.length).T)  # (d, n_train)
         n = len(self.U)
         if max(n, n_features) > _kernels().PAIRWISE_MAX:
             raise ValueError(f"at most {_kernels().PAIRWISE_MAX} training points and features, got {n}, {n_features}")
-        K = self._kernel(self.U, self.U) + (sn2 + getattr(gp, "jitter_", 0.0)) * np.eye(n)
+        K = self._kernel(self.U) + (sn2 + getattr(gp, "jitter_", 0.0)) * np.eye(n)
         omega = rng.standard_normal((k, n_features, d)) / self.length  # spectral density draws
         self.omega_t = np.ascontiguousarray(omega.transpose(0, 2, 1))  # (k, d, f)
         self.bound = np.abs(self.omega_t).max(axis=2)  # (k, d): bounds the cosines' arguments
@@ -67,11 +68,11 @@ class _OutputSamples:
         # (k, n): K^-1 (y - f(U) - eps)
         self.v = np.ascontiguousarray(cho_solve(cho_factor(K, lower=True), residual.T).T)
 
-    def _kernel(self, Z: np.ndarray, U: np.ndarray) -> np.ndarray:
-        """s2 exp(-|z - u_i|^2_l / 2) for Z (n, d) against the training inputs U: (n, n_train)."""
-        sq = np.zeros((len(Z), len(U)))
-        for j in range(U.shape[1]):
-            diff = (Z[:, j, None] - U[None, :, j]) / self.length[j]
+    def _kernel(self, Z: np.ndarray) -> np.ndarray:
+        """s2 exp(-|z - u_i|^2_l / 2) for Z (n, d) against the training inputs: (n, n_train)."""
+        sq = np.zeros((len(Z), self.U_scaled_t.shape[1]))
+        for j in range(Z.shape[1]):
+            diff = Z[:, j, None] / self.length[j] - self.U_scaled_t[None, j]
             sq += diff * diff
         return self.s2 * np.exp(-0.5 * sq)
 
@@ -92,7 +93,7 @@ class _OutputSamples:
         `sample`, else sample `sample[r]` at row r (n,)."""
         Z = (W - self.lower) / self.width
         if sample is None:
-            kernel = self._kernel(Z, self.U)  # one kernel matrix serves every sample
+            kernel = self._kernel(Z)  # one kernel matrix serves every sample
             every = np.repeat(np.arange(len(self.v)), len(Z))
             f = self._prior(every, np.tile(Z, (len(self.v), 1))).reshape(len(self.v), -1) + (kernel @ self.v.T).T
         else:
@@ -111,7 +112,7 @@ class _OutputSamples:
         for start in range(0, len(Z), rows):
             block = slice(start, start + rows)
             exponent = np.empty((len(Z[block]), len(self.U)))
-            kernels.kernel_exponents(Z[block], self.U_t, self.length, exponent)
+            kernels.kernel_exponents(Z[block], self.U_scaled_t, self.length, exponent)
             np.exp(exponent, out=exponent)
             kernels.update_rows(exponent, self.s2, sample[block], self.v, scratch, out[block])
         return out

@@ -193,17 +193,17 @@ def prior_rows(Z, sample, omega_t, phase, weights, scale, bound, scratch, out):
 
 
 @njit(cache=True)
-def kernel_exponents(Z, U_t, length, out):
-    """out[r, t] = -|Z[r] - U[t]|^2_l / 2 (U_t = U transposed, (d, n_train)), the squares summed
-    over the inputs in order, the training points innermost (vectorised)."""
-    n = U_t.shape[1]
+def kernel_exponents(Z, U_scaled_t, length, out):
+    """out[r, t] = -|Z[r] - U[t]|^2_l / 2 (U_scaled_t[j, t] = U[t, j] / length[j]), the squares
+    summed over the inputs in order, the training points innermost (vectorised)."""
+    n = U_scaled_t.shape[1]
     for r in range(Z.shape[0]):
         for t in range(n):
             out[r, t] = 0.0
-        for j in range(U_t.shape[0]):
-            z, scale = Z[r, j], length[j]
+        for j in range(U_scaled_t.shape[0]):
+            z = Z[r, j] / length[j]
             for t in range(n):
-                diff = (z - U_t[j, t]) / scale
+                diff = z - U_scaled_t[j, t]
                 out[r, t] += diff * diff
         for t in range(n):
             out[r, t] = -0.5 * out[r, t]
