@@ -144,7 +144,7 @@ def cos(x):
     v2 = r2 - r1
     e2 = (r1 - (r2 - v2)) + (-c - v2)
     lo = (e1 + e2) - n * _PIO2_3T
-    y = r2 + lo  # t - n pi/2 = y + yy to about 2^-100 relative
+    y = r2 + lo  # t - n pi/2 = y + yy, a double-double
     yy = lo - (y - r2)
     z = y * y
     w = z * z
