@@ -21,6 +21,20 @@ def test_single_blas_thread_sets_the_variables_and_keeps_a_users_choice():
     assert env == {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "4", "MKL_NUM_THREADS": "1"}
 
 
+def _malloc_thresholds():
+    return {name: os.environ.get(name) for name in processes.MALLOC_THRESHOLDS}
+
+
+def test_local_dask_workers_keep_the_raised_malloc_thresholds(monkeypatch):
+    """Dask's nanny sets its own MALLOC_TRIM_THRESHOLD_; the workers must see nearsub's (or the user's)."""
+    for name in processes.MALLOC_THRESHOLDS:
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setenv("MALLOC_MMAP_THRESHOLD_", "1048576")  # a user's own value is kept
+    with processes.task_client(workers=1) as client:
+        seen = client.submit(_malloc_thresholds).result()
+    assert seen == {"MALLOC_TRIM_THRESHOLD_": str(256 << 20), "MALLOC_MMAP_THRESHOLD_": "1048576"}
+
+
 def test_single_blas_thread_reaches_a_child(monkeypatch):
     for name in processes.BLAS_THREAD_VARIABLES:
         monkeypatch.delenv(name, raising=False)
