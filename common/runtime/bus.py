@@ -358,8 +358,8 @@ class PendingReply:
 
 class Requester:
     """Requests published on keys and their replies, published by the server on this requester's
-    own `reply_key`: a pub/sub pair that costs about half a get's round trip (`nearsub bench
-    surrogate`). The server's liveliness tokens (`server`) are watched, so a wait for a reply ends
+    own `reply_key`: a pub/sub pair, cheaper than a get's round trip (`nearsub bench surrogate`
+    times both). The server's liveliness tokens (`server`) are watched, so a wait for a reply ends
     as soon as the last of them goes (the server died) instead of at the timeout. The caller
     matches replies to requests (the payloads carry its numbers)."""
 
@@ -430,7 +430,7 @@ class Requester:
 
 
 class Querier:
-    """Repeated queries to one key (the sim asking the surrogate server every step)."""
+    """Repeated queries to one key (a tool asking the surrogate server)."""
 
     def __init__(self, querier, key: str, timeout: float):
         self._querier = querier

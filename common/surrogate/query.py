@@ -12,10 +12,11 @@ the doubles unchanged, so a reply equals the in-process prediction bit for bit.
 
 Two ways to ask, one codec and one server-side handler (apps/surrogate.py): a Zenoh get on the
 queryable `surrogate_key` (tools, sweeps, `nearsub bench surrogate`), or the sim's once-a-step
-request/reply pair of publications, which costs about half a get's round trip (`nearsub bench
-surrogate`): the client publishes the query on `request_key` and the server publishes the reply
-on the client's `reply_key`. Those keys hold a verbatim chunk ("@rpc"), which no wildcard matches,
-so the logger's nearsub/<community>/** does not record every step's query twice. A query carries a
+request/reply pair of publications, a cheaper round trip than a get's (`nearsub bench surrogate`
+times both): the client publishes the query on `request_key` and the server publishes the reply
+on the client's `reply_key`. Those keys hold a verbatim chunk ("@rpc", "@reply"), which no
+wildcard matches, so the logger's nearsub/<community>/** does not record each step's query and
+reply (the sim's forces carry the answer). A query carries a
 `request` number that its reply (or refusal) echoes, so a late answer to an earlier query is never
 taken for the current one.
 """
