@@ -449,14 +449,16 @@ def bench_surrogate(args) -> int:
         with local_server(path, community) as (bus, _):
             querier = bus.querier(surrogate_key(community), timeout=2.0)
             one, thousand = encode_query(point), encode_query(X[:1000])
-            _times(lambda: querier.ask(one), 200)  # warm-up: connections, caches
-            query = _times(lambda: decode_reply(querier.ask(one)), args.repeats)
-            query_batch = _times(lambda: decode_reply(querier.ask(thousand)), 20)
-            same = np.array_equal(decode_reply(querier.ask(one)).prediction().mean, surrogate.predict(point).mean)
             # The sim's path: the published request/reply pair (apps.services.RemoteSurrogate).
             remote = RemoteSurrogate(bus, community)
-            _times(lambda: remote.predict(point), 200)
-            published = _times(lambda: remote.predict(point), args.repeats)
+            _times(lambda: (querier.ask(one), remote.predict(point)), 200)  # warm-up: connections, caches
+            # The two paths in alternation, so a machine's changing load weighs on both alike.
+            query, published = np.empty(args.repeats), np.empty(args.repeats)
+            for i in range(args.repeats):
+                query[i] = _times(lambda: decode_reply(querier.ask(one)), 1)[0]
+                published[i] = _times(lambda: remote.predict(point), 1)[0]
+            query_batch = _times(lambda: decode_reply(querier.ask(thousand)), 20)
+            same = np.array_equal(decode_reply(querier.ask(one)).prediction().mean, surrogate.predict(point).mean)
             same = same and np.array_equal(remote.predict(point).mean, surrogate.predict(point).mean)
     shipped = load_surrogate()
     in_loop = None
