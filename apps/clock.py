@@ -43,8 +43,9 @@ from nearsub.common.runtime.processes import leave, prepare_process
 
 
 class Clock:
-    def __init__(self, run: RunConfig, bus: Bus):
+    def __init__(self, run: RunConfig, bus: Bus, after: list[str] = ()):
         mission = self.mission = run.mission
+        self.after = list(after)  # services the apps need at step 0 (the surrogate server)
         c = self.community = mission.name
         self.fleet = mission.lockstep()
         observer = None
@@ -80,10 +81,10 @@ class Clock:
         self.ended = False
 
     def wait_for_apps(self) -> str | None:
-        """Block until every vehicle's helm, pid and sim have liveliness tokens; an error text on
-        timeout."""
+        """Block until every vehicle's helm, pid and sim, and the `after` services, have liveliness
+        tokens; an error text on timeout."""
         timeout = self.mission.startup_timeout
-        if missing := wait_for_roles(self.bus, self.community, self.fleet.runners(0), timeout):
+        if missing := wait_for_roles(self.bus, self.community, [*self.fleet.runners(0), *self.after], timeout):
             return f"apps did not start within {timeout:g} s: {', '.join(missing)}"
         return None
 
@@ -160,12 +161,15 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description="nearsub lock-stepped clock")
     parser.add_argument("--run", required=True)
     parser.add_argument("--instance", default="clock")
+    parser.add_argument(
+        "--after", action="append", default=[], metavar="ROLE", help="wait for this role's liveliness token too"
+    )
     args = parser.parse_args(argv)
     prepare_process()
     run = RunConfig.load(args.run)
     try:
         with Bus(app_endpoints(run.connect)) as bus:
-            clock = Clock(run, bus)
+            clock = Clock(run, bus, args.after)
             bus.token(keys.alive(run.mission.name, "clock", args.instance))
             return clock.run()
     except KeyboardInterrupt:

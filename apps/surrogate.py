@@ -9,8 +9,10 @@ is predicted at once and answered with a `SurrogateReply`; a batch of more than
 checked or predicted. The same queryable answers
 nearsub/<community>/surrogate/discrepancy with the residual GP alone (the LF-in-the-loop kind's
 delta, which the increment mode adds to the LF it evaluates itself; `apps.services`) and
-nearsub/<community>/surrogate/kind with the model's kind. A malformed query gets an error reply
-naming the field and value, and the server carries on. Without --model the shipped model is
+nearsub/<community>/surrogate/kind with the model's kind. The sim's once-a-step queries come as
+publications instead (`query.request_key`, answered on the client's `query.reply_key`, a cheaper
+round trip than a get); both ways reach the same handler (`answer`). A malformed query gets an
+error reply naming the field and value, and the server carries on. Without --model the shipped model is
 used, or, until one ships, the analytic test fixture (with a warning). The server stops on
 SIGTERM/SIGINT, when its parent dies (PR_SET_PDEATHSIG) or when the launcher's token goes.
 """
@@ -24,7 +26,7 @@ from typing import NoReturn
 from nearsub.apps.services import MAX_BATCH, discrepancy_key, kind_key
 from nearsub.common.mission.schema import MissionError, RunConfig
 from nearsub.common.runtime import keys
-from nearsub.common.runtime.bus import Bus, app_endpoints, signal_self
+from nearsub.common.runtime.bus import Bus, Publisher, app_endpoints, signal_self
 from nearsub.common.runtime.processes import leave, prepare_process
 from nearsub.common.surrogate.domain import constraints_ok, in_domain
 from nearsub.common.surrogate.model import (
@@ -37,6 +39,7 @@ from nearsub.common.surrogate.model import (
     surrogate_key,
 )
 from nearsub.common.surrogate.modelfile import ModelFileError
+from nearsub.common.surrogate.query import encode_refusal, reply_key, request_of, requests_key, split_request_key
 
 # Error replies are cut to this many characters: a 100,000-point batch of NaNs would otherwise
 # name every value (a nearsub choice; the first errors say what is wrong).
@@ -56,11 +59,26 @@ def answer_discrepancy(
     return encode_reply(query, answer, surrogate.output_names, surrogate.model_id, source)
 
 
+def answer(surrogate: Surrogate, what: str, payload: bytes, instance: str = "surrogate") -> bytes:
+    """The server's answer to a `what` ("predict", "discrepancy" or "kind") query, asked either
+    way (the queryable or a publication). Raises MessageError (a ValueError) for a malformed or
+    oversized query, ValueError for a prediction the reply refuses (not finite), TypeError for a
+    discrepancy of a model without the LF in the loop."""
+    if what == "predict":
+        return answer_query(surrogate, payload, instance, MAX_BATCH)
+    if what == "discrepancy":
+        return answer_discrepancy(surrogate, payload, instance)
+    if what == "kind":
+        return surrogate.kind.encode()
+    raise ValueError(f"request {what!r}: not one of predict, discrepancy, kind")
+
+
 def serve(bus: Bus, community: str, surrogate: Surrogate, instance: str = "surrogate") -> NoReturn:
     """Answer queries until the process is stopped; the liveliness token
     nearsub/<community>/alive/surrogate/<instance> says the server is up."""
     key = surrogate_key(community)
-    requests = bus.serve(f"{key}/**")  # the key itself, .../discrepancy and .../kind
+    # The queryable on the key itself, .../discrepancy and .../kind, and the published requests.
+    requests = bus.serve(f"{key}/**", requests_key(community))
     bus.on_liveliness_lost(keys.alive(community, "launcher", "*"), signal_self())
     bus.token(keys.alive(community, "surrogate", instance))
     print(
@@ -68,16 +86,18 @@ def serve(bus: Bus, community: str, surrogate: Surrogate, instance: str = "surro
         f"({surrogate.loaded.provenance.get('method', 'no method recorded')})",
         flush=True,
     )
-    kind, delta = kind_key(community), discrepancy_key(community)
+    queried = {key: "predict", discrepancy_key(community): "discrepancy", kind_key(community): "kind"}
+    # A declared publisher per client's reply key (put on one costs less than a session put);
+    # the client subscribed to it before it asked (`Bus.put_reply`).
+    replies: dict[str, Publisher] = {}
     while True:
         request = requests.recv()
+        if request.query is not None:
+            what, client = queried.get(request.key, "predict"), None
+        else:
+            what, client = split_request_key(request.key)
         try:
-            if request.key == kind:
-                answer = surrogate.kind.encode()
-            elif request.key == delta:
-                answer = answer_discrepancy(surrogate, request.payload, instance)
-            else:
-                answer = answer_query(surrogate, request.payload, instance, MAX_BATCH)
+            found = answer(surrogate, what, request.payload, instance)
         # MessageError is a ValueError, as is a prediction the reply refuses (not finite), which
         # must not stop the server either; TypeError: no discrepancy in this kind of model.
         except (TypeError, ValueError) as exc:
@@ -85,9 +105,16 @@ def serve(bus: Bus, community: str, surrogate: Surrogate, instance: str = "surro
             if len(text) > MAX_ERROR_CHARS:
                 text = text[:MAX_ERROR_CHARS] + f" ... ({len(text) - MAX_ERROR_CHARS} more characters)"
             print(f"[{instance}] rejected query: {text}", file=sys.stderr, flush=True)
-            request.reply_error(text)
+            if client is None:
+                request.reply_error(text)
+                continue
+            found = encode_refusal(request_of(request.payload), text)
+        if client is None:
+            request.reply(found)
         else:
-            request.reply(answer)
+            if (publisher := replies.get(client)) is None:
+                publisher = replies[client] = bus.publisher(reply_key(community, client))
+            publisher.put(found)
 
 
 def main(argv=None) -> int:

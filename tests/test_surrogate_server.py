@@ -14,7 +14,7 @@ from conftest import ALPHA
 from nearsub.common.mission.schema import RunConfig, load_mission
 from nearsub.common.runtime import keys
 from nearsub.common.runtime.bus import ReplyError
-from nearsub.common.surrogate import domain
+from nearsub.common.surrogate import domain, query
 from nearsub.common.surrogate import model as sg
 from nearsub.common.surrogate.modelfile import load_model
 from nearsub.tools.surrogate import child_env, local_server, write_analytic_model
@@ -141,3 +141,83 @@ def test_missing_arguments_exit_with_2():
         [sys.executable, "-m", "nearsub.apps.surrogate", "--community", "x"], capture_output=True, text=True
     )
     assert result.returncode == 2 and "--connect" in result.stderr
+
+
+# ------------------------------------------------------------- the published request/reply pair
+@pytest.fixture(scope="module")
+def remote(server, community):
+    from nearsub.apps.services import RemoteSurrogate
+
+    bus, _ = server
+    return RemoteSurrogate(bus, community)
+
+
+def test_published_queries_equal_the_in_process_prediction_bit_for_bit(remote, surrogate):
+    X = domain.sample_feasible(3, seed=11)
+    got, expected = remote.predict(X), surrogate.predict(X)
+    assert np.array_equal(got.mean, expected.mean) and np.array_equal(got.std, expected.std)
+    assert np.array_equal(got.in_domain, expected.in_domain)
+    assert remote.model_id == surrogate.model_id and remote.kind == surrogate.kind
+
+
+def test_a_published_bad_query_gets_one_refusal_naming_field_and_value(server, community):
+    bus, _ = server
+    requester = bus.requester(query.reply_key(community, "badclient"), keys.alive(community, "surrogate", "*"), 5.0)
+    bad = msgpack.packb(
+        {"step": 0, "t": 0.0, "request": 7, "points": np.array([0.1, 0.07, 3.0, np.nan, 14, 7.0]).tobytes()}
+    )
+    deadline = requester.send(query.request_key(community, "predict", "badclient"), bad)
+    with pytest.raises(query.Refusal, match=r"'points.0.3' = nan") as info:
+        sg.decode_reply(requester.reply(deadline))
+    assert info.value.request == 7
+    with pytest.raises(ReplyError, match="no reply"):  # one answer per query
+        requester.reply(time.monotonic() + 0.5)
+
+
+def test_a_refusal_of_the_current_query_is_a_service_error(remote):
+    from nearsub.common.surrogate.query import ServiceError
+
+    with pytest.raises(ServiceError, match="discrepancy: only an LF-in-the-loop model has it"):
+        remote.discrepancy(domain.sample_feasible(1, seed=12))
+    assert remote.predict(domain.sample_feasible(1, seed=13)).mean.shape == (1, 3)  # still serving
+
+
+def test_a_stale_reply_is_never_taken_for_the_current_query(server, remote, surrogate):
+    bus, _ = server
+    old, new = domain.sample_feasible(2, seed=14)
+    remote.predict(old)
+    # A late second answer to the query just made (as a reply after its timeout would come).
+    stale = query.SurrogateQuery(old[None], request=remote._request)
+    bus.put(remote._rpc.reply_key, query.encode_reply(stale, surrogate.predict(old), ["X", "Y", "N"], "stale", "x"))
+    got = remote.predict(new)
+    assert np.array_equal(got.mean, surrogate.predict(new).mean)
+    assert remote.model_id == surrogate.model_id
+
+
+def test_a_dead_server_ends_the_wait_by_its_liveliness_not_the_timeout(server, model_path):
+    from nearsub.apps.services import RemoteSurrogate
+    from nearsub.common.surrogate.query import ServiceError
+
+    bus, endpoint = server
+    other = f"t{uuid.uuid4().hex[:10]}"
+    argv = [sys.executable, "-m", "nearsub.apps.surrogate", "--model", str(model_path)]
+    process = subprocess.Popen(
+        [*argv, "--community", other, "--connect", endpoint], env=child_env(), stdout=subprocess.DEVNULL
+    )
+    try:
+        end = time.monotonic() + 30
+        while not bus.alive(keys.alive(other, "surrogate", "*")):
+            assert process.poll() is None and time.monotonic() < end, "the server did not start"
+            time.sleep(0.05)
+        remote = RemoteSurrogate(bus, other, timeout=60.0)  # a timeout the test would notice
+        point = domain.sample_feasible(1, seed=15)
+        assert remote.predict(point).mean.shape == (1, 3)
+        process.kill()
+        process.wait()
+        start = time.monotonic()
+        with pytest.raises(ServiceError, match="liveliness token is gone"):
+            remote.predict(point)
+        assert time.monotonic() - start < 30.0  # well before the 60 s timeout
+    finally:
+        process.kill()
+        process.wait()

@@ -435,8 +435,9 @@ class Launcher:
 
     def start_apps(self, bus: Bus, log_path: Path) -> None:
         """Start every process at once, so their imports overlap; the lock-stepped apps wait for
-        the logger and the surrogate server (`--after`) before they publish, and the clock for
-        them before it grants step 0, so the order of the mission is kept."""
+        the logger (`--after`) before they publish, and the clock for them and the surrogate
+        server before it grants step 0, so the order of the mission is kept. The apps build their
+        cores (the sim's LF tables) while the server loads its model: nobody asks it before step 0."""
         services, wanted = [], []
         mission = self.mission
         if self.mission.apps.logger.enabled:
@@ -449,7 +450,7 @@ class Launcher:
         if self.mission.needs_surrogate:
             self.spawn("surrogate", "surrogate", "surrogate")
             services.append("surrogate")
-        after = [argument for role in services for argument in ("--after", role)]
+        after = [argument for role in services if role != "surrogate" for argument in ("--after", role)]
         for vehicle in mission.vehicle_names if mission.fleet else [None]:
             serves = ["--vehicle", vehicle] if vehicle else []
             for role in reversed(ORDER):
@@ -457,7 +458,7 @@ class Launcher:
                 instance = self.next_instance(app)
                 self.spawn(role, instance, app, [*after, *serves])
                 wanted.append((app, instance))
-        self.spawn("clock", "clock", "clock")
+        self.spawn("clock", "clock", "clock", ["--after", "surrogate"] if "surrogate" in services else [])
         self.wait_alive(
             bus, [(role, role) for role in services] + wanted + [("clock", "clock")], self.mission.startup_timeout
         )

@@ -299,31 +299,39 @@ class Stream:
 
 
 class Request:
-    """A received query: its key, payload and selector parameters; answer exactly once."""
+    """A received query (`query` set: answer it exactly once with `reply` or `reply_error`), or a
+    published request (`query` None: the server publishes its answer itself): key and payload."""
 
-    def __init__(self, query: zenoh.Query):
-        self._query = query
-        self.key = str(query.key_expr)
-        self.payload = query.payload.to_bytes() if query.payload is not None else b""
-        self.parameters = dict(query.parameters)
+    __slots__ = ("query", "key", "payload")
+
+    def __init__(self, key: str, payload: bytes, query: zenoh.Query | None = None):
+        self.query, self.key, self.payload = query, key, payload
 
     def reply(self, payload: bytes) -> None:
-        with self._query as q:
+        with self.query as q:
             q.reply(q.key_expr, payload, encoding=ENCODING)
 
     def reply_error(self, text: str) -> None:
-        with self._query as q:
+        with self.query as q:
             q.reply_err(text.encode())
 
 
 class RequestStream:
-    """Queries to one queryable, in a FIFO drained by the serving app's main loop."""
+    """Queries to one queryable and requests published under one key, in one FIFO in arrival
+    order, drained by the serving app's main loop (the callbacks only append, on Zenoh's thread)."""
 
-    def __init__(self, handler):
-        self._handler = handler
+    def __init__(self) -> None:
+        self._queue: queue.SimpleQueue[Request] = queue.SimpleQueue()
+
+    def on_query(self, query: zenoh.Query) -> None:
+        payload = query.payload.to_bytes() if query.payload is not None else b""
+        self._queue.put(Request(str(query.key_expr), payload, query))
+
+    def on_sample(self, sample: zenoh.Sample) -> None:
+        self._queue.put(Request(str(sample.key_expr), sample.payload.to_bytes()))
 
     def recv(self) -> Request:
-        return Request(self._handler.recv())
+        return self._queue.get()
 
 
 class ReplyError(RuntimeError):
@@ -348,8 +356,81 @@ class PendingReply:
         raise ReplyError(f"{self._key}: no reply within {self._timeout:g} s (is the server running?)")
 
 
+class Requester:
+    """Requests published on keys and their replies, published by the server on this requester's
+    own `reply_key`: a pub/sub pair, cheaper than a get's round trip (`nearsub bench surrogate`
+    times both). The server's liveliness tokens (`server`) are watched, so a wait for a reply ends
+    as soon as the last of them goes (the server died) instead of at the timeout. The caller
+    matches replies to requests (the payloads carry its numbers)."""
+
+    _GONE = None  # queued when the last server token goes
+
+    def __init__(self, session: zenoh.Session, keep: list, reply_key: str, server: str, timeout: float):
+        self.reply_key, self.server, self.timeout = reply_key, server, timeout
+        self._queue: queue.SimpleQueue[bytes | None] = queue.SimpleQueue()
+        self._session, self._keep = session, keep
+        self._publishers: dict[str, zenoh.Publisher] = {}
+        self._servers: set[str] = set()
+        self.gone = False  # a server was seen and none is left
+        # Subscribed before any request goes out, so the server knows the reply key when it
+        # answers (`Bus.put_reply`).
+        keep.append(session.declare_subscriber(reply_key, _direct(self._on_reply)))
+        keep.append(session.liveliness().declare_subscriber(server, _direct(self._on_server), history=True))
+
+    def _on_reply(self, sample: zenoh.Sample) -> None:
+        self._queue.put(sample.payload.to_bytes())
+
+    def _on_server(self, sample: zenoh.Sample) -> None:
+        if sample.kind == zenoh.SampleKind.PUT:
+            self._servers.add(str(sample.key_expr))
+            self.gone = False
+        else:
+            self._servers.discard(str(sample.key_expr))
+            if not self._servers:
+                self.gone = True
+                self._queue.put(self._GONE)
+
+    def _gone_error(self) -> ReplyError:
+        return ReplyError(f"{self.server}: the server's liveliness token is gone (it stopped or died)")
+
+    def send(self, key: str, payload: bytes) -> float:
+        """Publish a request on `key`; returns the deadline (monotonic seconds) of its reply. The
+        first request on a key waits, up to the timeout, until the server's subscription is known
+        here (data put before that is not delivered)."""
+        if self.gone:
+            raise self._gone_error()
+        publisher = self._publishers.get(key)
+        if publisher is None:
+            publisher = self._session.declare_publisher(
+                key, encoding=ENCODING, congestion_control=zenoh.CongestionControl.BLOCK, express=True
+            )
+            self._keep.append(publisher)
+            end = time.monotonic() + self.timeout
+            while not publisher.matching_status.matching:
+                if time.monotonic() > end:
+                    raise ReplyError(f"{key}: no server subscribed within {self.timeout:g} s (is it running?)")
+                time.sleep(0.002)
+            self._publishers[key] = publisher
+        publisher.put(payload)
+        return time.monotonic() + self.timeout
+
+    def reply(self, deadline: float) -> bytes:
+        """The next reply's payload; ReplyError at the deadline, or once the server is gone."""
+        while True:
+            try:
+                payload = self._queue.get(timeout=max(deadline - time.monotonic(), 0.0))
+            except queue.Empty:
+                raise ReplyError(
+                    f"{self.reply_key}: no reply within {self.timeout:g} s (is the server running?)"
+                ) from None
+            if payload is not self._GONE:
+                return payload
+            if self.gone:  # (not a server that has come back since)
+                raise self._gone_error()
+
+
 class Querier:
-    """Repeated queries to one key (the sim asking the surrogate server every step)."""
+    """Repeated queries to one key (a tool asking the surrogate server)."""
 
     def __init__(self, querier, key: str, timeout: float):
         self._querier = querier
@@ -534,11 +615,19 @@ class Bus:
     def subscribe(self, key: str, mailbox: Mailbox) -> None:
         self._keep.append(self._session.declare_subscriber(key, _direct(mailbox.on_sample)))
 
-    def serve(self, key: str, capacity: int = 1024) -> RequestStream:
-        """A queryable whose queries queue in a FIFO for the main loop (a server app)."""
-        queryable = self._session.declare_queryable(key, zenoh.handlers.FifoChannel(capacity))
-        self._keep.append(queryable)
-        return RequestStream(queryable.handler)
+    def serve(self, key: str, requests: str | None = None) -> RequestStream:
+        """A queryable on `key`, and a subscription to the requests published under `requests`,
+        whose items queue in one FIFO for the main loop (a server app)."""
+        stream = RequestStream()
+        self._keep.append(self._session.declare_queryable(key, _direct(stream.on_query)))
+        if requests is not None:
+            self._keep.append(self._session.declare_subscriber(requests, _direct(stream.on_sample)))
+        return stream
+
+    def requester(self, reply_key: str, server: str, timeout: float = 2.0) -> Requester:
+        """Requests published to a server whose liveliness tokens are `server`, answered on
+        `reply_key` (`Requester`)."""
+        return Requester(self._session, self._keep, reply_key, server, timeout)
 
     def querier(self, key: str, timeout: float = 2.0) -> Querier:
         """A pre-declared querier (cheaper than `request` when asking the same key repeatedly)."""

@@ -9,6 +9,16 @@ lists of floats field by field (pydantic) cost more than the round trip's own wo
 checks a query cheaply (shape, row count, finite values) and names the first bad field and value;
 it refuses to send a non-finite answer, so a client checks only a reply's shapes. The bytes carry
 the doubles unchanged, so a reply equals the in-process prediction bit for bit.
+
+Two ways to ask, one codec and one server-side handler (apps/surrogate.py): a Zenoh get on the
+queryable `surrogate_key` (tools, sweeps, `nearsub bench surrogate`), or the sim's once-a-step
+request/reply pair of publications, a cheaper round trip than a get's (`nearsub bench surrogate`
+times both): the client publishes the query on `request_key` and the server publishes the reply
+on the client's `reply_key`. Those keys hold a verbatim chunk ("@rpc", "@reply"), which no
+wildcard matches, so the logger's nearsub/<community>/** does not record each step's query and
+reply (the sim's forces carry the answer). A query carries a
+`request` number that its reply (or refusal) echoes, so a late answer to an earlier query is never
+taken for the current one.
 """
 
 from __future__ import annotations
@@ -29,6 +39,15 @@ class ServiceError(RuntimeError):
     """A service the mission depends on (the surrogate server) is missing or failed."""
 
 
+class Refusal(MessageError):
+    """The server's error answer to a published query: its text names the field and value;
+    `request` is the query's number (None when the query was too malformed to read it)."""
+
+    def __init__(self, text: str, request: int | None):
+        super().__init__(text)
+        self.request = request
+
+
 # Largest batch one query may carry (a nearsub choice: bounds the server's memory per query,
 # 4.8 MB of float64; a 10,000-point sweep is 10 queries).
 MAX_QUERY_POINTS = 100_000
@@ -41,6 +60,32 @@ WIRE_FLOAT = np.dtype("<f8")
 def surrogate_key(community: str) -> str:
     """The server's queryable: nearsub/<community>/surrogate (a service key, docs/design.md, "Keys")."""
     return f"{keys.community_root(community)}/surrogate"
+
+
+# What a published request asks for: the full prediction or the residual GP alone (the
+# LF-in-the-loop kind's delta, `Surrogate.discrepancy`).
+REQUESTS = ("predict", "discrepancy")
+
+
+def request_key(community: str, what: str, client: str) -> str:
+    """Where `client` publishes its `what` queries (module docstring)."""
+    return f"{surrogate_key(community)}/@rpc/{what}/{client}"
+
+
+def requests_key(community: str) -> str:
+    """Every client's published queries: the server's subscription."""
+    return f"{surrogate_key(community)}/@rpc/*/*"
+
+
+def reply_key(community: str, client: str) -> str:
+    """Where the server publishes its answers to `client`'s published queries."""
+    return f"{surrogate_key(community)}/@reply/{client}"
+
+
+def split_request_key(key: str) -> tuple[str, str]:
+    """(what, client) of a `request_key`."""
+    what, client = key.rsplit("/", 2)[-2:]
+    return what, client
 
 
 # ------------------------------------------------------------------------------- prediction
@@ -66,7 +111,7 @@ class Prediction:
 
 
 # -------------------------------------------------------------------------------- messages
-QUERY_FIELDS = ("schema_version", "step", "t", "source", "points")
+QUERY_FIELDS = ("schema_version", "step", "t", "source", "request", "points")
 
 
 @dataclass(slots=True)  # not frozen: a frozen dataclass costs a few us more to build, per query
@@ -76,12 +121,13 @@ class SurrogateQuery:
 
     Rows: a row is one vehicle state, maps to a numpy (n, 6) array without reordering, and a bad
     value is named by its position (field 'points.<row>.<column>'). step, t and source are the
-    sender's; the reply echoes step and t."""
+    sender's; the reply echoes step, t and request (the sender's number for the query)."""
 
     points: np.ndarray
     step: int = 0
     t: float = 0.0
     source: str = ""
+    request: int = 0
 
 
 @dataclass(slots=True)
@@ -89,8 +135,9 @@ class SurrogateReply:
     """Answers to a `SurrogateQuery`, row for row: mean and std (n, len(output_names)) of the
     non-dimensional coefficients, and the flags (n,) (see `Prediction` for out-of-domain points),
     read-only views of the reply's bytes. model_id names the model (a content hash), source is the
-    server instance."""
+    server instance, request the query's number."""
 
+    request: int
     step: int
     t: float
     source: str
@@ -119,6 +166,13 @@ def _first_non_finite(name: str, values: np.ndarray) -> str | None:
     return f"field '{name}.{row}.{column}' = {float(values[row, column])!r}: not a finite number"
 
 
+def _request(raw: dict, where: str) -> int:
+    request = raw.get("request", 0)
+    if type(request) is not int or request < 0:
+        raise MessageError(f"{where}: field 'request' = {request!r}: a whole number >= 0 is required")
+    return request
+
+
 def _header(raw: dict, where: str) -> tuple[int, float, str]:
     """The checked schema_version, step, t and source of an unpacked query or reply."""
     version = raw.get("schema_version", QUERY_VERSION)
@@ -136,10 +190,17 @@ def _header(raw: dict, where: str) -> tuple[int, float, str]:
     return step, float(t), source
 
 
-def encode_query(points: Any, step: int = 0, t: float = 0.0, source: str = "") -> bytes:
+def encode_query(points: Any, step: int = 0, t: float = 0.0, source: str = "", request: int = 0) -> bytes:
     """msgpack bytes of a query for points (n, 6) or (6,)."""
     rows = np.ascontiguousarray(_as_inputs(points), dtype=WIRE_FLOAT)
-    fields = {"schema_version": QUERY_VERSION, "step": step, "t": t, "source": source, "points": rows.tobytes()}
+    fields = {
+        "schema_version": QUERY_VERSION,
+        "step": step,
+        "t": t,
+        "source": source,
+        "request": request,
+        "points": rows.tobytes(),
+    }
     return msgpack.packb(fields)
 
 
@@ -150,6 +211,7 @@ def decode_query(payload: bytes, max_points: int = MAX_QUERY_POINTS, where: str 
     if extra := [name for name in raw if name not in QUERY_FIELDS]:
         raise MessageError(f"{where}: field '{extra[0]}': not a field of a query (fields: {', '.join(QUERY_FIELDS)})")
     step, t, source = _header(raw, where)
+    request = _request(raw, where)
     data = raw.get("points")
     if not isinstance(data, bytes):
         shown = repr(data) if len(repr(data)) < 80 else repr(data)[:80] + "..."
@@ -166,7 +228,7 @@ def decode_query(payload: bytes, max_points: int = MAX_QUERY_POINTS, where: str 
     points = _rows(data, len(INPUT_NAMES)).astype(float)  # the model's own copy
     if bad := _first_non_finite("points", points):
         raise MessageError(f"{where}: {bad}")
-    return SurrogateQuery(points, step, t, source)
+    return SurrogateQuery(points, step, t, source, request)
 
 
 def encode_reply(
@@ -179,6 +241,7 @@ def encode_reply(
             raise ValueError(f"surrogate reply: {bad}")
     fields = {
         "schema_version": QUERY_VERSION,
+        "request": query.request,
         "step": query.step,
         "t": query.t,
         "source": source,
@@ -194,8 +257,13 @@ def encode_reply(
 
 def decode_reply(payload: bytes, where: str = "surrogate reply") -> SurrogateReply:
     """A server reply's arrays, with their shapes checked (raises MessageError naming the field);
-    the values are the server's, which checked them before sending."""
+    the values are the server's, which checked them before sending. A refusal (`encode_refusal`)
+    raises `Refusal` with its text."""
     raw = unpack_map(payload, where)
+    if "error" in raw:
+        request = raw.get("request")
+        raise Refusal(str(raw["error"]), request if type(request) is int else None)
+    request = _request(raw, where)
     step, t, source = _header(raw, where)
     names, model_id = raw.get("output_names"), raw.get("model_id")
     if not isinstance(names, list) or not names or not all(isinstance(name, str) for name in names):
@@ -213,4 +281,18 @@ def decode_reply(payload: bytes, where: str = "surrogate reply") -> SurrogateRep
         )
     mean, std = _rows(arrays[0], len(names)), _rows(arrays[1], len(names))
     in_domain, constraints_ok = (np.frombuffer(array, dtype=bool) for array in arrays[2:])
-    return SurrogateReply(step, t, source, mean, std, in_domain, constraints_ok, names, model_id)
+    return SurrogateReply(request, step, t, source, mean, std, in_domain, constraints_ok, names, model_id)
+
+
+def request_of(payload: bytes) -> int | None:
+    """The `request` number of a query that may be malformed (for its refusal), or None."""
+    try:
+        request = msgpack.unpackb(payload).get("request")
+    except Exception:  # not a msgpack map: nothing to echo
+        return None
+    return request if type(request) is int else None
+
+
+def encode_refusal(request: int | None, text: str) -> bytes:
+    """msgpack bytes of the server's error answer to a published query (`decode_reply` raises it)."""
+    return msgpack.packb({"schema_version": QUERY_VERSION, "request": request, "error": text})
