@@ -68,7 +68,9 @@ def process_with(log_dir, marker: str) -> int:
     `marker` (`-m marker`) whose command line mentions `log_dir` (so only this test's processes
     match). A bare argument would also match `--after surrogate` of the apps that wait for it."""
     for pid, argv in processes_under(log_dir).items():
-        if any(flag in ("--instance", "-m") and value == marker for flag, value in zip(argv, argv[1:])):
+        if any(
+            flag in ("--instance", "-m") and value == marker for flag, value in zip(argv[:-1], argv[1:], strict=True)
+        ):
             return pid
     raise AssertionError(f"no process with {marker} under {log_dir}")
 

@@ -87,7 +87,10 @@ SLEEPER = (
 def test_stop_returns_at_once_when_the_first_rung_is_heeded():
     process = subprocess.Popen(
         [sys.executable, "-c", SLEEPER],
-        stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, process_group=0,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        text=True,
+        process_group=0,
     )
     # A SIGINT that lands while the interpreter is still starting may be lost; wait until it runs.
     assert process.stdout.readline().strip() == "ready"
