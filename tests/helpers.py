@@ -8,7 +8,12 @@ import time
 from collections import defaultdict
 from pathlib import Path
 
+from nearsub.common.mission.schema import Mission
 from nearsub.common.runtime.logfile import read_log
+
+# A launch's own bound on its apps coming up (the mission's default startup_timeout): the waits
+# below derive from it instead of a number of their own.
+STARTUP_TIMEOUT = Mission.model_fields["startup_timeout"].default
 
 
 def log_path(summary: dict) -> Path:
@@ -29,7 +34,7 @@ def per_topic(path: Path, skip=WALL_CLOCK_TOPICS) -> dict[str, list[bytes]]:
     return dict(topics)
 
 
-def wait_registered(community: str, timeout: float = 30.0) -> dict:
+def wait_registered(community: str, timeout: float = STARTUP_TIMEOUT) -> dict:
     """Block until `nearsub launch` has registered the mission (its apps are all up)."""
     from nearsub.tools import registry
 
@@ -87,7 +92,7 @@ def clock_status(community: str) -> dict:
     return json.loads(out.stdout)
 
 
-def wait_paused(community: str, timeout: float = 30.0) -> dict:
+def wait_paused(community: str, timeout: float = STARTUP_TIMEOUT) -> dict:
     """The clock's status once it has paused; fails after `timeout` wall seconds."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:

@@ -73,7 +73,7 @@ def test_swapping_in_nuv_compensation_mid_run_avoids_the_collision(launches, com
     helm is swapped in at a fixed step. The log equals the in-process run with the same swap."""
     mission_file = MISSIONS / "overtake_stern_standard.toml"
     process = launches.start(mission_file, "--set", f"name={community}", "--set", f"pause_at_step={SWAP_STEP}")
-    wait_registered(community, timeout=60)
+    wait_registered(community, timeout=2 * load_mission(mission_file).startup_timeout)  # the server, then the apps
     swap = nearsub("swap", community, "helm", "--at-step", str(SWAP_STEP), "--behaviour", "nuv_compensation", "--json")
     assert swap.returncode == 0, swap.stderr
     code, summary, err = finish(process, timeout=200)
