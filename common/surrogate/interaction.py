@@ -98,12 +98,21 @@ def smoothstep(x: np.ndarray) -> np.ndarray:
     return x * x * (3.0 - 2.0 * x)
 
 
+def _ramps(bounds: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Lower and upper bounds (6,) and the ramps' widths inside them."""
+    lower, upper = np.ascontiguousarray(bounds[:, 0]), np.ascontiguousarray(bounds[:, 1])
+    return lower, upper, BLEND_FRACTION * (upper - lower)
+
+
+_RAMPS = _ramps(domain.BOUNDS)  # table 4.2's, which every step of a mission asks about
+
+
 def _margins(inputs: np.ndarray, bounds: np.ndarray, heading: bool) -> tuple[np.ndarray, np.ndarray]:
     """Ramp coordinates (1 and above: in full, 0 and below: off) of inputs (n, 6): (n, 6) for the
     bounds, (n, 4) for the constraints (4.4)-(4.7)."""
     inputs = np.atleast_2d(inputs)
-    span = bounds[:, 1] - bounds[:, 0]
-    inside = np.minimum(inputs - bounds[:, 0], bounds[:, 1] - inputs) / (BLEND_FRACTION * span)
+    lower, upper, ramp = _RAMPS if bounds is domain.BOUNDS else _ramps(bounds)
+    inside = np.minimum(inputs - lower, upper - inputs) / ramp
     inside[:, GEOMETRY] = np.where(inside[:, GEOMETRY] >= 0, np.inf, -np.inf)
     if not heading:
         inside[:, HEADING] = np.inf
@@ -343,7 +352,7 @@ def interaction_at(
         delta_weight, held = np.full(n, np.nan), np.zeros(n, dtype=bool)
     # One conversion for the five (n, 3) arrays (element-wise, so each gets its own bits).
     parts = np.concatenate([coefficients, model_mean, spread, lf, delta_free])
-    converted = domain.to_forces(parts, np.tile(mirror, 5), np.tile(u, 5), vehicle.length, rho)
+    converted = domain.to_forces(parts, np.concatenate((mirror,) * 5), np.concatenate((u,) * 5), vehicle.length, rho)
     forces, model_forces, spread_forces, lf_forces, free_forces = converted.reshape(5, n, 3)
     safe = np.where(np.isfinite(forces), forces, 0.0)  # weight is 0 wherever they are not finite
     interaction = Interaction(safe[0], weight[0], mode) if single else Interaction(safe, weight, mode)
