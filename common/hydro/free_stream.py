@@ -38,7 +38,7 @@ from scipy.interpolate import NdBSpline, make_interp_spline
 import nearsub
 from nearsub.common.hydro import high_fidelity as hydro_hf
 from nearsub.common.hydro.low_fidelity import KNOT, NU, input_columns
-from nearsub.common.physics.hull import D_SUB
+from nearsub.common.physics.hull import D_SUB, uuv_dimensions
 from nearsub.common.surrogate import domain
 from nearsub.common.surrogate import model as sg
 
@@ -61,9 +61,13 @@ class FreeStreamFileError(ValueError):
 
 def reynolds(inputs: Any) -> np.ndarray:
     """(n,) Re_L = u L_uuv / nu of input rows [R_long, R_lat, u_kn, psi_deg, d_ratio, ld_ratio],
-    exactly as hydro_hf.hf_free_stream computes it (nu of sea water, hydro_lf.NU)."""
-    _, _, speed, _, _, length = input_columns(inputs)
-    return speed * length / NU
+    exactly as hydro_hf.hf_free_stream computes it (nu of sea water, hydro_lf.NU): the speed and
+    length of `input_columns`, without its other four columns (the sim asks every step)."""
+    rows = np.atleast_2d(np.asarray(inputs, dtype=float))
+    if rows.shape[1] != 6:
+        input_columns(rows)  # raises the error that names the columns
+    _, length = uuv_dimensions(rows[:, 4], rows[:, 5])
+    return rows[:, 2] * KNOT * length / NU
 
 
 def reynolds_range(bounds: np.ndarray = domain.BOUNDS) -> tuple[float, float]:
