@@ -177,8 +177,10 @@ def to_forces(coeffs: Any, mirror: Any, u: Any, uuv_length: Any, rho: float = RH
     """Coefficients (n, 3) [X', Y', N'] -> dimensional [X_s N, Y_s N, N_s N m] (n, 3), with Y and N
     flipped on the -y side (mirror = -1), undoing the mirroring of `to_inputs`."""
     coeffs = np.atleast_2d(np.asarray(coeffs, dtype=float))
-    mirror = np.asarray(mirror, dtype=float).reshape(-1, 1)
-    signs = np.hstack([np.ones_like(mirror), mirror, mirror])
+    mirror = np.asarray(mirror, dtype=float).ravel()
+    signs = np.empty((len(mirror), 3))  # [1, mirror, mirror], filled column by column
+    signs[:, 0] = 1.0
+    signs[:, 1] = signs[:, 2] = mirror
     return coeffs * _force_scales(u, uuv_length, rho) * signs
 
 
