@@ -166,3 +166,30 @@ def test_a_hull_outside_the_shape_constraints_is_reported_as_getting_no_surrogat
     reason = geometry_outside(NPS_AUV_II)
     assert reason is not None and "(4.6)" in reason and "zero everywhere" in reason and "LF increment" in reason
     assert geometry_outside(SDV) is None
+
+
+@pytest.mark.parametrize("vehicle", ["sdv", "remus100"])  # hull ratios inside table 4.2, and clipped
+def test_each_row_of_a_batch_has_the_bits_of_the_state_asked_alone(vehicle):
+    """The single-row shortcuts (constraint values reused between the weights, x_c and the flags,
+    conversions without broadcast copies) keep the row-by-row arithmetic: a batch's row and the same
+    state asked alone agree bit for bit in all but the std (a BLAS product, `gp._Predictor.rows`)."""
+    from nearsub.common.physics.vehicles import get_vehicle
+
+    surrogate, uuv = load_surrogate(None), get_vehicle(vehicle)
+    rng = np.random.default_rng(3)
+    n = 40
+    states = np.column_stack(
+        [
+            rng.uniform(1.0, 2.5, n),
+            np.zeros(n),
+            np.zeros(n),
+            rng.uniform(-80.0, 80.0, n),  # inside and beyond table 4.2's R_long
+            rng.uniform(4.5, 12.0, n) * rng.choice([-1.0, 1.0], n),  # both sides, in and beyond (4.5)
+            rng.uniform(-0.1, 0.1, n),
+        ]
+    )
+    batch = interaction_at(surrogate, states, uuv, 1025.0, "increment")
+    for i, state in enumerate(states):
+        alone = interaction_at(surrogate, state, uuv, 1025.0, "increment")
+        for name in ("forces", "applied", "model", "lf", "delta_free", "delta_weight", "outside_mask", "lf_held"):
+            np.testing.assert_array_equal(getattr(alone, name)[0], getattr(batch, name)[i], err_msg=name)

@@ -312,6 +312,8 @@ def course_lag(vehicle: Vehicle, speed) -> np.ndarray:
     speed = np.asarray(speed, dtype=float)
     quantised = np.maximum(np.round(speed / LAG_SPEED_RESOLUTION), 1.0) * LAG_SPEED_RESOLUTION
     key = vehicle.model_dump_json()  # a Vehicle is not hashable (its PID tuning is mutable)
+    if quantised.ndim == 0:  # one vehicle's speed (the helm's every step): no np.vectorize
+        return np.array(_course_lag(key, float(quantised)))
     lags = {u: _course_lag(key, u) for u in np.unique(quantised).tolist()}
     return np.vectorize(lags.__getitem__, otypes=[float])(quantised)
 

@@ -221,7 +221,7 @@ def closest_distance(x, y, psi, length: float, diameter: float, n: int = 64):
     """
     x, y, psi = np.broadcast_arrays(*(np.asarray(a, dtype=float) for a in (x, y, psi)))
     flat = [np.ascontiguousarray(a).ravel() for a in (x, y, psi)]
-    bx, by = uuv_body_outline(length, diameter, n)
+    bx, by = _body_outline(length, diameter, n)
     clearance = np.empty(flat[0].size)
     _kernel().outline_clearances(
         flat[0], flat[1], np.cos(flat[2]), np.sin(flat[2]), bx, by, *_kernel_grids(), clearance
@@ -236,9 +236,16 @@ def closest_distance(x, y, psi, length: float, diameter: float, n: int = 64):
 
 
 @lru_cache(maxsize=64)
+def _body_outline(length: float, diameter: float, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """`hull.uuv_body_outline`, kept per hull (the sim classifies every step with one; nothing here
+    writes to it, and the kernels keep their writable-array signatures)."""
+    return uuv_body_outline(length, diameter, n)
+
+
+@lru_cache(maxsize=64)
 def _uuv_reach(length: float, diameter: float, n: int) -> float:
     """Largest distance from the UUV's CB to its outline (a bound for the cheap pre-check)."""
-    bx, by = uuv_body_outline(length, diameter, n)
+    bx, by = _body_outline(length, diameter, n)
     return float(np.max(np.hypot(bx, by)))
 
 

@@ -92,9 +92,12 @@ def constraint_values(X: Any) -> np.ndarray:
     everywhere in the domain: (4.4) needs R_lat >= 0.5048 / 8.575 = 0.0589 plus the UUV's share.
     """
     X = _as_inputs(X)
+    features = np.empty((len(X), 4))  # filled column by column: column_stack's values at less cost
     with np.errstate(divide="ignore", invalid="ignore"):
-        inv_d = 1.0 / X[:, 4]  # (D_sub/D_uuv)^-1
-        features = np.column_stack([X[:, 1], inv_d, inv_d * X[:, 5], X[:, 5]])
+        inv_d = np.divide(1.0, X[:, 4], out=features[:, 1])  # (D_sub/D_uuv)^-1
+        features[:, 0] = X[:, 1]
+        np.multiply(inv_d, X[:, 5], out=features[:, 2])
+        features[:, 3] = X[:, 5]
         return features @ _CONSTRAINT_COEFFICIENTS[:, :4].T + _CONSTRAINT_COEFFICIENTS[:, 4]
 
 
@@ -121,7 +124,12 @@ def sample_feasible(n: int, seed: int = 0) -> np.ndarray:
 # ------------------------------------------------------------------------- unit conversions
 def _flat_broadcast(*values: Any) -> list[np.ndarray]:
     """Float arrays broadcast together and flattened to one length n (scalars give n = 1)."""
-    return [a.ravel() for a in np.broadcast_arrays(*(np.atleast_1d(np.asarray(v, dtype=float)) for v in values))]
+    arrays = [np.asarray(v, dtype=float) for v in values]
+    lengths = {len(a) for a in arrays if a.ndim == 1}
+    if len(lengths) <= 1 and all(a.ndim <= 1 for a in arrays):  # vectors of one length and scalars (a vehicle's)
+        n = lengths.pop() if lengths else 1
+        return [a if a.ndim == 1 else np.full(n, a) for a in arrays]
+    return [a.ravel() for a in np.broadcast_arrays(*(np.atleast_1d(a) for a in arrays))]
 
 
 def to_inputs(
@@ -145,16 +153,13 @@ def to_inputs(
     x, y, u, psi, length, diameter = _flat_broadcast(x, y, u, psi, uuv_length, uuv_diameter)
     mirror = np.where(y < 0.0, -1.0, 1.0)
     psi_wrapped = np.remainder(psi + math.pi, 2.0 * math.pi) - math.pi  # heading in [-pi, pi)
-    inputs = np.column_stack(
-        [
-            x / l_sub,  # R_long (3.3), docs/design.md, "Thesis errata" 2
-            np.abs(y) / l_sub,  # R_lat (3.4), centre-to-centre (errata 7)
-            u / KNOT,
-            mirror * np.degrees(psi_wrapped),
-            d_sub / diameter,
-            length / diameter,
-        ]
-    )
+    inputs = np.empty((len(x), 6))  # filled column by column: column_stack's values at less cost
+    np.divide(x, l_sub, out=inputs[:, 0])  # R_long (3.3), docs/design.md, "Thesis errata" 2
+    np.divide(np.abs(y), l_sub, out=inputs[:, 1])  # R_lat (3.4), centre-to-centre (errata 7)
+    np.divide(u, KNOT, out=inputs[:, 2])
+    np.multiply(mirror, np.degrees(psi_wrapped), out=inputs[:, 3])
+    np.divide(d_sub, diameter, out=inputs[:, 4])
+    np.divide(length, diameter, out=inputs[:, 5])
     return inputs, mirror
 
 
@@ -162,15 +167,20 @@ def _force_scales(u: Any, uuv_length: Any, rho: float) -> np.ndarray:
     """(n, 3) factors [q L^2, q L^2, q L^3], q = 0.5 rho u^2: coefficient -> force (thesis section 5.2)."""
     u, length = _flat_broadcast(u, uuv_length)
     ql2 = 0.5 * rho * u**2 * length**2
-    return np.column_stack([ql2, ql2, ql2 * length])
+    scales = np.empty((len(ql2), 3))
+    scales[:, 0] = scales[:, 1] = ql2
+    np.multiply(ql2, length, out=scales[:, 2])
+    return scales
 
 
 def to_forces(coeffs: Any, mirror: Any, u: Any, uuv_length: Any, rho: float = RHO_SEA) -> np.ndarray:
     """Coefficients (n, 3) [X', Y', N'] -> dimensional [X_s N, Y_s N, N_s N m] (n, 3), with Y and N
     flipped on the -y side (mirror = -1), undoing the mirroring of `to_inputs`."""
     coeffs = np.atleast_2d(np.asarray(coeffs, dtype=float))
-    mirror = np.asarray(mirror, dtype=float).reshape(-1, 1)
-    signs = np.hstack([np.ones_like(mirror), mirror, mirror])
+    mirror = np.asarray(mirror, dtype=float).ravel()
+    signs = np.empty((len(mirror), 3))  # [1, mirror, mirror], filled column by column
+    signs[:, 0] = 1.0
+    signs[:, 1] = signs[:, 2] = mirror
     return coeffs * _force_scales(u, uuv_length, rho) * signs
 
 

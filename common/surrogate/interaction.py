@@ -98,16 +98,38 @@ def smoothstep(x: np.ndarray) -> np.ndarray:
     return x * x * (3.0 - 2.0 * x)
 
 
-def _margins(inputs: np.ndarray, bounds: np.ndarray, heading: bool) -> tuple[np.ndarray, np.ndarray]:
+def _ramps(bounds: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Lower and upper bounds (6,) and the ramps' widths inside them."""
+    lower, upper = np.ascontiguousarray(bounds[:, 0]), np.ascontiguousarray(bounds[:, 1])
+    return lower, upper, BLEND_FRACTION * (upper - lower)
+
+
+_RAMPS = _ramps(domain.BOUNDS)  # table 4.2's, which every step of a mission asks about
+
+
+Known = tuple[np.ndarray, np.ndarray]  # input rows (n, 6) and their `domain.constraint_values`
+
+
+def _constraint_values(X: np.ndarray, known: Known | None = None) -> np.ndarray:
+    """`domain.constraint_values` of rows X (n, 6), or the values `known` has for the same numbers
+    (a row's values depend on its numbers alone): a step asks about its inputs up to three times."""
+    if known is not None and X.shape == known[0].shape and np.array_equal(X, known[0]):
+        return known[1]
+    return domain.constraint_values(X)
+
+
+def _margins(
+    inputs: np.ndarray, bounds: np.ndarray, heading: bool, known: Known | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Ramp coordinates (1 and above: in full, 0 and below: off) of inputs (n, 6): (n, 6) for the
     bounds, (n, 4) for the constraints (4.4)-(4.7)."""
     inputs = np.atleast_2d(inputs)
-    span = bounds[:, 1] - bounds[:, 0]
-    inside = np.minimum(inputs - bounds[:, 0], bounds[:, 1] - inputs) / (BLEND_FRACTION * span)
+    lower, upper, ramp = _RAMPS if bounds is domain.BOUNDS else _ramps(bounds)
+    inside = np.minimum(inputs - lower, upper - inputs) / ramp
     inside[:, GEOMETRY] = np.where(inside[:, GEOMETRY] >= 0, np.inf, -np.inf)
     if not heading:
         inside[:, HEADING] = np.inf
-    return inside, domain.constraint_values(inputs) / CONSTRAINT_BAND
+    return inside, _constraint_values(inputs, known) / CONSTRAINT_BAND
 
 
 def _weight(inside: np.ndarray, feasible: np.ndarray) -> np.ndarray:
@@ -115,31 +137,33 @@ def _weight(inside: np.ndarray, feasible: np.ndarray) -> np.ndarray:
     return smoothstep(np.where(np.isfinite(margin), margin, 0.0))
 
 
-def blend_weight(inputs: np.ndarray, bounds: np.ndarray = domain.BOUNDS, heading: bool = True) -> np.ndarray:
+def blend_weight(
+    inputs: np.ndarray, bounds: np.ndarray = domain.BOUNDS, heading: bool = True, known: Known | None = None
+) -> np.ndarray:
     """(n,) weight of the surrogate's forces at inputs (n, 6). The ramp runs inside the bounds of
     the state inputs (position, speed and, with `heading`, the heading) and the constraints; the
     hull ratios are constants of a vehicle, so they switch the surrogate on or off for a whole
     mission (see `interaction_at`). (4.4)-(4.7) hold no heading term (docs/design.md, "Thesis
     errata": (4.4) has 0.27 sin(2 deg) as a constant), so without `heading` it does not depend on
-    psi at all."""
-    return _weight(*_margins(inputs, bounds, heading))
+    psi at all. `known`: constraint values already computed (`_constraint_values`)."""
+    return _weight(*_margins(inputs, bounds, heading, known))
 
 
-def discrepancy_weight(inputs: np.ndarray) -> np.ndarray:
+def discrepancy_weight(inputs: np.ndarray, known: Known | None = None) -> np.ndarray:
     """(n,) weight w of delta in the LF-in-the-loop increment: `blend_weight` without its heading
     ramp, and across (4.5) the outward ramp of DELTA_TAPER instead of the inward one."""
-    inside, feasible = _margins(inputs, domain.BOUNDS, heading=False)
+    inside, feasible = _margins(inputs, domain.BOUNDS, heading=False, known=known)
     # (4.5) is in units of D_sub (8.575 R_lat = y_dist / D_sub), so one D_uuv is 1 / (D_sub/D_uuv).
     taper = DELTA_TAPER / np.atleast_2d(inputs)[:, 4]
     feasible[:, LATERAL] = 1.0 + feasible[:, LATERAL] * CONSTRAINT_BAND[LATERAL] / taper
     return _weight(inside, feasible)
 
 
-def discrepancy_inputs(inputs: np.ndarray) -> np.ndarray:
+def discrepancy_inputs(inputs: np.ndarray, known: Known | None = None) -> np.ndarray:
     """x_c: inputs (n, 6) clamped into table 4.2's box and then, beyond (4.5), R_lat onto its edge
     (where `discrepancy_weight` tapers delta off), so delta is asked only where it was trained."""
-    clamped = np.minimum(np.maximum(inputs, domain.BOUNDS[:, 0]), domain.BOUNDS[:, 1])  # np.clip: no bound is 0
-    beyond = np.minimum(domain.constraint_values(clamped)[:, LATERAL], 0.0)
+    clamped = np.minimum(np.maximum(inputs, _RAMPS[0]), _RAMPS[1])  # np.clip: no bound is 0
+    beyond = np.minimum(_constraint_values(clamped, known)[:, LATERAL], 0.0)
     clamped[:, 1] += beyond / 8.575  # (4.5) falls by 8.575 (= L_sub / D_sub) per unit of R_lat
     return clamped
 
@@ -197,12 +221,12 @@ class InteractionAt:
         return [name for name, out in zip(FLAG_NAMES, self.outside_mask[row], strict=True) if out]
 
 
-def outside_mask(raw: np.ndarray) -> np.ndarray:
+def outside_mask(raw: np.ndarray, known: Known | None = None) -> np.ndarray:
     """(n, 10) True where a raw input lies outside table 4.2's bounds (non-finite included) or a
-    constraint (4.4)-(4.7) fails, columns FLAG_NAMES."""
+    constraint (4.4)-(4.7) fails, columns FLAG_NAMES. `known`: as in `blend_weight`."""
     with np.errstate(invalid="ignore"):
         beyond = ~((raw >= domain.BOUNDS[:, 0]) & (raw <= domain.BOUNDS[:, 1]))
-        return np.hstack([beyond, ~(domain.constraint_values(raw) >= 0.0)])
+        return np.hstack([beyond, ~(_constraint_values(raw, known) >= 0.0)])
 
 
 HULL_SHAPE_CONSTRAINTS = [2, 3]  # (4.6) and (4.7): functions of the hull ratios alone
@@ -317,17 +341,18 @@ def interaction_at(
     inputs = raw.copy()
     inputs[:, GEOMETRY] = np.minimum(np.maximum(raw[:, GEOMETRY], _GEOMETRY_LOWER), _GEOMETRY_UPPER)
     n = len(inputs)
+    known = (inputs, domain.constraint_values(inputs))  # for the weights, x_c and the flags
     table = None
     if mode == "increment":
         table = free_stream if free_stream is not None else increment_table(model)
     if mode == "increment" and getattr(model, "kind", None) == "lf_in_loop":
         coefficients, weight, model_mean, spread, lf, delta_free, delta_weight, held = lf_in_loop_increment(
-            model, inputs, x, y, vehicle, table, with_std, weighted_only, delta
+            model, inputs, x, y, vehicle, table, with_std, weighted_only, delta, known
         )
     elif delta is not None:
         raise ValueError(f'a sampled delta needs the "increment" mode and a model of kind "lf_in_loop", got {mode!r}')
     else:
-        weight = blend_weight(inputs)
+        weight = blend_weight(inputs, known=known)
         asked = weight > 0.0 if weighted_only else np.ones(n, dtype=bool)
         model_mean, spread = np.zeros((n, 3)), np.full((n, 3), np.nan)
         free = np.zeros((n, 3))
@@ -343,11 +368,11 @@ def interaction_at(
         delta_weight, held = np.full(n, np.nan), np.zeros(n, dtype=bool)
     # One conversion for the five (n, 3) arrays (element-wise, so each gets its own bits).
     parts = np.concatenate([coefficients, model_mean, spread, lf, delta_free])
-    converted = domain.to_forces(parts, np.tile(mirror, 5), np.tile(u, 5), vehicle.length, rho)
+    converted = domain.to_forces(parts, np.concatenate((mirror,) * 5), np.concatenate((u,) * 5), vehicle.length, rho)
     forces, model_forces, spread_forces, lf_forces, free_forces = converted.reshape(5, n, 3)
     safe = np.where(np.isfinite(forces), forces, 0.0)  # weight is 0 wherever they are not finite
     interaction = Interaction(safe[0], weight[0], mode) if single else Interaction(safe, weight, mode)
-    flags = outside_mask(raw)
+    flags = outside_mask(raw, known)
     return InteractionAt(
         interaction=interaction,
         forces=forces,
@@ -387,6 +412,7 @@ def lf_in_loop_increment(
     with_std: bool = True,
     weighted_only: bool = False,
     delta: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
+    known: Known | None = None,
 ):
     """The increment [LF(x) - LF_free(x)] + w(x) [delta(x_c) - (HF_free(x_c) - LF_free(x_c))] in
     coefficients (n, 3) at inputs (n, 6) (hull ratios clipped) of UUVs at CB positions x, y, with
@@ -402,7 +428,7 @@ def lf_in_loop_increment(
     same model's lone UUV at the same hull, speed and heading, so the increment tends to zero away
     from the submarine. Without `weighted_only` delta is asked about every state (the sim
     publishes it); with it only where both weights are above zero (a sweep). `delta`: as in
-    `interaction_at`."""
+    `interaction_at`; `known`: as in `blend_weight`."""
     if vehicle.length > LF_MAX_LENGTH:
         raise ValueError(
             f"vehicle {vehicle.name}: {vehicle.length:g} m long, longer than the {LF_MAX_LENGTH:.2f} m the LF's "
@@ -410,13 +436,13 @@ def lf_in_loop_increment(
         )
     n = len(inputs)
     reach = lf_reach_weight(x, y)
-    delta_weight = discrepancy_weight(inputs)
+    delta_weight = discrepancy_weight(inputs, known)
     near = reach > 0.0
     asked = near & (delta_weight > 0.0) if weighted_only else np.ones(n, dtype=bool)
     # Every row (the sim's one vehicle, a batch near the hull) needs no masked copies.
     every_asked, every_near = n > 0 and bool(asked.all()), n > 0 and bool(near.all())
     if any_asked := every_asked or asked.any():
-        clamped = discrepancy_inputs(inputs if every_asked else inputs[asked])
+        clamped = discrepancy_inputs(inputs if every_asked else inputs[asked], known)
         if delta is None:  # asked first, answered after the LF below (`discrepancy_later`)
             answer = discrepancy_later(model, clamped, with_std)
     if every_near:
