@@ -6,7 +6,8 @@ PROBLEM.png (median and interquartile band against the number of HF samples), PR
 (median, quartiles, mean +/- 95 % CI, the paired win rate of the reference method over each
 baseline, the crossover HF counts and the wall time). With --reference, PROBLEM-reference.csv
 holds the reference GP's MAPE on every method's training sets at those HF counts (same columns).
-Everything follows from --seed.
+Everything follows from --seed. A folder that already holds a run of the same configuration is
+resumed: its repeats are kept, only the missing ones run, and the files hold the union.
 """
 
 from __future__ import annotations
@@ -235,7 +236,9 @@ def al_bench_command(args) -> int:
     else:
         # Bad input is reported in one line before the progress bar starts.
         check_request(args.problem, args.hf_samples, args.n_lf0, args.n_hf0, methods, tuple(args.reference))
-        result = _run(args, methods)
+        # Repeats already in the folder are kept and only the missing ones run.
+        previous = read_outputs(args.problem, out) if (out / f"{args.problem}.csv").exists() else None
+        result = _run(args, methods, previous)
     summary = summarise(result)
     paths = write_outputs(result, summary, out)
     _print_report(result, summary, paths)
@@ -244,7 +247,7 @@ def al_bench_command(args) -> int:
     return 0
 
 
-def _run(args, methods) -> dict[str, Any]:
+def _run(args, methods, previous) -> dict[str, Any]:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
 
     from nearsub.common.learning.albench import run_benchmark
@@ -268,6 +271,7 @@ def _run(args, methods) -> dict[str, Any]:
             reference_counts=tuple(args.reference),
             on_task_done=lambda done, total: bar.update(job, completed=done, total=total),
             time_limit=None if args.time_limit is None else 60.0 * args.time_limit,
+            previous=previous,
             **settings,
         )
 
@@ -336,5 +340,10 @@ def add_parser(subparsers) -> None:
         help="run nothing: summarise and draw again the CSVs a run wrote in the output folder",
     )
     p.add_argument("--markdown", action="store_true", help="also print the docs' markdown tables")
-    p.add_argument("-o", "--out", default="al-bench", help="output folder (default: al-bench)")
+    p.add_argument(
+        "-o",
+        "--out",
+        default="al-bench",
+        help="output folder (default: al-bench); one holding a run of the same configuration is resumed",
+    )
     p.set_defaults(func=al_bench_command)

@@ -152,6 +152,7 @@ def run_benchmark(
     reference_counts: tuple[int, ...] = (),
     on_task_done: Callable[[int, int], None] | None = None,
     time_limit: float | None = None,
+    previous: dict[str, Any] | None = None,
     **settings: Any,
 ) -> dict[str, Any]:
     """Run the paired comparison and return raw results: per method, an array (repeats, n_hf
@@ -164,11 +165,31 @@ def run_benchmark(
     time_limit: seconds after which no further repeat starts (the repeats begun finish); the
     result then holds fewer repeats ("repeats") than asked ("repeats_requested"). Each repeat's
     numbers depend only on its seed, so they are the same as in a run without the limit.
+    previous: an earlier result of the same configuration (LookupError naming the field that
+    differs); only its missing repeats run, and the result is the union, equal to one run of
+    them all.
     """
     problem = get_problem(problem_name)
     methods, n_lf0, n_hf0 = check_request(problem_name, hf_samples, n_lf0, n_hf0, methods, reference_counts)
     config = dict(settings, hf_budget=hf_samples, n_lf0=n_lf0, n_hf0=n_hf0)
     counts = list(range(n_hf0, hf_samples + 1))
+    ref_counts = sorted(reference_counts)
+    done = 0
+    if previous is not None:
+        request = {
+            "problem": problem_name,
+            "methods": list(methods),
+            "seed": seed,
+            "hf_samples": hf_samples,
+            "test_points": test_points,
+            "reference counts": ref_counts,
+            "settings": config,
+        }
+        if conflict := resume_conflict(previous, request):
+            raise LookupError(conflict)
+        done = previous["repeats"]
+    if done >= repeats:
+        return _union(previous, None, repeats, 0.0)
     single_blas_thread()  # inherited by the spawned workers
     start = time.perf_counter()
     deadline = None if time_limit is None else start + time_limit
@@ -177,12 +198,11 @@ def run_benchmark(
         X_test, Y_test = _test_set(problem, test_points, seed, pool, max(1, jobs))
         tasks = [
             _Task(problem_name, method, r, repeat_seed(seed, r), config, X_test, Y_test, tuple(reference_counts))
-            for r in range(repeats)
+            for r in range(done, repeats)
             for method in methods
         ]
         results = _run_all(pool, tasks, on_task_done, deadline)
     requested, repeats = repeats, 1 + max(r for _, r, *_ in results)  # begun repeats are a prefix
-    ref_counts = sorted(reference_counts)
 
     def empty(n):
         return {method: np.full((repeats, n, problem.n_outputs), np.nan) for method in methods}
@@ -197,7 +217,8 @@ def run_benchmark(
             mape_by_method[method][r, counts.index(n_hf)] = err
         for n_hf, err in reference_rows:
             reference[method][r, ref_counts.index(n_hf)] = err
-    return {
+    wall = time.perf_counter() - start
+    result = {
         "problem": problem_name,
         "outputs": list(problem.output_names),
         "methods": list(methods),
@@ -212,10 +233,58 @@ def run_benchmark(
         "n_hf": counts,
         "mape": mape_by_method,
         "reference": {"counts": ref_counts, "mape": reference} if ref_counts else None,
-        "wall_seconds": time.perf_counter() - start,
+        "wall_seconds": wall,
         "task_seconds_per_method": task_seconds,  # wall, summed over repeats
         "task_cpu_seconds_per_method": task_cpu,  # CPU of the worker processes, summed over repeats
+        "runs": [{"repeats": [done, repeats], "jobs": jobs, "wall_seconds": wall, "time_limit_seconds": time_limit}],
     }
+    return result if previous is None else _union(previous, result, requested, wall)
+
+
+def resume_conflict(previous: dict[str, Any], request: dict[str, Any]) -> str | None:
+    """Why an earlier result cannot be resumed by `request` (the first field that differs), or
+    None. Values are compared as the JSON files hold them."""
+    import json
+
+    def norm(value):
+        return json.loads(json.dumps(value))
+
+    ref = previous.get("reference")
+    old = {
+        **{k: previous.get(k) for k in ("problem", "methods", "seed", "hf_samples", "test_points")},
+        "reference counts": ref["counts"] if ref else [],
+    }
+    old_settings, new_settings = norm(previous.get("settings", {})), norm(request["settings"])
+    fields = [(k, norm(old[k]), norm(request[k])) for k in old]
+    fields += [(f"settings.{k}", old_settings.get(k), new_settings.get(k)) for k in sorted(old_settings | new_settings)]
+    for name, was, now in fields:
+        if was != now:
+            return f"cannot resume: the earlier run's {name} is {was!r}, this run's {now!r}"
+    return None
+
+
+def _union(previous: dict[str, Any], new: dict[str, Any] | None, requested: int, wall: float) -> dict[str, Any]:
+    """`previous` with the repeats of `new` (which follow its own) appended; times summed."""
+    done = previous["repeats"]
+    runs = previous.get("runs") or [{"repeats": [0, done], "wall_seconds": previous.get("wall_seconds")}]
+    if new is None:
+        return {**previous, "repeats_requested": requested, "runs": runs}
+
+    def join(old, fresh):
+        return {m: np.concatenate([old[m][:done], fresh[m][done:]]) for m in new["methods"]}
+
+    result = {**new, "mape": join(previous["mape"], new["mape"])}
+    if new["reference"]:
+        result["reference"] = {
+            **new["reference"],
+            "mape": join(previous["reference"]["mape"], new["reference"]["mape"]),
+        }
+    for key in ("task_seconds_per_method", "task_cpu_seconds_per_method"):
+        old = previous.get(key) or {}
+        result[key] = {m: old.get(m, 0.0) + t for m, t in new[key].items()}
+    result["wall_seconds"] = (previous.get("wall_seconds") or 0.0) + wall
+    result["runs"] = runs + new["runs"]
+    return result
 
 
 def check_request(
