@@ -121,3 +121,30 @@ def test_resume_refuses_another_configuration(tmp_path):
         back, {**request, "settings": {"n_lookahead": 3}}
     )
     assert "reference counts is [10], this run's []" in resume_conflict(back, {**request, "reference counts": []})
+
+
+def test_reference_kernel_fits_bit_for_bit_like_emukits(monkeypatch):
+    """The reference GP's kernel skips work the fit does not use (masks rebuilt at every
+    likelihood evaluation, the fixed rho's gradient): its fit and prediction are emukit's, bit
+    for bit."""
+    import pytest
+
+    from nearsub.common.learning import reference_gp
+
+    if reason := reference_gp.missing():
+        pytest.skip(f"reference GP: {reason}")
+    from emukit.multi_fidelity.kernels import LinearMultiFidelityKernel
+
+    from nearsub.common.learning.testproblems import get_problem
+
+    park = get_problem("park")
+    X = np.random.default_rng(5).uniform(size=(60, 4))
+    X_lf, X_hf, X_test = X[:24], X[:7], X[24:]
+    args = (park.bounds, X_hf, park.hf(X_hf), X_test)
+    kw = dict(lf_data=(X_lf, park.lf(X_lf)), seed=3)
+    ours = reference_gp.predict_hf(*args, **kw)
+    assert reference_gp._fixed_rho_kernel_class() is not LinearMultiFidelityKernel
+    monkeypatch.setattr(reference_gp, "_KERNEL_CLASS", [LinearMultiFidelityKernel])
+    emukits = reference_gp.predict_hf(*args, **kw)
+    np.testing.assert_array_equal(ours, emukits)
+    assert np.mean(np.abs(ours[:, 0] / park.hf(X_test)[:, 0] - 1.0)) < 0.05  # a real fit
