@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import multiprocessing
 import time
+from collections import Counter
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
@@ -153,6 +154,7 @@ def run_benchmark(
     on_task_done: Callable[[int, int], None] | None = None,
     time_limit: float | None = None,
     previous: dict[str, Any] | None = None,
+    on_checkpoint: Callable[[dict[str, Any]], None] | None = None,
     **settings: Any,
 ) -> dict[str, Any]:
     """Run the paired comparison and return raw results: per method, an array (repeats, n_hf
@@ -168,6 +170,8 @@ def run_benchmark(
     previous: an earlier result of the same configuration (LookupError naming the field that
     differs); only its missing repeats run, and the result is the union, equal to one run of
     them all.
+    on_checkpoint(result) is called whenever the repeats finished so far (from the first) grow:
+    the result so far, so a run that is stopped can be resumed from what it wrote.
     """
     problem = get_problem(problem_name)
     methods, n_lf0, n_hf0 = check_request(problem_name, hf_samples, n_lf0, n_hf0, methods, reference_counts)
@@ -193,6 +197,47 @@ def run_benchmark(
     single_blas_thread()  # inherited by the spawned workers
     start = time.perf_counter()
     deadline = None if time_limit is None else start + time_limit
+
+    def assemble(results, upto):
+        """The result of repeats done..upto - 1 (all in `results`), joined to `previous`."""
+
+        def empty(n):
+            return {method: np.full((upto, n, problem.n_outputs), np.nan) for method in methods}
+
+        mape_by_method, reference = empty(len(counts)), empty(len(ref_counts))
+        task_seconds = {method: 0.0 for method in methods}
+        task_cpu = {method: 0.0 for method in methods}
+        for method, r, rows, reference_rows, seconds, cpu in results:
+            task_seconds[method] += seconds
+            task_cpu[method] += cpu
+            for n_hf, err in rows:
+                mape_by_method[method][r, counts.index(n_hf)] = err
+            for n_hf, err in reference_rows:
+                reference[method][r, ref_counts.index(n_hf)] = err
+        wall = time.perf_counter() - start
+        run = {"repeats": [done, upto], "jobs": jobs, "wall_seconds": wall, "time_limit_seconds": time_limit}
+        result = {
+            "problem": problem_name,
+            "outputs": list(problem.output_names),
+            "methods": list(methods),
+            "repeats": upto,
+            "repeats_requested": repeats,
+            "time_limit_seconds": time_limit,
+            "hf_samples": hf_samples,
+            "seed": seed,
+            "jobs": jobs,
+            "settings": config,
+            "test_points": test_points,
+            "n_hf": counts,
+            "mape": mape_by_method,
+            "reference": {"counts": ref_counts, "mape": reference} if ref_counts else None,
+            "wall_seconds": wall,
+            "task_seconds_per_method": task_seconds,  # wall, summed over repeats
+            "task_cpu_seconds_per_method": task_cpu,  # CPU of the worker processes, summed over repeats
+            "runs": [run],
+        }
+        return result if previous is None else _union(previous, result, repeats, wall)
+
     ctx = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(max_workers=max(1, jobs), mp_context=ctx) as pool:
         X_test, Y_test = _test_set(problem, test_points, seed, pool, max(1, jobs))
@@ -201,44 +246,19 @@ def run_benchmark(
             for r in range(done, repeats)
             for method in methods
         ]
-        results = _run_all(pool, tasks, on_task_done, deadline)
-    requested, repeats = repeats, 1 + max(r for _, r, *_ in results)  # begun repeats are a prefix
+        last = [done]
 
-    def empty(n):
-        return {method: np.full((repeats, n, problem.n_outputs), np.nan) for method in methods}
+        def checkpoint(results):  # the union up to the first repeat not yet whole
+            finished = Counter(r for _, r, *_ in results)
+            upto = last[0]
+            while finished[upto] == len(methods):
+                upto += 1
+            if on_checkpoint is not None and upto > last[0]:
+                last[0] = upto
+                on_checkpoint(assemble([x for x in results if x[1] < upto], upto))
 
-    mape_by_method, reference = empty(len(counts)), empty(len(ref_counts))
-    task_seconds = {method: 0.0 for method in methods}
-    task_cpu = {method: 0.0 for method in methods}
-    for method, r, rows, reference_rows, seconds, cpu in results:
-        task_seconds[method] += seconds
-        task_cpu[method] += cpu
-        for n_hf, err in rows:
-            mape_by_method[method][r, counts.index(n_hf)] = err
-        for n_hf, err in reference_rows:
-            reference[method][r, ref_counts.index(n_hf)] = err
-    wall = time.perf_counter() - start
-    result = {
-        "problem": problem_name,
-        "outputs": list(problem.output_names),
-        "methods": list(methods),
-        "repeats": repeats,
-        "repeats_requested": requested,
-        "time_limit_seconds": time_limit,
-        "hf_samples": hf_samples,
-        "seed": seed,
-        "jobs": jobs,
-        "settings": config,
-        "test_points": test_points,
-        "n_hf": counts,
-        "mape": mape_by_method,
-        "reference": {"counts": ref_counts, "mape": reference} if ref_counts else None,
-        "wall_seconds": wall,
-        "task_seconds_per_method": task_seconds,  # wall, summed over repeats
-        "task_cpu_seconds_per_method": task_cpu,  # CPU of the worker processes, summed over repeats
-        "runs": [{"repeats": [done, repeats], "jobs": jobs, "wall_seconds": wall, "time_limit_seconds": time_limit}],
-    }
-    return result if previous is None else _union(previous, result, requested, wall)
+        results = _run_all(pool, tasks, on_task_done, deadline, checkpoint)
+    return assemble(results, 1 + max(r for _, r, *_ in results))  # begun repeats are a prefix
 
 
 def resume_conflict(previous: dict[str, Any], request: dict[str, Any]) -> str | None:
@@ -317,7 +337,7 @@ def check_request(
     return tuple(methods), max(n_lf0, n_hf0), n_hf0
 
 
-def _run_all(pool, tasks, on_task_done, deadline=None):
+def _run_all(pool, tasks, on_task_done, deadline=None, on_result=None):
     """Results of the tasks (submitted repeat by repeat). After `deadline` (perf_counter) the
     tasks of repeats that have not begun are cancelled, so every repeat run is whole; checked as
     each task finishes, which is when a worker takes the next."""
@@ -327,6 +347,8 @@ def _run_all(pool, tasks, on_task_done, deadline=None):
         if future.cancelled():
             continue
         results.append(future.result())
+        if on_result is not None:
+            on_result(results)
         if on_task_done is not None:
             on_task_done(len(results), len(tasks))
         if deadline is not None and time.perf_counter() > deadline:
