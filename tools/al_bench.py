@@ -6,14 +6,18 @@ PROBLEM.png (median and interquartile band against the number of HF samples), PR
 (median, quartiles, mean +/- 95 % CI, the paired win rate of the reference method over each
 baseline, the crossover HF counts and the wall time). With --reference, PROBLEM-reference.csv
 holds the reference GP's MAPE on every method's training sets at those HF counts (same columns).
-Everything follows from --seed.
+Everything follows from --seed. The CSVs and JSON are rewritten as each repeat completes, and a
+folder that already holds a run of the same configuration is resumed: its repeats are kept, only
+the missing ones run, and the files hold the union.
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import json
 import math
+import os
 from pathlib import Path
 from typing import Any
 
@@ -41,8 +45,8 @@ THESIS_CLAIMS = {
 
 
 # ---------------------------------------------------------------------- outputs
-def write_outputs(result: dict[str, Any], summary: dict[str, Any], out: Path) -> dict[str, Path]:
-    """CSV of every MAPE, JSON summary and PNG figure in `out`; returns their paths."""
+def write_outputs(result: dict[str, Any], summary: dict[str, Any], out: Path, plot: bool = True) -> dict[str, Path]:
+    """CSV of every MAPE, JSON summary and (plot) PNG figure in `out`; returns their paths."""
     from nearsub.common.learning.albench import repeat_seed
 
     out.mkdir(parents=True, exist_ok=True)
@@ -57,7 +61,7 @@ def write_outputs(result: dict[str, Any], summary: dict[str, Any], out: Path) ->
         paths["reference"] = out / f"{result['problem']}-reference.csv"
         tables.append((paths["reference"], result["reference"]["mape"], result["reference"]["counts"]))
     for path, mapes, counts in tables:
-        with open(path, "w", newline="") as fh:
+        with _replacing(path) as fh:
             w = csv.writer(fh)
             w.writerow(["problem", "method", "repeat", "seed", "n_hf", "output", "mape_percent"])
             for m in result["methods"]:
@@ -70,10 +74,21 @@ def write_outputs(result: dict[str, Any], summary: dict[str, Any], out: Path) ->
     meta = {k: v for k, v in result.items() if k not in ("mape", "reference")}
     meta["reference_counts"] = result["reference"]["counts"] if result.get("reference") else []
     meta["thesis_claim"] = THESIS_CLAIMS.get(result["problem"], "")
-    with open(paths["json"], "w") as fh:
+    with _replacing(paths["json"]) as fh:
         json.dump({**meta, "summary": summary}, fh, indent=1)
-    _plot(result, summary, paths["png"])
+    if plot:
+        _plot(result, summary, paths["png"])
     return paths
+
+
+@contextlib.contextmanager
+def _replacing(path: Path):
+    """A text file written beside `path` and moved over it when complete: a run stopped while
+    writing leaves the previous file."""
+    part = path.with_name(path.name + ".part")
+    with open(part, "w", newline="") as fh:
+        yield fh
+    os.replace(part, path)
 
 
 def _plot(result: dict[str, Any], summary: dict[str, Any], path: Path) -> None:
@@ -161,7 +176,8 @@ def read_outputs(problem: str, out: Path) -> dict[str, Any]:
     def arrays(rows, counts):
         a = {m: np.full((meta["repeats"], len(counts), len(outputs)), np.nan) for m in methods}
         for m, r, n_hf, name, value in rows:
-            a[m][r, counts.index(n_hf), outputs.index(name)] = value
+            if r < meta["repeats"]:  # a CSV replaced after its JSON was not
+                a[m][r, counts.index(n_hf), outputs.index(name)] = value
         return a
 
     result = {k: v for k, v in meta.items() if k not in ("summary", "reference_counts", "thesis_claim")}
@@ -235,7 +251,9 @@ def al_bench_command(args) -> int:
     else:
         # Bad input is reported in one line before the progress bar starts.
         check_request(args.problem, args.hf_samples, args.n_lf0, args.n_hf0, methods, tuple(args.reference))
-        result = _run(args, methods)
+        # Repeats already in the folder are kept and only the missing ones run.
+        previous = read_outputs(args.problem, out) if (out / f"{args.problem}.csv").exists() else None
+        result = _run(args, methods, previous, out)
     summary = summarise(result)
     paths = write_outputs(result, summary, out)
     _print_report(result, summary, paths)
@@ -244,10 +262,10 @@ def al_bench_command(args) -> int:
     return 0
 
 
-def _run(args, methods) -> dict[str, Any]:
+def _run(args, methods, previous, out) -> dict[str, Any]:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
 
-    from nearsub.common.learning.albench import run_benchmark
+    from nearsub.common.learning.albench import run_benchmark, summarise
 
     settings = {"n_lookahead": args.lookahead, "n_restarts": args.restarts, "n_polish": args.polish}
     if args.learn_rho:
@@ -268,6 +286,9 @@ def _run(args, methods) -> dict[str, Any]:
             reference_counts=tuple(args.reference),
             on_task_done=lambda done, total: bar.update(job, completed=done, total=total),
             time_limit=None if args.time_limit is None else 60.0 * args.time_limit,
+            previous=previous,
+            # The files are rewritten as each repeat completes: a stopped run resumes from them.
+            on_checkpoint=lambda result: write_outputs(result, summarise(result), out, plot=False),
             **settings,
         )
 
@@ -336,5 +357,10 @@ def add_parser(subparsers) -> None:
         help="run nothing: summarise and draw again the CSVs a run wrote in the output folder",
     )
     p.add_argument("--markdown", action="store_true", help="also print the docs' markdown tables")
-    p.add_argument("-o", "--out", default="al-bench", help="output folder (default: al-bench)")
+    p.add_argument(
+        "-o",
+        "--out",
+        default="al-bench",
+        help="output folder (default: al-bench); one holding a run of the same configuration is resumed",
+    )
     p.set_defaults(func=al_bench_command)

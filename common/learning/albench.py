@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import multiprocessing
 import time
+from collections import Counter
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
@@ -152,6 +153,8 @@ def run_benchmark(
     reference_counts: tuple[int, ...] = (),
     on_task_done: Callable[[int, int], None] | None = None,
     time_limit: float | None = None,
+    previous: dict[str, Any] | None = None,
+    on_checkpoint: Callable[[dict[str, Any]], None] | None = None,
     **settings: Any,
 ) -> dict[str, Any]:
     """Run the paired comparison and return raw results: per method, an array (repeats, n_hf
@@ -164,58 +167,144 @@ def run_benchmark(
     time_limit: seconds after which no further repeat starts (the repeats begun finish); the
     result then holds fewer repeats ("repeats") than asked ("repeats_requested"). Each repeat's
     numbers depend only on its seed, so they are the same as in a run without the limit.
+    previous: an earlier result of the same configuration (LookupError naming the field that
+    differs); only its missing repeats run, and the result is the union, equal to one run of
+    them all.
+    on_checkpoint(result) is called whenever the repeats finished so far (from the first) grow:
+    the result so far, so a run that is stopped can be resumed from what it wrote.
     """
     problem = get_problem(problem_name)
     methods, n_lf0, n_hf0 = check_request(problem_name, hf_samples, n_lf0, n_hf0, methods, reference_counts)
     config = dict(settings, hf_budget=hf_samples, n_lf0=n_lf0, n_hf0=n_hf0)
     counts = list(range(n_hf0, hf_samples + 1))
+    ref_counts = sorted(reference_counts)
+    done = 0
+    if previous is not None:
+        request = {
+            "problem": problem_name,
+            "methods": list(methods),
+            "seed": seed,
+            "hf_samples": hf_samples,
+            "test_points": test_points,
+            "reference counts": ref_counts,
+            "settings": config,
+        }
+        if conflict := resume_conflict(previous, request):
+            raise LookupError(conflict)
+        done = previous["repeats"]
+    if done >= repeats:
+        return _union(previous, None, repeats, 0.0)
     single_blas_thread()  # inherited by the spawned workers
     start = time.perf_counter()
     deadline = None if time_limit is None else start + time_limit
+
+    def assemble(results, upto):
+        """The result of repeats done..upto - 1 (all in `results`), joined to `previous`."""
+
+        def empty(n):
+            return {method: np.full((upto, n, problem.n_outputs), np.nan) for method in methods}
+
+        mape_by_method, reference = empty(len(counts)), empty(len(ref_counts))
+        task_seconds = {method: 0.0 for method in methods}
+        task_cpu = {method: 0.0 for method in methods}
+        for method, r, rows, reference_rows, seconds, cpu in results:
+            task_seconds[method] += seconds
+            task_cpu[method] += cpu
+            for n_hf, err in rows:
+                mape_by_method[method][r, counts.index(n_hf)] = err
+            for n_hf, err in reference_rows:
+                reference[method][r, ref_counts.index(n_hf)] = err
+        wall = time.perf_counter() - start
+        run = {"repeats": [done, upto], "jobs": jobs, "wall_seconds": wall, "time_limit_seconds": time_limit}
+        result = {
+            "problem": problem_name,
+            "outputs": list(problem.output_names),
+            "methods": list(methods),
+            "repeats": upto,
+            "repeats_requested": repeats,
+            "time_limit_seconds": time_limit,
+            "hf_samples": hf_samples,
+            "seed": seed,
+            "jobs": jobs,
+            "settings": config,
+            "test_points": test_points,
+            "n_hf": counts,
+            "mape": mape_by_method,
+            "reference": {"counts": ref_counts, "mape": reference} if ref_counts else None,
+            "wall_seconds": wall,
+            "task_seconds_per_method": task_seconds,  # wall, summed over repeats
+            "task_cpu_seconds_per_method": task_cpu,  # CPU of the worker processes, summed over repeats
+            "runs": [run],
+        }
+        return result if previous is None else _union(previous, result, repeats, wall)
+
     ctx = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(max_workers=max(1, jobs), mp_context=ctx) as pool:
         X_test, Y_test = _test_set(problem, test_points, seed, pool, max(1, jobs))
         tasks = [
             _Task(problem_name, method, r, repeat_seed(seed, r), config, X_test, Y_test, tuple(reference_counts))
-            for r in range(repeats)
+            for r in range(done, repeats)
             for method in methods
         ]
-        results = _run_all(pool, tasks, on_task_done, deadline)
-    requested, repeats = repeats, 1 + max(r for _, r, *_ in results)  # begun repeats are a prefix
-    ref_counts = sorted(reference_counts)
+        last = [done]
 
-    def empty(n):
-        return {method: np.full((repeats, n, problem.n_outputs), np.nan) for method in methods}
+        def checkpoint(results):  # the union up to the first repeat not yet whole
+            finished = Counter(r for _, r, *_ in results)
+            upto = last[0]
+            while finished[upto] == len(methods):
+                upto += 1
+            if on_checkpoint is not None and upto > last[0]:
+                last[0] = upto
+                on_checkpoint(assemble([x for x in results if x[1] < upto], upto))
 
-    mape_by_method, reference = empty(len(counts)), empty(len(ref_counts))
-    task_seconds = {method: 0.0 for method in methods}
-    task_cpu = {method: 0.0 for method in methods}
-    for method, r, rows, reference_rows, seconds, cpu in results:
-        task_seconds[method] += seconds
-        task_cpu[method] += cpu
-        for n_hf, err in rows:
-            mape_by_method[method][r, counts.index(n_hf)] = err
-        for n_hf, err in reference_rows:
-            reference[method][r, ref_counts.index(n_hf)] = err
-    return {
-        "problem": problem_name,
-        "outputs": list(problem.output_names),
-        "methods": list(methods),
-        "repeats": repeats,
-        "repeats_requested": requested,
-        "time_limit_seconds": time_limit,
-        "hf_samples": hf_samples,
-        "seed": seed,
-        "jobs": jobs,
-        "settings": config,
-        "test_points": test_points,
-        "n_hf": counts,
-        "mape": mape_by_method,
-        "reference": {"counts": ref_counts, "mape": reference} if ref_counts else None,
-        "wall_seconds": time.perf_counter() - start,
-        "task_seconds_per_method": task_seconds,  # wall, summed over repeats
-        "task_cpu_seconds_per_method": task_cpu,  # CPU of the worker processes, summed over repeats
+        results = _run_all(pool, tasks, on_task_done, deadline, checkpoint)
+    return assemble(results, 1 + max(r for _, r, *_ in results))  # begun repeats are a prefix
+
+
+def resume_conflict(previous: dict[str, Any], request: dict[str, Any]) -> str | None:
+    """Why an earlier result cannot be resumed by `request` (the first field that differs), or
+    None. Values are compared as the JSON files hold them."""
+    import json
+
+    def norm(value):
+        return json.loads(json.dumps(value))
+
+    ref = previous.get("reference")
+    old = {
+        **{k: previous.get(k) for k in ("problem", "methods", "seed", "hf_samples", "test_points")},
+        "reference counts": ref["counts"] if ref else [],
     }
+    old_settings, new_settings = norm(previous.get("settings", {})), norm(request["settings"])
+    fields = [(k, norm(old[k]), norm(request[k])) for k in old]
+    fields += [(f"settings.{k}", old_settings.get(k), new_settings.get(k)) for k in sorted(old_settings | new_settings)]
+    for name, was, now in fields:
+        if was != now:
+            return f"cannot resume: the earlier run's {name} is {was!r}, this run's {now!r}"
+    return None
+
+
+def _union(previous: dict[str, Any], new: dict[str, Any] | None, requested: int, wall: float) -> dict[str, Any]:
+    """`previous` with the repeats of `new` (which follow its own) appended; times summed."""
+    done = previous["repeats"]
+    runs = previous.get("runs") or [{"repeats": [0, done], "wall_seconds": previous.get("wall_seconds")}]
+    if new is None:
+        return {**previous, "repeats_requested": requested, "runs": runs}
+
+    def join(old, fresh):
+        return {m: np.concatenate([old[m][:done], fresh[m][done:]]) for m in new["methods"]}
+
+    result = {**new, "mape": join(previous["mape"], new["mape"])}
+    if new["reference"]:
+        result["reference"] = {
+            **new["reference"],
+            "mape": join(previous["reference"]["mape"], new["reference"]["mape"]),
+        }
+    for key in ("task_seconds_per_method", "task_cpu_seconds_per_method"):
+        old = previous.get(key) or {}
+        result[key] = {m: old.get(m, 0.0) + t for m, t in new[key].items()}
+    result["wall_seconds"] = (previous.get("wall_seconds") or 0.0) + wall
+    result["runs"] = runs + new["runs"]
+    return result
 
 
 def check_request(
@@ -248,7 +337,7 @@ def check_request(
     return tuple(methods), max(n_lf0, n_hf0), n_hf0
 
 
-def _run_all(pool, tasks, on_task_done, deadline=None):
+def _run_all(pool, tasks, on_task_done, deadline=None, on_result=None):
     """Results of the tasks (submitted repeat by repeat). After `deadline` (perf_counter) the
     tasks of repeats that have not begun are cancelled, so every repeat run is whole; checked as
     each task finishes, which is when a worker takes the next."""
@@ -258,6 +347,8 @@ def _run_all(pool, tasks, on_task_done, deadline=None):
         if future.cancelled():
             continue
         results.append(future.result())
+        if on_result is not None:
+            on_result(results)
         if on_task_done is not None:
             on_task_done(len(results), len(tasks))
         if deadline is not None and time.perf_counter() > deadline:

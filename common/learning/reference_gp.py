@@ -80,8 +80,9 @@ def predict_hf(
                 out[:, j] = base[:, j] + mu + sd * model.predict(unit(X))[0][:, 0]
             return out
         from emukit.multi_fidelity.convert_lists_to_array import convert_x_list_to_array, convert_y_list_to_array
-        from emukit.multi_fidelity.kernels import LinearMultiFidelityKernel
         from emukit.multi_fidelity.models import GPyLinearMultiFidelityModel
+
+        kernel_class = _fixed_rho_kernel_class()
 
         X_lf, Y_lf = lf_data
         Y_lf = np.asarray(Y_lf, dtype=float).reshape(len(X_lf), -1)
@@ -90,7 +91,7 @@ def predict_hf(
         for j in range(Y_hf.shape[1]):
             mu, sd = Y_lf[:, j].mean(), Y_lf[:, j].std() or 1.0
             Y_train = convert_y_list_to_array([(Y_lf[:, [j]] - mu) / sd, (Y_hf[:, [j]] - mu) / sd])
-            kernel = LinearMultiFidelityKernel([GPy.kern.RBF(len(lower), ARD=True) for _ in range(2)])
+            kernel = kernel_class([GPy.kern.RBF(len(lower), ARD=True) for _ in range(2)])
             kernel.scale.fix(1.0)  # rho = 1, as in nearsub's model
             model = GPyLinearMultiFidelityModel(X_train, Y_train, kernel, n_fidelities=2)
             model.mixed_noise.Gaussian_noise.fix(_NOISE)
@@ -99,3 +100,54 @@ def predict_hf(
             mean = model.predict(X_query, Y_metadata={"output_index": X_query[:, -1].astype(int)})[0]
             out[:, j] = mu + sd * mean[:, 0]
     return out
+
+
+_KERNEL_CLASS: list[type] = []
+
+
+def _fixed_rho_kernel_class() -> type:
+    """emukit's `LinearMultiFidelityKernel`, minus work whose result the fit does not use, so
+    the fit is bit-identical and cheaper (about a tenth of a reference fit, see
+    docs/al-bench/README.md "Timing"): the sub-kernels' gradient masks (which blocks of K each
+    kernel enters, and with which power of rho) depend only on the fidelity column and rho, so
+    they are built once per training set instead of at every likelihood evaluation; and the
+    gradient of a fixed rho, which the optimiser drops, is not computed (emukit builds every
+    sub-kernel's full K for it)."""
+    if _KERNEL_CLASS:
+        return _KERNEL_CLASS[0]
+    from emukit.multi_fidelity.kernels import LinearMultiFidelityKernel
+
+    class FixedRhoKernel(LinearMultiFidelityKernel):
+        _masks: tuple[bytes, list[np.ndarray]] | None = None
+
+        def _update_sub_kernel_gradients_full(self, X, X2, dL_dK):
+            rho = np.asarray(self.scaling_param, dtype=float)
+            key = X[:, -1].tobytes() + b"|" + X2[:, -1].tobytes() + b"|" + rho.tobytes()
+            if self._masks is None or self._masks[0] != key:
+                self._masks = (key, _gradient_masks(X[:, -1], X2[:, -1], rho, self.n_fidelities))
+            for kernel, mask in zip(self.kernels, self._masks[1], strict=True):
+                kernel.update_gradients_full(dL_dK * mask, X, X2)
+
+        def _update_scaling_parameter_gradients_full(self, X, X2, dL_dK):
+            if not self.scaling_param.is_fixed:
+                super()._update_scaling_parameter_gradients_full(X, X2, dL_dK)
+            else:
+                self.scaling_param.gradient = np.zeros(self.n_fidelities - 1)
+
+    _KERNEL_CLASS.append(FixedRhoKernel)
+    return FixedRhoKernel
+
+
+def _gradient_masks(f: np.ndarray, f2: np.ndarray, rho: np.ndarray, n_fidelities: int) -> list[np.ndarray]:
+    """d K / d K_k for each sub-kernel k: emukit 0.5.1's `_update_sub_kernel_gradients_full`
+    loop (Kennedy & O'Hagan 2000, section 2.5), the same additions in the same order."""
+    masks = [np.zeros((len(f), len(f2))) for _ in range(n_fidelities)]
+    for i in range(n_fidelities):
+        for j in range(i + 1):
+            idx, idx_t = np.ix_(f == j, f2 == i), np.ix_(f == i, f2 == j)
+            for k in range(j + 1):
+                scale = np.prod(rho[k:i]) * np.prod(rho[k:j])
+                masks[k][idx] += scale
+                if i != j:
+                    masks[k][idx_t] += scale
+    return masks
