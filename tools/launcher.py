@@ -280,7 +280,10 @@ class Launcher:
                 return
             for inst in missing:
                 child = self.children.get(inst)
-                if child is not None and child.process.poll() is not None:
+                code = None if child is None else child.process.poll()
+                # 0: it ended the mission since `missing` was read (a sim refusing its
+                # interaction settings at step 0); supervise() reads that end and its reason.
+                if code is not None and code != 0:
                     raise LaunchError(
                         f"app {inst} exited with code {child.process.returncode} during start-up\n{child.tail()}", inst
                     )
