@@ -133,3 +133,36 @@ def test_a_name_is_claimed_by_one_process_until_it_releases_or_dies(runtime_dir)
         holder.kill()
         holder.wait()
     registry.claim("alpha").release()  # the dead holder's claim went with it
+
+
+class _ExitsWhileAsked:
+    """A child process that is running at the first poll and has exited with `code` after it."""
+
+    def __init__(self, code: int):
+        self.code, self.polls, self.returncode = code, 0, None
+
+    def poll(self):
+        self.polls += 1
+        if self.polls > 1:
+            self.returncode = self.code
+        return self.returncode
+
+
+class _NoTokens:
+    def alive(self, key, timeout=1.0):
+        return []
+
+
+@pytest.mark.parametrize("code", [0, 1])
+def test_an_app_exiting_while_the_launcher_waits_for_it(tmp_path, code):
+    """Exit code 0 between the token check and the exit check is an app that ended the mission
+    (the sim refusing its settings at step 0): not a start-up failure. Another code is one."""
+    from nearsub.tools.launcher import Child, Launcher, LaunchError
+
+    launcher = Launcher(load_mission(ALPHA), None, str(tmp_path), quiet=True)
+    launcher.children["sim-1"] = Child("sim-1", "sim", _ExitsWhileAsked(code), tmp_path / "sim-1.out")
+    if code == 0:
+        launcher.wait_alive(_NoTokens(), [("sim", "sim-1")], timeout=5.0)
+    else:
+        with pytest.raises(LaunchError, match="sim-1 exited with code 1 during start-up"):
+            launcher.wait_alive(_NoTokens(), [("sim", "sim-1")], timeout=5.0)
