@@ -53,6 +53,12 @@ def finish(process, timeout: float = 120) -> tuple[int, dict, str]:
     return process.returncode, json.loads(out.strip().splitlines()[-1]), err
 
 
+def command_line(pid) -> list[str]:
+    """The words of a process's command line. An app forked by the launcher's fork server
+    (common/runtime/forkserver.py) shows its command as one title with spaces, not NUL-separated."""
+    return open(f"/proc/{pid}/cmdline").read().replace("\0", " ").split()
+
+
 def processes_under(log_dir) -> dict[int, list[str]]:
     """pid -> argv of the processes whose command line mentions `log_dir` (only this test's)."""
     found = {}
@@ -60,7 +66,7 @@ def processes_under(log_dir) -> dict[int, list[str]]:
         if not entry.isdigit():
             continue
         try:
-            argv = open(f"/proc/{entry}/cmdline").read().split("\0")
+            argv = command_line(entry)
         except OSError:
             continue
         if any(str(log_dir) in a for a in argv):

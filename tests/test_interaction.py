@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from conftest import ALPHA
-from helpers import finish, log_path, per_topic, wait_registered
+from helpers import command_line, finish, log_path, per_topic, wait_registered
 from nearsub.common.mission.cores import build_cores, run_mission
 from nearsub.common.mission.schema import load_mission
 from nearsub.common.physics.dynamics import Interaction, body_forces
@@ -143,7 +143,7 @@ def test_a_lost_surrogate_server_stops_the_mission_naming_it(launches, community
 
 def _is_server(pid: str, log_dir) -> bool:
     try:
-        argv = open(f"/proc/{pid}/cmdline").read().split("\0")
+        argv = command_line(pid)
     except OSError:
         return False
     return "nearsub.apps.surrogate" in argv and any(str(log_dir) in a for a in argv)

@@ -41,7 +41,7 @@ from nearsub.common.mission.schema import (
     mission_from_dict,
 )
 from nearsub.common.runtime import credentials as mission_credentials
-from nearsub.common.runtime import keys
+from nearsub.common.runtime import forkserver, keys
 from nearsub.common.runtime.bus import (
     CONNECT_TIMEOUT_VARIABLE,
     LINK_VARIABLE,
@@ -51,6 +51,7 @@ from nearsub.common.runtime.bus import (
     Mailbox,
     app_link,
 )
+from nearsub.common.runtime.forkserver import ForkServer, ForkServerError, process_cpu
 from nearsub.common.runtime.lifecycle import ORDER
 from nearsub.common.runtime.messages import (
     Event,
@@ -60,7 +61,7 @@ from nearsub.common.runtime.messages import (
     encode,
     model_for_key,
 )
-from nearsub.common.runtime.processes import cpu_seconds, spawn_app, stop
+from nearsub.common.runtime.processes import spawn_app, stop
 
 from . import registry
 from .caller import Caller
@@ -179,6 +180,26 @@ class Summary:
         return "\n".join(lines)
 
 
+# What the fork server loads before it forks the apps (common/runtime/forkserver.py): what every
+# lock-stepped app, the logger and the clock import at start-up; near a submarine also the
+# surrogate server's GP stack and the sim's interaction, the LF's compiled kernels (from numba's
+# cache) and its submarine field table (from nearsub's cache), which the sim and the server
+# would otherwise each load.
+APP_PRELOAD = ("nearsub.apps.shell", "nearsub.apps.logger", "nearsub.apps.clock", "nearsub.common.mission.cores")
+SURROGATE_PRELOAD = (
+    "nearsub.apps.surrogate",
+    "nearsub.apps.services",
+    "nearsub.common.surrogate.model",
+    "nearsub.common.surrogate.interaction",
+    "nearsub.common.hydro.low_fidelity:compile_kernels",
+    "nearsub.common.hydro.low_fidelity:submarine_field",
+)
+
+
+def fork_preload(mission: Mission) -> tuple[str, ...]:
+    return APP_PRELOAD + (SURROGATE_PRELOAD if mission.needs_surrogate else ())
+
+
 def spawn_router(
     folder: Path, timeout: float, credentials: Path, interrupted=lambda: False
 ) -> tuple[subprocess.Popen, list[str]]:
@@ -235,6 +256,7 @@ class Launcher:
         self.stop_requested: int | None = None
         self.instance_counter = Counter()
         self.router: subprocess.Popen | None = None
+        self.forks: ForkServer | None = None  # the apps' pre-imported parent (runtime/forkserver.py)
         self.credentials: str | None = None  # the file the mission's router requires
         self.stopping = False
         self.clock_started = time.monotonic()
@@ -243,8 +265,17 @@ class Launcher:
     def spawn(self, module: str, instance: str, role: str, extra: list[str] = ()) -> Child:
         output = self.run_dir / f"{instance}.out"  # a fleet vehicle's apps: in its own folder
         output.parent.mkdir(exist_ok=True)
+        args = ["--run", str(self.run_file), "--instance", instance, *extra]
         with open(output, "wb") as out:
-            process = spawn_app(module, ["--run", str(self.run_file), "--instance", instance, *extra], out)
+            process = None
+            if self.forks is not None:
+                try:
+                    process = self.forks.spawn(f"nearsub.apps.{module}", args, out)
+                except ForkServerError as exc:
+                    self.say(f"{exc}; starting the apps as their own processes")
+                    self.forks = None
+            if process is None:
+                process = spawn_app(module, args, out)
         child = Child(instance, role, process, output)
         self.children[instance] = child
         self.say(f"started {instance} (pid {process.pid})")
@@ -314,6 +345,7 @@ class Launcher:
         previous_handlers = {s: signal.signal(s, self._on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
         link_given = os.environ.get(LINK_VARIABLE)
         try:
+            self.forks = forkserver.start(fork_preload(self.mission))  # loads while the router starts
             connect = self.start_router()
             if self.router is not None:
                 self.say(f"started router (pid {self.router.pid}) on {', '.join(connect)}")
@@ -376,6 +408,8 @@ class Launcher:
             self.stop_all()
             if self.router is not None:
                 stop([self.router], grace=0.0)
+            if self.forks is not None:
+                self.forks.close()
             (registry.runtime_dir() / f"{self.community}.json").unlink(missing_ok=True)
             if not self.mission.network.connect:  # ours: the next launch of the name makes new ones
                 registry.credentials_path(self.community).unlink(missing_ok=True)
@@ -615,7 +649,7 @@ class Launcher:
         processes = {c.instance: c.process for c in self.children.values()}
         if self.router is not None:
             processes["router"] = self.router
-        cpu = {name: cpu_seconds(p.pid) for name, p in processes.items()}
+        cpu = {name: process_cpu(p) for name, p in processes.items()}
         return {name: seconds for name, seconds in cpu.items() if seconds is not None}
 
     def drain_mailbox(self) -> None:

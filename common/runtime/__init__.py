@@ -8,4 +8,5 @@
 - clock: the clock's grants, pauses and stall timer (ClockCore), free of transport and of the wall clock.
 - logfile: MCAP mission logs (write and read).
 - processes: the processes nearsub starts: one BLAS thread, spawning apps, the stop ladder, Dask tasks.
+- forkserver: the apps' pre-imported parent: forks each app with the shared modules loaded.
 """

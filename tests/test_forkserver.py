@@ -1,0 +1,141 @@
+"""The fork server (common/runtime/forkserver.py): modules forked from a pre-imported parent keep
+`processes.spawn_app`'s contract (own process group, one BLAS thread, the requester's environment,
+output into the given file, exit codes as subprocess gives them), report their CPU at exit, and
+leave nothing behind."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from helpers import command_line
+from nearsub.common.runtime import forkserver, processes
+from nearsub.common.runtime.forkserver import ForkedApp, ForkServer, ForkServerError, process_cpu
+
+pytestmark = pytest.mark.timeout(120)
+WAIT = 60.0  # wall seconds for a forked module to start or end on a busy machine
+
+# A module that writes what a launched app would check about itself, then sleeps ("wait") or
+# exits with the code in its first argument.
+PROBE = """
+import json, os, sys, time
+from nearsub.common.runtime.processes import prepare_process
+prepare_process()  # as every app does: SIGTERM when its parent dies
+print(json.dumps({"argv": sys.argv[1:], "env": dict(os.environ), "group": os.getpgid(0), "pid": os.getpid(),
+                  "stdin": sys.stdin.read()}), flush=True)
+print("to stderr", file=sys.stderr, flush=True)
+if sys.argv[1] == "wait":
+    time.sleep(300)
+raise SystemExit(int(sys.argv[1]))
+"""
+
+
+@pytest.fixture
+def server(tmp_path, monkeypatch):
+    (tmp_path / "forkprobe.py").write_text(PROBE)
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join(filter(None, [str(tmp_path), os.environ.get("PYTHONPATH")])))
+    started = ForkServer(("json",))
+    yield started
+    started.close()
+    try:
+        started.process.wait(timeout=WAIT)
+    except subprocess.TimeoutExpired:
+        started.process.kill()
+
+
+def probe(server: ForkServer, path, *args: str) -> ForkedApp:
+    with open(path, "wb") as handle:
+        return server.spawn("forkprobe", list(args), handle)
+
+
+def said(path) -> dict:
+    deadline = time.monotonic() + WAIT
+    while not path.read_text().strip():
+        assert time.monotonic() < deadline, "the forked module wrote nothing"
+        time.sleep(0.02)
+    return json.loads(path.read_text().splitlines()[0])
+
+
+def test_a_forked_module_gets_its_arguments_the_environment_a_group_and_its_exit_code(server, tmp_path, monkeypatch):
+    for name in processes.BLAS_THREAD_VARIABLES:
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setenv("NEARSUB_LINK", "client")  # set after the server started: the request carries it
+    out = tmp_path / "probe.out"
+    app = probe(server, out, "3", "--instance", "sim-1")
+    assert app.wait(WAIT) == 3
+    seen = said(out)
+    assert seen["argv"] == ["3", "--instance", "sim-1"]
+    assert seen["env"]["NEARSUB_LINK"] == "client"
+    assert {name: seen["env"].get(name) for name in processes.BLAS_THREAD_VARIABLES} == dict.fromkeys(
+        processes.BLAS_THREAD_VARIABLES, "1"
+    )
+    assert seen["group"] == seen["pid"] == app.pid  # a process group of its own, as spawn_app gives
+    assert seen["stdin"] == ""  # /dev/null
+    assert out.read_text().splitlines()[1] == "to stderr"  # stderr into the same file
+    assert "OPENBLAS_NUM_THREADS" not in os.environ  # the requester's own environment is left alone
+    assert app.cpu is not None and app.cpu > 0.0
+    assert process_cpu(app) == app.cpu  # reaped by the server: the figure it reported
+
+
+def test_a_forked_module_reads_as_its_command_line_in_ps(server, tmp_path):
+    out = tmp_path / "probe.out"
+    app = probe(server, out, "wait", "--run", "logs/x/run.json")
+    try:
+        said(out)
+        words = command_line(app.pid)
+        cpu = process_cpu(app)
+    finally:
+        processes.stop([app], wait=5.0)
+    assert words == [sys.executable, "-u", "-m", "forkprobe", "wait", "--run", "logs/x/run.json"]
+    assert cpu is not None  # from /proc while it runs
+
+
+def test_a_signal_is_reported_as_subprocess_reports_it(server, tmp_path):
+    out = tmp_path / "probe.out"
+    app = probe(server, out, "wait")
+    said(out)
+    os.killpg(app.pid, signal.SIGKILL)
+    assert app.wait(WAIT) == -signal.SIGKILL
+
+
+def test_the_stop_ladder_stops_a_forked_module(server, tmp_path):
+    out = tmp_path / "probe.out"
+    app = probe(server, out, "wait")
+    said(out)
+    processes.stop([app], wait=5.0)
+    assert app.returncode == -signal.SIGINT  # the first rung; uncaught, as Python leaves on it
+
+
+def test_the_server_leaves_once_closed_and_its_modules_have_left(server, tmp_path):
+    out = tmp_path / "probe.out"
+    app = probe(server, out, "wait")
+    said(out)
+    server.close()
+    time.sleep(0.5)
+    assert server.process.poll() is None  # it waits for its module
+    os.killpg(app.pid, signal.SIGTERM)
+    assert server.process.wait(timeout=WAIT) == 0
+
+
+def test_a_dead_server_fails_the_next_spawn_and_its_modules_die_with_it(server, tmp_path):
+    out = tmp_path / "probe.out"
+    app = probe(server, out, "wait")
+    said(out)
+    server.process.kill()
+    server.process.wait(timeout=WAIT)
+    assert app.wait(WAIT) is not None
+    with pytest.raises(ForkServerError):
+        probe(server, tmp_path / "late.out", "0")
+    deadline = time.monotonic() + WAIT
+    while os.path.exists(f"/proc/{app.pid}") and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not os.path.exists(f"/proc/{app.pid}")  # PR_SET_PDEATHSIG reached it
+
+
+def test_turned_off_by_the_variable(monkeypatch):
+    monkeypatch.setenv(forkserver.VARIABLE, "0")
+    assert forkserver.start(()) is None
