@@ -12,7 +12,8 @@ import time
 
 import pytest
 
-from helpers import command_line
+from conftest import ALPHA, nearsub
+from helpers import command_line, finish, process_with, wait_registered
 from nearsub.common.runtime import forkserver, processes
 from nearsub.common.runtime.forkserver import ForkedApp, ForkServer, ForkServerError, process_cpu
 
@@ -139,3 +140,24 @@ def test_a_dead_server_fails_the_next_spawn_and_its_modules_die_with_it(server, 
 def test_turned_off_by_the_variable(monkeypatch):
     monkeypatch.setenv(forkserver.VARIABLE, "0")
     assert forkserver.start(()) is None
+
+
+def parent_words(pid: int) -> list[str]:
+    ppid = int(open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()[1])
+    return command_line(ppid)
+
+
+@pytest.mark.parametrize("forked", [True, False])
+def test_a_launch_forks_its_apps_from_the_server_unless_turned_off(launches, community, monkeypatch, forked):
+    if not forked:
+        monkeypatch.setenv(forkserver.VARIABLE, "0")
+    process = launches.start(ALPHA, "--set", f"name={community}", "--set", "pause_at_step=20", "--until", "5")
+    wait_registered(community)
+    parents = {name: parent_words(process_with(launches.log_dir, name)) for name in ("sim-1", "logger", "clock")}
+    assert nearsub("clock", community, "resume").returncode == 0
+    code, summary, err = finish(process)
+    assert code == 0 and summary["outcome"] == "time_limit", err
+    for name, words in parents.items():
+        assert ("nearsub.common.runtime.forkserver" in words) == forked, (name, words)
+        assert ("launch" in words) != forked, (name, words)
+    assert summary["cpu"]["sim-1"] > 0.0  # the CPU of every app, forked or not
