@@ -142,6 +142,10 @@ def test_turned_off_by_the_variable(monkeypatch):
     assert forkserver.start(()) is None
 
 
+def thread_names(pid: int) -> list[str]:
+    return [open(f"/proc/{pid}/task/{task}/comm").read().strip() for task in os.listdir(f"/proc/{pid}/task")]
+
+
 def parent_words(pid: int) -> list[str]:
     ppid = int(open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()[1])
     return command_line(ppid)
@@ -153,7 +157,9 @@ def test_a_launch_forks_its_apps_from_the_server_unless_turned_off(launches, com
         monkeypatch.setenv(forkserver.VARIABLE, "0")
     process = launches.start(ALPHA, "--set", f"name={community}", "--set", "pause_at_step=20", "--until", "5")
     wait_registered(community)
-    parents = {name: parent_words(process_with(launches.log_dir, name)) for name in ("sim-1", "logger", "clock")}
+    pids = {name: process_with(launches.log_dir, name) for name in ("sim-1", "logger", "clock")}
+    parents = {name: parent_words(pid) for name, pid in pids.items()}
+    threads = {name: thread_names(pid) for name, pid in pids.items()}
     assert nearsub("clock", community, "resume").returncode == 0
     code, summary, err = finish(process)
     assert code == 0 and summary["outcome"] == "time_limit", err
@@ -161,3 +167,16 @@ def test_a_launch_forks_its_apps_from_the_server_unless_turned_off(launches, com
         assert ("nearsub.common.runtime.forkserver" in words) == forked, (name, words)
         assert ("launch" in words) != forked, (name, words)
     assert summary["cpu"]["sim-1"] > 0.0  # the CPU of every app, forked or not
+    for name, names in threads.items():  # Zenoh's receive runtime handed over (bus.APP_RUNTIME)
+        assert "app-0" in names and not any(n.startswith(("rx-", "acc-", "net-")) for n in names), (name, names)
+
+
+def test_a_users_zenoh_runtime_reaches_the_apps_unchanged(launches, community, monkeypatch):
+    monkeypatch.setenv("ZENOH_RUNTIME", "(rx: (worker_threads: 3))")
+    process = launches.start(ALPHA, "--set", f"name={community}", "--set", "pause_at_step=20", "--until", "5")
+    wait_registered(community)
+    names = thread_names(process_with(launches.log_dir, "pid-1"))
+    assert nearsub("clock", community, "resume").returncode == 0
+    code, summary, err = finish(process)
+    assert code == 0, err
+    assert {"rx-0", "rx-1", "rx-2"} <= set(names), names

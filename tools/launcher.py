@@ -43,8 +43,10 @@ from nearsub.common.mission.schema import (
 from nearsub.common.runtime import credentials as mission_credentials
 from nearsub.common.runtime import forkserver, keys
 from nearsub.common.runtime.bus import (
+    APP_RUNTIME,
     CONNECT_TIMEOUT_VARIABLE,
     LINK_VARIABLE,
+    RUNTIME_VARIABLE,
     Bus,
     BusError,
     Endpoints,
@@ -343,7 +345,7 @@ class Launcher:
         # Every process started from here keeps trying to reach its router this long.
         os.environ[CONNECT_TIMEOUT_VARIABLE] = f"{self.mission.startup_timeout:g}"
         previous_handlers = {s: signal.signal(s, self._on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
-        link_given = os.environ.get(LINK_VARIABLE)
+        link_given, runtime_given = os.environ.get(LINK_VARIABLE), os.environ.get(RUNTIME_VARIABLE)
         try:
             self.forks = forkserver.start(fork_preload(self.mission))  # loads while the router starts
             connect = self.start_router()
@@ -369,6 +371,8 @@ class Launcher:
                 self.event_pub = bus.publisher(keys.events(c, "launcher"))
                 self.end_pub = bus.publisher(keys.mission_end(c))
                 bus.token(keys.alive(c, "launcher", "launcher"))
+                # The apps' Zenoh threads (bus.APP_RUNTIME); the launcher's own session opened above.
+                os.environ.setdefault(RUNTIME_VARIABLE, APP_RUNTIME)
                 try:
                     self.start_apps(bus, log_path)
                     self.summary.startup_time = time.monotonic() - start_wall
@@ -401,10 +405,11 @@ class Launcher:
             self.stopping = True
             for signum, handler in previous_handlers.items():
                 signal.signal(signum, handler)
-            if link_given is None:  # the next launch in this process chooses afresh
-                os.environ.pop(LINK_VARIABLE, None)
-            else:
-                os.environ[LINK_VARIABLE] = link_given
+            for name, given in ((LINK_VARIABLE, link_given), (RUNTIME_VARIABLE, runtime_given)):
+                if given is None:  # the next launch in this process chooses afresh
+                    os.environ.pop(name, None)
+                else:
+                    os.environ[name] = given
             self.stop_all()
             if self.router is not None:
                 stop([self.router], grace=0.0)

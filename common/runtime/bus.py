@@ -73,6 +73,19 @@ PEER_LISTEN = "tcp/127.0.0.1:0"  # a peer's own listener: loopback, a free port
 # sim, pid, helm, clock) gain.
 PEER_APPS = 6
 
+# Zenoh's async runtimes in a mission app (read by Zenoh when the process opens its first session;
+# RON, Zenoh's `ZRuntime` documentation). By default each process runs the receive, accept,
+# network and application runtimes on workers of their own (12-15 threads an app, measured); a
+# lock-stepped app handles one message at a time, so the handoffs between those threads were
+# most of its CPU. All but the sender run on one worker here. Measured with `nearsub bench
+# pipeline --repeats 2` against Zenoh's default, alternating on one 2-core machine: alpha 1090 ->
+# 1388-1402 steps/s and 1.27 -> 0.92-0.94 CPU-ms per step; overtake_stern_nuv 340-368 -> 354-492
+# steps/s and 3.48-3.80 -> 2.52-3.52 CPU-ms. Handing the sender (tx) over too deadlocked the
+# apps. The launcher hands it to the apps it starts, not to its router; a value the user has set
+# in ZENOH_RUNTIME is kept.
+RUNTIME_VARIABLE = "ZENOH_RUNTIME"
+APP_RUNTIME = "(rx: (handover: app), acc: (handover: app), net: (handover: app), app: (worker_threads: 1))"
+
 
 class BusError(RuntimeError):
     """A session that could not be opened; the one-line text names the endpoints."""
