@@ -35,6 +35,7 @@ from helpers import (
 )
 from nearsub.common.mission.cores import build_cores
 from nearsub.common.mission.schema import Mission, load_mission
+from nearsub.common.runtime import forkserver
 from nearsub.common.runtime.lifecycle import Schedule, run_inprocess
 from nearsub.common.runtime.logfile import read_log
 from nearsub.common.runtime.messages import encode
@@ -260,10 +261,15 @@ def test_a_30_s_pause_and_resume_completes_as_in_process(busy_machine, launches,
     assert_equals_inprocess(mission, summary)
 
 
-def test_a_swap_longer_than_step_timeout_keeps_the_mission_and_its_trajectory(busy_machine, launches, community):
-    """The new helm's start-up (a Python process importing numpy and Zenoh: 0.6 s of imports alone
-    on an idle machine) takes longer than a 0.5 s step_timeout; the clock is paused meanwhile, so
-    nothing stalls. (At 2 s, a fast machine swapped in 1.3 s and the test tested nothing.)"""
+def test_a_swap_longer_than_step_timeout_keeps_the_mission_and_its_trajectory(
+    busy_machine, launches, community, monkeypatch
+):
+    """The new helm's start-up takes longer than a 0.5 s step_timeout; the clock is paused
+    meanwhile, so nothing stalls. The launcher starts it as a process of its own, not from the
+    fork server, so it imports numpy and Zenoh itself (0.6 s of imports alone on an idle machine;
+    forked, a swap took 0.41 s beside two busy loops and the test tested nothing; at a 2 s
+    step_timeout, a fast machine swapped in 1.3 s)."""
+    monkeypatch.setenv(forkserver.VARIABLE, "0")
     settings = [f"name={community}", "pause_at_step=300", "time_limit=30", "step_timeout=0.5"]
     mission = load_mission(ALPHA, settings)
     process = launches.start(ALPHA, *settings_args(settings))
