@@ -6,6 +6,7 @@ leave nothing behind."""
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -80,6 +81,27 @@ def test_a_forked_module_gets_its_arguments_the_environment_a_group_and_its_exit
     assert "OPENBLAS_NUM_THREADS" not in os.environ  # the requester's own environment is left alone
     assert app.cpu is not None and app.cpu > 0.0
     assert process_cpu(app) == app.cpu  # reaped by the server: the figure it reported
+
+
+def test_an_exit_reported_with_the_pid_is_kept(server, tmp_path):
+    """A module that exits at once: the server's exit report can come in the same read as its pid
+    (a fresh clone once lost it and waited forever)."""
+    apps = [probe(server, tmp_path / f"probe{k}.out", str(k % 5)) for k in range(20)]
+    assert [app.wait(WAIT) for app in apps] == [k % 5 for k in range(20)]
+
+
+def test_an_exit_in_the_same_read_as_its_pid_is_kept(tmp_path):
+    """The client side alone, against a socket that answers a spawn with the pid and the exit
+    together (what a server that was descheduled between its fork and its reply sends)."""
+    ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
+    client = ForkServer.__new__(ForkServer)
+    client._attach(ours, process=None)
+    theirs.sendall(b'{"pid": 4242}\n{"exited": 4242, "code": 3, "cpu": 0.25}\n')
+    with open(tmp_path / "out", "wb") as handle:
+        app = client.spawn("forkprobe", ["3"], handle)
+    assert (app.returncode, app.cpu) == (3, 0.25)
+    theirs.close()
+    ours.close()
 
 
 def test_a_forked_module_reads_as_its_command_line_in_ps(server, tmp_path):

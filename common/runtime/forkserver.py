@@ -84,7 +84,7 @@ class ForkServer:
 
     def __init__(self, preload: Sequence[str]):
         ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
-        self.process = subprocess.Popen(
+        process = subprocess.Popen(
             [sys.executable, "-u", "-m", __name__, str(theirs.fileno()), *preload],
             pass_fds=[theirs.fileno()],
             stdin=subprocess.DEVNULL,
@@ -92,8 +92,12 @@ class ForkServer:
             process_group=0,  # a Ctrl-C reaches the launcher, which stops the apps in order, not the server
         )
         theirs.close()
-        self.socket = ours
+        self._attach(ours, process)
+
+    def _attach(self, ours: socket.socket, process: subprocess.Popen) -> None:
+        self.socket, self.process = ours, process
         self.apps: dict[int, ForkedApp] = {}
+        self.exits: dict[int, tuple[int, float]] = {}  # pid -> (code, cpu) reported by the server
         self.buffer = b""
         self.replies: list[dict] = []
 
@@ -114,7 +118,13 @@ class ForkServer:
         if "error" in reply:
             raise ForkServerError(f"the fork server could not start {module}: {reply['error']}")
         forked = self.apps[reply["pid"]] = ForkedApp(self, reply["pid"])
+        self._settle()
         return forked
+
+    def _settle(self) -> None:
+        for pid in [pid for pid in self.exits if pid in self.apps]:
+            app = self.apps[pid]
+            app.returncode, app.cpu = self.exits.pop(pid)
 
     def collect(self, wait: float = 0.0) -> None:
         """Read what the server has said (spawn replies, exits), waiting up to `wait` seconds."""
@@ -135,10 +145,9 @@ class ForkServer:
         *lines, self.buffer = self.buffer.split(b"\n")
         for line in lines:
             message = json.loads(line)
-            if "exited" in message:
-                app = self.apps.get(message["exited"])
-                if app is not None:
-                    app.returncode, app.cpu = message["code"], message["cpu"]
+            if "exited" in message:  # kept until `spawn` has made its app: it may arrive with the pid
+                self.exits[message["exited"]] = message["code"], message["cpu"]
+                self._settle()
             else:
                 self.replies.append(message)
 
