@@ -43,15 +43,14 @@ from nearsub.common.mission.schema import (
 from nearsub.common.runtime import credentials as mission_credentials
 from nearsub.common.runtime import forkserver, keys
 from nearsub.common.runtime.bus import (
-    APP_RUNTIME,
     CONNECT_TIMEOUT_VARIABLE,
     LINK_VARIABLE,
-    RUNTIME_VARIABLE,
     Bus,
     BusError,
     Endpoints,
     Mailbox,
     app_link,
+    app_runtime,
 )
 from nearsub.common.runtime.forkserver import ForkServer, ForkServerError, process_cpu
 from nearsub.common.runtime.lifecycle import ORDER
@@ -345,7 +344,7 @@ class Launcher:
         # Every process started from here keeps trying to reach its router this long.
         os.environ[CONNECT_TIMEOUT_VARIABLE] = f"{self.mission.startup_timeout:g}"
         previous_handlers = {s: signal.signal(s, self._on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
-        link_given, runtime_given = os.environ.get(LINK_VARIABLE), os.environ.get(RUNTIME_VARIABLE)
+        link_given = os.environ.get(LINK_VARIABLE)
         try:
             self.forks = forkserver.start(fork_preload(self.mission))  # loads while the router starts
             connect = self.start_router()
@@ -371,30 +370,32 @@ class Launcher:
                 self.event_pub = bus.publisher(keys.events(c, "launcher"))
                 self.end_pub = bus.publisher(keys.mission_end(c))
                 bus.token(keys.alive(c, "launcher", "launcher"))
-                # The apps' Zenoh threads (bus.APP_RUNTIME); the launcher's own session opened above.
-                os.environ.setdefault(RUNTIME_VARIABLE, APP_RUNTIME)
-                try:
-                    self.start_apps(bus, log_path)
-                    self.summary.startup_time = time.monotonic() - start_wall
-                    self.say(
-                        f"mission {c} running: {len(self.children) + (self.router is not None)} processes up "
-                        f"in {self.summary.startup_time:.2f} s"
-                    )
-                    names = self.mission.vehicle_names if self.mission.fleet else []
-                    registry.register(self.community, connect, str(log_path), self.credentials, names)  # tools find it
-                    self.companion_processes += [start(self.run_file) for start in self.companions]
-                    if self.status_line:
-                        self.positions: dict[str, tuple] = {}
-                        vehicles = self.mission.vehicle_names
-                        self.latest_state = bus.stream(keys.vehicle_topic(c, "*", "state"), len(vehicles), True)
-                    self.supervise()
-                except LaunchError as exc:
-                    self.fail(exc)
-                except KeyboardInterrupt:
-                    self.abort("interrupted", "stopped by the user")
-                self.stopping = True
-                self.stop_all()
-                self.drain_mailbox()
+                # The apps' Zenoh threads (bus.APP_RUNTIME), for every app started from here, swaps
+                # included; the launcher's own session is open already.
+                with app_runtime():
+                    try:
+                        self.start_apps(bus, log_path)
+                        self.summary.startup_time = time.monotonic() - start_wall
+                        self.say(
+                            f"mission {c} running: {len(self.children) + (self.router is not None)} processes up "
+                            f"in {self.summary.startup_time:.2f} s"
+                        )
+                        names = self.mission.vehicle_names if self.mission.fleet else []
+                        # Tools find the mission in the registry.
+                        registry.register(self.community, connect, str(log_path), self.credentials, names)
+                        self.companion_processes += [start(self.run_file) for start in self.companions]
+                        if self.status_line:
+                            self.positions: dict[str, tuple] = {}
+                            vehicles = self.mission.vehicle_names
+                            self.latest_state = bus.stream(keys.vehicle_topic(c, "*", "state"), len(vehicles), True)
+                        self.supervise()
+                    except LaunchError as exc:
+                        self.fail(exc)
+                    except KeyboardInterrupt:
+                        self.abort("interrupted", "stopped by the user")
+                    self.stopping = True
+                    self.stop_all()
+                    self.drain_mailbox()
         except (BusError, LaunchError) as exc:  # before any app started: there is no mission to end
             self.summary.outcome, self.summary.reason = "error", str(exc).splitlines()[0]
             self.summary.failed_app = getattr(exc, "app", None)
@@ -405,11 +406,10 @@ class Launcher:
             self.stopping = True
             for signum, handler in previous_handlers.items():
                 signal.signal(signum, handler)
-            for name, given in ((LINK_VARIABLE, link_given), (RUNTIME_VARIABLE, runtime_given)):
-                if given is None:  # the next launch in this process chooses afresh
-                    os.environ.pop(name, None)
-                else:
-                    os.environ[name] = given
+            if link_given is None:  # the next launch in this process chooses afresh
+                os.environ.pop(LINK_VARIABLE, None)
+            else:
+                os.environ[LINK_VARIABLE] = link_given
             self.stop_all()
             if self.router is not None:
                 stop([self.router], grace=0.0)

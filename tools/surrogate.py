@@ -27,7 +27,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from nearsub.apps.services import RemoteSurrogate
 from nearsub.common.learning.gp import GaussianProcess, MultiOutputGP
 from nearsub.common.runtime import keys
-from nearsub.common.runtime.bus import Bus, app_endpoints, free_tcp_port
+from nearsub.common.runtime.bus import Bus, app_endpoints, app_runtime, free_tcp_port
 from nearsub.common.runtime.processes import single_blas_thread, spawn_app, stop
 from nearsub.common.surrogate.domain import BOUNDS, CONSTRAINT_NAMES, INPUT_NAMES, constraint_values, sample_feasible
 from nearsub.common.surrogate.model import (
@@ -84,23 +84,23 @@ def local_server(model_path: str | os.PathLike, community: str, timeout: float =
     started: list[subprocess.Popen] = []
     with tempfile.TemporaryFile() as output:
         try:
-            for argv in (
-                ["router", "--listen", endpoint, "--with-parent"],
-                ["surrogate", "--model", str(model_path), "--community", community, "--connect", endpoint],
-            ):
-                started.append(spawn_app(argv[0], argv[1:], output))
-            # The bench's bus joins as the sim does (a peer on this host's router), so its round
-            # trip is the one a mission's sim sees.
-            with Bus(app_endpoints((endpoint,))) as bus:
-                token = keys.alive(community, "surrogate", "*")
-                end = time.monotonic() + timeout
-                while not bus.alive(token, timeout=0.5):
-                    if time.monotonic() > end or any(p.poll() is not None for p in started):
-                        output.seek(0)
-                        text = output.read().decode(errors="replace")
-                        raise RuntimeError(f"surrogate server did not come up on {endpoint}:\n{text}")
-                    time.sleep(0.05)
-                yield bus, endpoint
+            started.append(spawn_app("router", ["--listen", endpoint, "--with-parent"], output))
+            # The server and the bench's bus run as a mission's apps do (Zenoh's threads,
+            # `bus.app_runtime`; the bus a peer on this host's router, as the sim is), so the
+            # round trip is the one a mission's sim sees.
+            with app_runtime():
+                server = ["--model", str(model_path), "--community", community, "--connect", endpoint]
+                started.append(spawn_app("surrogate", server, output))
+                with Bus(app_endpoints((endpoint,))) as bus:
+                    token = keys.alive(community, "surrogate", "*")
+                    end = time.monotonic() + timeout
+                    while not bus.alive(token, timeout=0.5):
+                        if time.monotonic() > end or any(p.poll() is not None for p in started):
+                            output.seek(0)
+                            text = output.read().decode(errors="replace")
+                            raise RuntimeError(f"surrogate server did not come up on {endpoint}:\n{text}")
+                        time.sleep(0.05)
+                    yield bus, endpoint
         finally:
             stop(started)
 

@@ -42,7 +42,7 @@ import queue
 import signal
 import socket
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
@@ -85,6 +85,20 @@ PEER_APPS = 6
 # in ZENOH_RUNTIME is kept.
 RUNTIME_VARIABLE = "ZENOH_RUNTIME"
 APP_RUNTIME = "(rx: (handover: app), acc: (handover: app), net: (handover: app), app: (worker_threads: 1))"
+
+
+@contextmanager
+def app_runtime() -> Iterator[None]:
+    """APP_RUNTIME in this process's environment while the block runs (a user's ZENOH_RUNTIME is
+    kept): for the apps started inside it, and for this process's own Zenoh if it opens its first
+    session inside it (Zenoh reads the variable once per process)."""
+    given = os.environ.get(RUNTIME_VARIABLE)
+    os.environ.setdefault(RUNTIME_VARIABLE, APP_RUNTIME)
+    try:
+        yield
+    finally:
+        if given is None:
+            os.environ.pop(RUNTIME_VARIABLE, None)
 
 
 class BusError(RuntimeError):
