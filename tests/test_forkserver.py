@@ -51,7 +51,7 @@ def server(tmp_path, monkeypatch):
 
 def probe(server: ForkServer, path, *args: str) -> ForkedApp:
     with open(path, "wb") as handle:
-        return server.spawn("forkprobe", list(args), handle)
+        return server.spawn("forkprobe", list(args), handle, WAIT)
 
 
 def said(path) -> dict:
@@ -98,8 +98,24 @@ def test_an_exit_in_the_same_read_as_its_pid_is_kept(tmp_path):
     client._attach(ours, process=None)
     theirs.sendall(b'{"pid": 4242}\n{"exited": 4242, "code": 3, "cpu": 0.25}\n')
     with open(tmp_path / "out", "wb") as handle:
-        app = client.spawn("forkprobe", ["3"], handle)
+        app = client.spawn("forkprobe", ["3"], handle, WAIT)
     assert (app.returncode, app.cpu) == (3, 0.25)
+    theirs.close()
+    ours.close()
+
+
+def test_a_server_that_does_not_answer_in_time_is_killed(tmp_path):
+    """It must never fork the app late, beside the one the launcher then starts itself."""
+    ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
+    silent = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    client = ForkServer.__new__(ForkServer)
+    client._attach(ours, silent)
+    with (
+        pytest.raises(ForkServerError, match="did not fork forkprobe within 0.2 s"),
+        open(tmp_path / "o", "wb") as handle,
+    ):
+        client.spawn("forkprobe", ["0"], handle, 0.2)
+    assert silent.wait(timeout=WAIT) == -signal.SIGKILL
     theirs.close()
     ours.close()
 

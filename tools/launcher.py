@@ -271,7 +271,7 @@ class Launcher:
             process = None
             if self.forks is not None:
                 try:
-                    process = self.forks.spawn(f"nearsub.apps.{module}", args, out)
+                    process = self.forks.spawn(f"nearsub.apps.{module}", args, out, self.mission.startup_timeout)
                 except ForkServerError as exc:
                     self.say(f"{exc}; starting the apps as their own processes")
                     self.forks = None

@@ -46,7 +46,6 @@ except ImportError:  # the apps run the same without it
 
 # "0" in the launcher's environment: start every app as its own `python -m` process instead.
 VARIABLE = "NEARSUB_FORK_SERVER"
-REPLY_TIMEOUT = 30.0  # wall seconds for the server to answer a spawn (it only forks: a busy machine's margin)
 MAX_MESSAGE = 1 << 20
 
 
@@ -101,18 +100,21 @@ class ForkServer:
         self.buffer = b""
         self.replies: list[dict] = []
 
-    def spawn(self, module: str, args: Iterable[str], output: IO[bytes]) -> ForkedApp:
+    def spawn(self, module: str, args: Iterable[str], output: IO[bytes], timeout: float) -> ForkedApp:
         """Fork `python -m MODULE ARGS` (an app: nearsub.apps.X) with stdout and stderr into
-        `output`, as `processes.spawn_app` starts one."""
+        `output`, as `processes.spawn_app` starts one. The first answer waits for the preload;
+        a server that has not answered within `timeout` wall seconds is killed (so that it never
+        forks the app late, beside the one the caller then starts itself)."""
         request = {"module": module, "args": list(args), "env": dict(single_blas_thread(dict(os.environ)))}
         try:
             socket.send_fds(self.socket, [json.dumps(request).encode() + b"\n"], [output.fileno()])
         except OSError as exc:
             raise ForkServerError(f"the fork server is gone ({exc}; exit code {self.process.poll()})") from None
-        end = time.monotonic() + REPLY_TIMEOUT
+        end = time.monotonic() + timeout
         while not self.replies:
             if time.monotonic() > end:
-                raise ForkServerError(f"the fork server did not fork {module} within {REPLY_TIMEOUT:g} s")
+                self.process.kill()
+                raise ForkServerError(f"the fork server did not fork {module} within {timeout:g} s")
             self.collect(wait=0.05)
         reply = self.replies.pop(0)
         if "error" in reply:
