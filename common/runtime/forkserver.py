@@ -37,7 +37,7 @@ import time
 from collections.abc import Iterable, Sequence
 from typing import IO
 
-from nearsub.common.runtime.processes import cpu_seconds, single_blas_thread
+from nearsub.common.runtime.processes import cpu_seconds, leave, prepare_process, single_blas_thread
 
 try:  # a forked app's `ps` line reads as the command it stands for (pyproject.toml says why)
     import setproctitle
@@ -235,8 +235,6 @@ def _run_app(request: dict, output: int, conn: socket.socket, selector: selector
 
 
 def serve(conn: socket.socket, preload: Sequence[str]) -> int:
-    from nearsub.common.runtime.processes import prepare_process
-
     prepare_process()  # SIGTERM when the launcher dies; our apps then get theirs
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     for entry in preload:
@@ -302,6 +300,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    from nearsub.common.runtime.processes import leave
-
     leave(main())  # without the interpreter's teardown of what it preloaded (0.4 s with numba and scipy)
