@@ -37,7 +37,13 @@ import time
 from collections.abc import Iterable, Sequence
 from typing import IO
 
-from nearsub.common.runtime.processes import cpu_seconds, leave, prepare_process, single_blas_thread
+from nearsub.common.runtime.processes import (
+    cpu_seconds,
+    leave,
+    module_command,
+    prepare_process,
+    single_blas_thread,
+)
 
 try:  # a forked app's `ps` line reads as the command it stands for (pyproject.toml says why)
     import setproctitle
@@ -187,10 +193,6 @@ def process_cpu(process) -> float | None:
 
 
 # ------------------------------------------------------------------------------- the server
-def _title(module: str, args: list[str]) -> str:
-    return " ".join([sys.executable, "-u", "-m", module, *args])
-
-
 def _run_app(request: dict, output: int, conn: socket.socket, selector: selectors.BaseSelector) -> None:
     """In the forked child: become the app, then exit with its code (never returns)."""
     code = 1
@@ -206,7 +208,7 @@ def _run_app(request: dict, output: int, conn: socket.socket, selector: selector
         os.close(output)
         signal.signal(signal.SIGCHLD, signal.SIG_DFL)
         if setproctitle is not None:  # before the environment changes: it reuses that memory
-            setproctitle.setproctitle(_title(request["module"], request["args"]))
+            setproctitle.setproctitle(" ".join(module_command(request["module"], request["args"])))
         os.environ.clear()
         os.environ.update(request["env"])
         module = request["module"]

@@ -77,12 +77,18 @@ def leave(code: int) -> NoReturn:
     os._exit(code)
 
 
+def module_command(module: str, args: Iterable[str]) -> list[str]:
+    """`python -u -m MODULE ARGS` with this interpreter: how an app is started (and how a forked
+    one is shown, `forkserver`)."""
+    return [sys.executable, "-u", "-m", module, *args]
+
+
 def spawn_app(app: str, args: Iterable[str], output: IO[bytes] | int) -> subprocess.Popen:
     """Start `python -m nearsub.apps.<app> ARGS` with one BLAS thread, stdin closed, stdout and
     stderr into `output`, in a process group of its own so that `stop` reaches the workers it
     starts too."""
     return subprocess.Popen(
-        [sys.executable, "-u", "-m", f"nearsub.apps.{app}", *args],
+        module_command(f"nearsub.apps.{app}", args),
         stdout=output,
         stderr=subprocess.STDOUT,
         stdin=subprocess.DEVNULL,
