@@ -228,7 +228,7 @@ class AppShell:
                 return 0
             else:
                 continue
-            for channel, message in stepper.run():
+            for channel, message in stepper.produce():  # published as they come (`Iteration.then`)
                 if channel == EVENTS and message.kind == "error":
                     print(f"[{self.instance}] error: {message.detail}", file=sys.stderr, flush=True)
                 self.publishers[channel].put(encode(message))

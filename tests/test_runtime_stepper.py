@@ -155,6 +155,48 @@ def test_an_end_request_goes_out_before_its_step_outputs_and_stops_the_app():
     assert s.step == 3 and inputs(published) == [0, 1, 2]
 
 
+class ThenPid(FakePid):
+    """A pid whose step leaves work for `Iteration.then` (as the sim leaves its forces query)."""
+
+    def __init__(self, fail: Exception | None = None):
+        super().__init__()
+        self.then_fail = fail
+        self.then_ran: list[int] = []
+
+    def iterate(self, step, t):
+        result = super().iterate(step, t)
+
+        def later():
+            self.then_ran.append(step)
+            if self.then_fail is not None:
+                raise self.then_fail
+            return Iteration(events=[Event(step=step, t=t, source="pid", kind="info", detail="later")])
+
+        result.then = later
+        return result
+
+
+def test_then_runs_after_its_step_outputs_are_out_and_adds_no_ack():
+    core = ThenPid()
+    s = stepper(core)
+    s.grant(9)
+    feed(s, 0)
+    outputs = s.produce()
+    assert next(outputs)[0] == "input" and core.then_ran == []  # published before `then` starts
+    rest = [(c, m.detail) for c, m in outputs]
+    assert core.then_ran == [0] and rest == [(EVENTS, "ran"), (EVENTS, "later")]
+    assert s.step == 1
+
+
+def test_a_recoverable_failure_in_then_ends_the_mission_after_the_step_outputs():
+    s = stepper(ThenPid(fail=TimeoutError("server gone")), recoverable=(TimeoutError,))
+    s.grant(9)
+    published = drive(s, range(3))
+    assert [c for c, _ in published] == ["input", EVENTS, ACK, EVENTS]
+    ack = published[2][1]
+    assert ack.end == "error" and "server gone" in ack.reason and s.step == 1
+
+
 def test_an_end_request_of_another_app_stops_after_its_step():
     s = stepper()
     s.grant(9)

@@ -68,7 +68,7 @@ class HelmCore:
     """pHelmIvP: the mission's behaviours arbitrated by priority (`autonomy.helm.Helm`; the legacy
     single behaviour is one waypoints behaviour, thesis 5.7 or 6.3.2), with N_uv compensation
     (6.3.1) modifying the chosen heading, turning x_k into x_d,k. The interaction at x_k (N_s, and
-    the forces hull avoidance predicts with) is the sim's: the forces it published with x_k, a
+    the forces hull avoidance predicts with) is the sim's: the forces it published for x_k, a
     declared input, so each vehicle-step asks the surrogate once; only when the sim has no forces
     (interaction "off") does the helm ask itself. Pokes (`nearsub poke`) set mission variables
     from the step they arrive at."""
@@ -314,8 +314,9 @@ class SimCore:
         return [*self.forces_at(0, 0.0), ("state", state_message(self.x, 0, 0.0, self.role))]
 
     def forces_at(self, step: int, t: float) -> list[tuple[str, Message]]:
-        """Ask the surrogate about x_step, once: the forces are published with the state they
-        belong to (labelled like it, for the helm's N_s) and applied when step `step` runs."""
+        """Ask the surrogate about x_step, once: the forces are published just after the state
+        they belong to (labelled like it, for the helm's N_s; `Iteration.then`, so the pid need not
+        wait for the answer) and applied when step `step` runs."""
         if self.surrogate is None or step >= self.max_steps:
             return []
         self.seen = self.ask()
@@ -349,8 +350,9 @@ class SimCore:
             )
             result.events.append(event(self.role, step, t, "error", result.reason))
             return result
-        result.outputs.extend(self.forces_at(next_step, next_t))
         result.outputs.append(("state", state_message(self.x, next_step, next_t, self.role)))
+        if self.surrogate is not None:
+            result.then = lambda: Iteration(outputs=self.forces_at(next_step, next_t))
         if self.submarine:
             self.check_proximity(next_step, next_t, result)
         return result

@@ -19,6 +19,7 @@ floor(k / p_producer) * p_producer. The sim's state output is labelled with the 
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -39,7 +40,7 @@ from nearsub.common.runtime.messages import (
 
 ORDER = ("helm", "pid", "sim")
 
-# Which role publishes each lock-stepped topic (the sim's forces at x_k go out with x_k, for the
+# Which role publishes each lock-stepped topic (the sim's forces at x_k go out after x_k, for the
 # helm's N_uv compensation).
 PRODUCER = {"desired": "helm", "input": "pid", "state": "sim", "forces": "sim"}
 
@@ -66,12 +67,17 @@ OUTCOME_SEVERITY = ("diverged", "collision", "error", "completed", "time_limit")
 
 @dataclass
 class Iteration:
-    """What one `iterate` call produced. Outputs are (topic leaf, message) in publish order."""
+    """What one `iterate` call produced. Outputs are (topic leaf, message) in publish order.
+
+    `then`, if set, is more work of the same step that nobody waits for before these outputs: it
+    runs once they are published, and what it returns is published after them (the sim's forces
+    at x_{k+1}: the pid computes u_{k+1} from x_{k+1} while the surrogate server answers)."""
 
     outputs: list[tuple[str, Message]] = field(default_factory=list)
     events: list[Event] = field(default_factory=list)
     end: str | None = None
     reason: str = ""
+    then: Callable[[], Iteration] | None = None
 
 
 class Core(Protocol):
@@ -358,42 +364,54 @@ class Stepper:
 
     def run(self) -> list[tuple[str, Message]]:
         """Run every permitted step whose inputs have arrived; (channel, message) in publish order."""
-        published: list[tuple[str, Message]] = []
+        return list(self.produce())
+
+    def produce(self) -> Iterator[tuple[str, Message]]:
+        """`run`, yielding each output as soon as it exists, so a shell that publishes while it
+        iterates sends a step's outputs before the step's `then` work starts."""
         while self.step <= min(self.granted, self.stop_after):
             if not self.started:
                 self.started = True
                 try:
-                    published.extend(self.core.startup())
+                    yield from self.core.startup()
                 except self.recoverable as exc:  # e.g. the sim's first interaction query
-                    published.extend(self._outputs(self.step, self._failure(self.step, exc)))
+                    yield from self._outputs(self.step, self._failure(self.step, exc))
                     self.step += 1
                     break
             if self.schedule.runs(self.core.role, self.step):
                 if self.inbox.waiting_for(self.step):
                     break
-                published.extend(self._iterate(self.step))
+                yield from self._iterate(self.step)
             self.step += 1
-        return published
 
-    def _iterate(self, step: int) -> list[tuple[str, Message]]:
+    def _iterate(self, step: int) -> Iterator[tuple[str, Message]]:
         t = step * self.dt
         self.core.new_mail(self.inbox.take(step) | self._overridden(step))
         try:
             result = self.core.iterate(step, t)
         except self.recoverable as exc:
             result = self._failure(step, exc)
-        return self._outputs(step, result)
+        yield from self._outputs(step, result)
+        if result.then is not None:
+            try:
+                later = result.then()
+            except self.recoverable as exc:
+                later = self._failure(step, exc)
+            yield from self._outputs(step, later, done=True)
 
     def _failure(self, step: int, exc: Exception) -> Iteration:
         """A recoverable exception ends the mission with "error" and an error event."""
         error = Event(step=step, t=step * self.dt, source=self.core.role, kind="error", detail=str(exc))
         return Iteration(events=[error], end="error", reason=str(exc))
 
-    def _outputs(self, step: int, result: Iteration) -> list[tuple[str, Message]]:
+    def _outputs(self, step: int, result: Iteration, done: bool = False) -> list[tuple[str, Message]]:
+        """The messages of `result`, with an Ack first when it asks to end or the step is not
+        `done` by its done topic (`done`: a `then` result, whose step already is)."""
         role = self.core.role
         t = step * self.dt
         published: list[tuple[str, Message]] = []
-        if result.end is not None or all(leaf != DONE_TOPIC[role] for leaf, _ in result.outputs):
+        finished = done or any(leaf == DONE_TOPIC[role] for leaf, _ in result.outputs)
+        if result.end is not None or not finished:
             published.append((ACK, Ack(step=step, t=t, source=role, end=result.end, reason=result.reason)))
             if result.end is not None and self.ends_itself:
                 self.end_after(step)
