@@ -38,6 +38,7 @@ from nearsub.common.runtime.lifecycle import (
     OPERATOR,
     OPERATOR_ONLY,
     OPERATOR_TOPICS,
+    PRODUCER,
     Core,
     Schedule,
     Stepper,
@@ -143,23 +144,29 @@ class AppShell:
             self.core = self.core_factory(mission, surrogate)
             # A surrogate server that stops answering ends the mission, naming it.
             shared = self.lockstep.shared
+            schedule = Schedule(mission.periods())
             self.stepper = Stepper(
                 self.core,
-                Schedule(mission.periods()),
+                schedule,
                 self.dt,
                 mission.max_steps,
                 recoverable=(ServiceError,),
                 ends_itself=not shared,
             )
             pokes = [leaf for leaf, role in OPERATOR_ONLY.items() if role == self.core.role]
-            self.input_of_key = {
-                keys.vehicle_topic(c, self.vehicle, leaf): leaf for leaf in (*self.core.inputs, *pokes)
-            }
+            self.input_of_key = {self.input_key(leaf, schedule): leaf for leaf in (*self.core.inputs, *pokes)}
             clock = [self.tick_key, self.end_key] if shared else [keys.clock_traffic(c)]
             self.stream = bus.inputs([*self.input_of_key, *clock, self.control_key, self.reply_key])
             bus.on_liveliness_lost(keys.alive(c, "launcher", "*"), signal_self())
             self.publishers = {
                 leaf: bus.publisher(keys.vehicle_topic(c, self.vehicle, leaf)) for leaf in self.core.outputs
+            }
+            self.feed_publishers = {
+                leaf: [
+                    (stride, bus.publisher(keys.feed(c, self.vehicle, leaf, stride))) for stride in schedule.feeds(leaf)
+                ]
+                for leaf in self.core.outputs
+                if leaf in PRODUCER
             }
             self.app = keys.app_name(self.named, self.core.role)
             self.publishers[ACK] = bus.publisher(keys.ack(c, self.app))
@@ -231,8 +238,18 @@ class AppShell:
             for channel, message in stepper.produce():  # published as they come (`Iteration.then`)
                 if channel == EVENTS and message.kind == "error":
                     print(f"[{self.instance}] error: {message.detail}", file=sys.stderr, flush=True)
-                self.publishers[channel].put(encode(message))
+                payload = encode(message)
+                self.publishers[channel].put(payload)
+                for stride, feed in self.feed_publishers.get(channel, ()):
+                    if message.step % stride == 0:
+                        feed.put(payload)
             self.try_handover()
+
+    def input_key(self, leaf: str, schedule: Schedule) -> str:
+        """The key input `leaf` arrives on: its feed when this app reads it strided (`Schedule.stride`)."""
+        if leaf in PRODUCER and (stride := schedule.stride(leaf, self.core.role)) in schedule.feeds(leaf):
+            return keys.feed(self.community, self.vehicle, leaf, stride)
+        return keys.vehicle_topic(self.community, self.vehicle, leaf)
 
     def on_input(self, leaf: str, payload: bytes) -> None:
         key = keys.vehicle_topic(self.community, self.vehicle, leaf)

@@ -43,6 +43,15 @@ def test_helm_period_changes_the_schedule_not_the_protocol():
 
 def test_schedule_labels():
     schedule = Schedule({"helm": 5, "pid": 1, "sim": 1})
-    assert [schedule.expected_label("desired", k) for k in range(7)] == [0, 0, 0, 0, 0, 5, 5]
-    assert schedule.expected_label("state", 7) == 7
+    assert [schedule.expected_label("desired", k, "pid") for k in range(7)] == [0, 0, 0, 0, 0, 5, 5]
+    assert schedule.expected_label("state", 7, "pid") == 7
+    # The helm (period 5) reads every 5th state and forces, on their feeds; the pid every state.
+    assert schedule.expected_label("state", 7, "helm") == 5
+    assert schedule.stride("state", "helm") == schedule.stride("forces", "helm") == 5
+    assert schedule.stride("state", "pid") == 1 and schedule.feeds("state") == (5,) and schedule.feeds("forces") == (5,)
+    assert schedule.feeds("input") == () and schedule.feeds("desired") == ()
+    # Not for a period that is no multiple of the producer's, nor for an operator's topic.
+    odd = Schedule({"helm": 5, "pid": 2, "sim": 2})
+    assert odd.stride("state", "helm") == 2 and odd.feeds("state") == ()
+    assert Schedule({"helm": 1, "pid": 3, "sim": 1}).feeds("desired") == ()
     assert schedule.runners(10) == ["helm", "pid", "sim"] and schedule.runners(11) == ["pid", "sim"]

@@ -12,7 +12,7 @@ from test_fleet import TWO
 
 from conftest import ALPHA
 from nearsub.apps.shell import AppShell
-from nearsub.common.mission.cores import PidCore, build_cores, run_mission
+from nearsub.common.mission.cores import HelmCore, PidCore, build_cores, run_mission
 from nearsub.common.mission.schema import RunConfig, load_mission
 from nearsub.common.runtime import keys
 from nearsub.common.runtime.bus import Bus, Endpoints, free_tcp_port, make_config
@@ -190,3 +190,43 @@ def test_a_fleet_vehicles_pid_receives_only_its_own_vehicles_inputs():
     assert [s.payload.to_bytes() for s in outputs] == [encode(m) for m in expected]
     assert shell.received == sent
     assert set(sent) == {own["state"], own["desired"], keys.tick(c), keys.mission_end(c)}
+
+
+def test_the_helm_wakes_only_for_the_states_of_its_own_steps():
+    """The helm (period 5) reads every 5th state: it subscribes to the state's feed, which the sim
+    fills at the helm's steps, and never hears the states between them."""
+    mission = load_mission(ALPHA, ["name=helm-inputs-test", "time_limit=5"])
+    c, vehicle = mission.name, mission.vehicle_name
+    period = mission.periods()["helm"]
+    assert period > 1
+    reference = run_inprocess(build_cores(mission), Schedule(mission.periods()), mission.dt, mission.max_steps)
+    states = reference.topic("state")
+    plain, feed = keys.vehicle_topic(c, vehicle, "state"), keys.feed(c, vehicle, "state", period)
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    with Bus(make_config("router", listen=[endpoint])), Bus(Endpoints("client", (endpoint,))) as world:
+        outputs = []
+        world.session.declare_subscriber(keys.vehicle_topic(c, vehicle, "desired"), lambda s: outputs.append(s))
+        shell = CountingShell(lambda m, s: HelmCore(m), RunConfig(mission=mission, connect=[endpoint]), "helm-1")
+        thread = threading.Thread(target=shell.serve, daemon=True)
+        thread.start()
+        timeout = mission.startup_timeout + mission.step_timeout
+        wait_until(lambda: world.alive(keys.alive(c, "helm", "*")), timeout, "the helm did not start")
+        sent = Counter()
+
+        def put(k: str, payload: bytes) -> None:
+            world.put_when_matched(k, payload, wait=timeout) if not sent[k] else world.put(k, payload)
+            sent[k] += 1
+
+        put(keys.tick(c), encode(Tick(step=mission.max_steps - 1, t=0.0, source="clock")))
+        for state in states[:-1]:  # as the sim's shell publishes them
+            world.put(plain, encode(state))
+            if state.step % period == 0:
+                put(feed, encode(state))
+        expected = reference.topic("desired")
+        wait_until(lambda: len(outputs) >= len(expected), timeout, "the helm did not publish every desired state")
+        put(keys.mission_end(c), encode(MissionEnd(step=mission.max_steps, t=0.0, source="clock", outcome="x")))
+        thread.join(timeout)
+        assert not thread.is_alive()
+    assert [s.payload.to_bytes() for s in outputs] == [encode(m) for m in expected]
+    assert shell.received == sent and sent[feed] == len(expected) == -(-(len(states) - 1) // period)
+    assert plain not in shell.received

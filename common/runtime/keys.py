@@ -26,6 +26,14 @@ def vehicle_topic(community: str, vehicle: str, leaf: str) -> str:
     return f"{ROOT}/{community}/{vehicle}/{leaf}"
 
 
+def feed(community: str, vehicle: str, leaf: str, stride: int) -> str:
+    """The outputs of a vehicle topic labelled with multiples of `stride`, for the apps that read
+    only those (`lifecycle.Schedule.stride`: the helm of period 5 and the sim's state): a copy of
+    what the topic carries, under a verbatim chunk (`@every5`) that no wildcard matches, so the
+    logger, `tap` and the viewers, subscribed with `**` or `*`, never see it twice."""
+    return f"{vehicle_topic(community, vehicle, leaf)}/@every{stride}"
+
+
 def tick(community: str) -> str:
     return f"{ROOT}/{community}/clock/tick"
 

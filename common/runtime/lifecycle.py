@@ -43,6 +43,8 @@ ORDER = ("helm", "pid", "sim")
 # Which role publishes each lock-stepped topic (the sim's forces at x_k go out after x_k, for the
 # helm's N_uv compensation).
 PRODUCER = {"desired": "helm", "input": "pid", "state": "sim", "forces": "sim"}
+# The roles that may read each of them (a core declares which it does read: its `inputs`).
+CONSUMERS = {"desired": ("pid",), "input": ("sim",), "state": ("helm", "pid"), "forces": ("helm",)}
 
 # The output that tells the clock an app has finished a step: its acknowledgement. An app sends
 # an explicit Ack only when it asks to end the mission or did not publish this output (e.g. the
@@ -106,9 +108,28 @@ class Schedule:
     def runners(self, step: int) -> list[str]:
         return [role for role in ORDER if self.runs(role, step)]
 
-    def expected_label(self, topic: str, step: int) -> int:
-        period = self.periods[PRODUCER[topic]]
-        return (step // period) * period
+    def stride(self, topic: str, consumer: str) -> int:
+        """The spacing of the labels of `topic` that `consumer` receives. A consumer whose period
+        is a longer multiple of the producer's reads only the outputs labelled with its own steps,
+        so it receives only those (on the topic's feed, `keys.feed`) and wakes only for them: the
+        helm of period 5 gets every 5th state and forces. Otherwise every output: the producer's
+        period. Operator topics are never strided: an override reaches its consumer on the topic."""
+        produced, period = self.periods[PRODUCER[topic]], self.periods[consumer]
+        if topic in OPERATOR_TOPICS or period <= produced or period % produced:
+            return produced
+        return period
+
+    def feeds(self, topic: str) -> tuple[int, ...]:
+        """The strides longer than the producer's period at which `topic` is read: its producer
+        also publishes each output whose label is a multiple of one on that stride's feed."""
+        produced = self.periods[PRODUCER[topic]]
+        strides = {self.stride(topic, role) for role in CONSUMERS[topic] if role in self.periods}
+        return tuple(sorted(stride for stride in strides if stride > produced))
+
+    def expected_label(self, topic: str, step: int, consumer: str) -> int:
+        """The label of `topic` that `consumer` reads at `step`: the latest one it receives."""
+        stride = self.stride(topic, consumer)
+        return (step // stride) * stride
 
 
 class Inbox:
@@ -121,9 +142,10 @@ class Inbox:
     and carry on; the inbox holds one message per topic whatever it is offered.
     """
 
-    def __init__(self, inputs: tuple[str, ...], schedule: Schedule):
+    def __init__(self, inputs: tuple[str, ...], schedule: Schedule, role: str):
         self.inputs = inputs
         self.schedule = schedule
+        self.role = role
         self.held: dict[str, Message] = {}
         self.delivered: dict[str, int] = {}
 
@@ -133,10 +155,13 @@ class Inbox:
         if message.source != producer:
             return f"{leaf} from source {message.source!r} ignored: only {producer!r} publishes {leaf}"
         held = self.held.get(leaf)
-        if held is None:
-            expected = self.schedule.expected_label(leaf, step)
-        else:
-            expected = held.step + self.schedule.periods[producer]
+        stride = self.schedule.stride(leaf, self.role)
+        if held is not None:
+            expected = held.step + stride
+        elif self.schedule.runs(self.role, step) or stride == self.schedule.periods[producer]:
+            expected = self.schedule.expected_label(leaf, step, self.role)
+        else:  # a strided reader that does not run `step` receives the label of its next step first
+            expected = (step // stride + 1) * stride
         if message.step != expected:
             holding = "nothing" if held is None else f"step {held.step}"
             return f"{leaf} with step {message.step} ignored: holding {holding}, the next is step {expected}"
@@ -148,7 +173,7 @@ class Inbox:
         missing = []
         for leaf in self.inputs:
             held = self.held.get(leaf)
-            if held is None or held.step < self.schedule.expected_label(leaf, step):
+            if held is None or held.step < self.schedule.expected_label(leaf, step, self.role):
                 missing.append(leaf)
         return missing
 
@@ -157,7 +182,7 @@ class Inbox:
         mail = {}
         for leaf in self.inputs:
             message = self.held[leaf]
-            expected = self.schedule.expected_label(leaf, step)
+            expected = self.schedule.expected_label(leaf, step, self.role)
             if message.step != expected:
                 raise RuntimeError(f"step {step}: {leaf} has label {message.step}, expected {expected}")
             if self.delivered.get(leaf) != message.step:
@@ -311,12 +336,16 @@ class Stepper:
         self.dt = dt
         self.recoverable = recoverable
         self.ends_itself = ends_itself
-        self.inbox = Inbox(core.inputs, schedule)
+        self.inbox = Inbox(core.inputs, schedule, core.role)
         self.granted = -1
         self.stop_after = max_steps - 1
         self.started = False
         self.step = 0  # the next step this app will run
         self.overrides: dict[str, list[tuple[int, Message]]] = {}  # leaf -> [(from step, message)]
+
+    def receives(self, leaf: str, step: int) -> bool:
+        """Whether this app receives the output of `leaf` labelled `step` (`Schedule.stride`)."""
+        return step % self.schedule.stride(leaf, self.core.role) == 0
 
     def offer(self, leaf: str, message: Message) -> str | None:
         """Accept an input (see `Inbox.offer`); an error text when it is refused."""
@@ -530,6 +559,8 @@ def run_inprocess(
                     if channel == "state":
                         states[vehicle_of[app]] = message
                     for consumer in consumers[app].get(channel, ()):
+                        if not steppers[consumer].receives(channel, message.step):
+                            continue
                         if error := steppers[consumer].offer(channel, message):
                             raise RuntimeError(error)
                         due.add(consumer)
