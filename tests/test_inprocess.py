@@ -55,3 +55,17 @@ def test_schedule_labels():
     assert odd.stride("state", "helm") == 2 and odd.feeds("state") == ()
     assert Schedule({"helm": 1, "pid": 3, "sim": 1}).feeds("desired") == ()
     assert schedule.runners(10) == ["helm", "pid", "sim"] and schedule.runners(11) == ["pid", "sim"]
+
+
+def test_every_lock_stepped_input_of_a_core_is_among_its_topics_consumers():
+    """`Schedule.feeds` asks `CONSUMERS` who reads a topic: a core reading one it does not list
+    would never get that topic's feed."""
+    from nearsub.common.runtime.lifecycle import CONSUMERS, PRODUCER
+    from nearsub.common.surrogate.model import load_surrogate
+
+    nuv = ALPHA.parent / "overtake_stern_nuv.toml"
+    for mission in (load_mission(ALPHA), load_mission(nuv)):
+        surrogate = load_surrogate(mission.surrogate.model or None) if mission.needs_surrogate else None
+        for role, core in build_cores(mission, surrogate).items():
+            for leaf in core.inputs:
+                assert leaf not in PRODUCER or role in CONSUMERS[leaf], (role, leaf)
