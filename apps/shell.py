@@ -193,6 +193,7 @@ class AppShell:
             request_id=uuid.uuid4().hex,
             reply_to=self.instance,
         )
+        self.bus.join()
         self.bus.put_when_matched(keys.control(self.community, old_instance), encode(request))
         try:
             with deadline(HANDOVER_TIMEOUT):

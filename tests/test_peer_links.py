@@ -120,6 +120,33 @@ def test_whoever_sees_a_peers_token_can_send_to_it_at_once():
                     assert got is not None and got.payload == b"go", round_
 
 
+def test_a_newcomer_that_joins_reaches_a_peer_it_has_not_met_and_hears_its_answer():
+    """The swap's case: a swapped-in app asks its predecessor for the handover before it declares
+    its token. The logger's catch-all subscription satisfies `put_when_matched` as soon as the
+    newcomer has linked to the logger, which may be before it has linked to the predecessor, so it
+    must join the peers first (`Bus.join`), or the predecessor may never get the request (without
+    it, half of the runs of these 40 rounds failed here)."""
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    with Bus(make_config("router", listen=[endpoint], admin_space=True)), peer(endpoint) as logger:
+        logger.subscribe("test/**", Mailbox())
+        logger.token("test/alive/logger")
+        with peer(endpoint) as predecessor:
+            requests = Mailbox()
+            predecessor.subscribe("test/control/old", requests)
+            predecessor.token("test/alive/old")
+            for round_ in range(40):
+                with peer(endpoint) as newcomer:
+                    replies = Mailbox()
+                    newcomer.subscribe(f"test/reply/{round_}", replies)
+                    newcomer.join()
+                    newcomer.put_when_matched("test/control/old", str(round_).encode(), wait=WAIT)
+                    got = requests.get(timeout=WAIT)
+                    assert got is not None and got.payload == str(round_).encode(), round_
+                    predecessor.put_reply(f"test/reply/{round_}", b"handover")
+                    answer = replies.get(timeout=WAIT)
+                    assert answer is not None and answer.payload == b"handover", round_
+
+
 def test_a_peers_own_listener_admits_only_holders_of_the_credentials(tmp_path, monkeypatch):
     monkeypatch.delenv(credentials.VARIABLE, raising=False)
     secret = credentials.create(tmp_path / "mission.credentials")

@@ -668,9 +668,8 @@ class Bus:
         self._keep.append(self._session.declare_queryable(key, _direct(mailbox.on_query)))
 
     def token(self, key: str) -> None:
-        """Declare a liveliness token; a peer first meets the other peers (`meet_peers`)."""
-        if self._peer:
-            self.meet_peers()
+        """Declare a liveliness token; a peer first meets the other peers (`join`)."""
+        self.join()
         self._keep.append(self._session.liveliness().declare_token(key))
 
     def router_peers(self) -> set[str]:
@@ -686,6 +685,14 @@ class Bus:
     def linked_peers(self) -> set[str]:
         """Zenoh ids of the peers this session has a direct link to."""
         return {str(zid) for zid in self._session.info.peers_zid()}
+
+    def join(self) -> None:
+        """A peer meets the other peers (`meet_peers`), so that what it publishes next reaches each
+        of them and their answers reach it; a client's router knows them already. A swapped-in app
+        joins before it asks its predecessor for the handover: `put_when_matched` is satisfied by any
+        subscriber, the logger's included, and a peer not yet met would not get the request."""
+        if self._peer:
+            self.meet_peers()
 
     def meet_peers(self) -> None:
         """Link to every peer the router knows, then make a round trip to each linked peer (its
