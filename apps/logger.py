@@ -10,6 +10,7 @@ SIGINT/SIGTERM, or the launcher disappearing.
 from __future__ import annotations
 
 import argparse
+import queue
 import sys
 import time
 from pathlib import Path
@@ -17,10 +18,11 @@ from pathlib import Path
 from nearsub import __version__
 from nearsub.common.mission.schema import RunConfig
 from nearsub.common.runtime import keys
-from nearsub.common.runtime.bus import Bus, BusError, app_endpoints, signal_self
+from nearsub.common.runtime.bus import Bus, BusError, app_endpoints, queue_lost, signal_self
 from nearsub.common.runtime.lifecycle import OPERATOR
 from nearsub.common.runtime.logfile import LogWriter
 from nearsub.common.runtime.messages import (
+    AppStatus,
     Control,
     Event,
     MessageError,
@@ -31,7 +33,7 @@ from nearsub.common.runtime.messages import (
 )
 from nearsub.common.runtime.processes import prepare_process
 
-DRAIN_SECONDS = 0.3  # after the mission end, keep what is still in flight (status, app_left)
+DRAIN_SECONDS = 0.3  # after the last app has left, keep what is still in flight (app_left)
 # Wall seconds between two reads of an empty stream: about 50 messages at 1000 steps/s, far below
 # the stream's capacity (bus.stream), so the publishers never wait on the logger.
 NAP = 0.02
@@ -43,6 +45,7 @@ class Recorder:
         self.community = community
         self.sim_time = 0.0
         self.end: MissionEnd | None = None
+        self.running: set[str] = set()  # liveliness keys of the apps that said "running", not yet "stopping"
 
     def log_time(self, message) -> float:
         """The simulated time a message is logged at: its own t, except for requests from outside
@@ -75,6 +78,18 @@ class Recorder:
         self.writer.write(key, payload, self.log_time(message))
         if isinstance(message, MissionEnd) and self.end is None:
             self.end = message
+        elif isinstance(message, AppStatus):
+            token = keys.alive(self.community, message.app, message.instance)
+            (self.running.add if message.state == "running" else self.running.discard)(token)
+
+
+def drain(stream, recorder: Recorder) -> None:
+    """Record the next message, or nap briefly when none is waiting."""
+    item = stream.try_recv()
+    if item is None:
+        time.sleep(0.01)
+    else:
+        recorder.record(*item)
 
 
 def main(argv=None) -> int:
@@ -100,6 +115,8 @@ def main(argv=None) -> int:
         with Bus(app_endpoints(run.connect)) as bus:
             stream = bus.stream(keys.everything(community))
             bus.on_liveliness_lost(keys.alive(community, "launcher", "*"), signal_self())
+            lost: queue.SimpleQueue[str] = queue.SimpleQueue()
+            bus.on_liveliness_lost(keys.all_alive(community), queue_lost(lost))
             bus.token(keys.alive(community, "logger", args.instance))
             while recorder.end is None:
                 item = stream.try_recv()
@@ -107,14 +124,18 @@ def main(argv=None) -> int:
                     time.sleep(NAP)
                 else:
                     recorder.record(*item)
-            # Keep what is still in flight after the end (status, app_left), then close.
+            # An app may still be finishing the end step's follow-up work (the sim's forces at the
+            # last state, `Iteration.then`): keep recording until every app has said "stopping"
+            # (its last words, after its last outputs, on the same link) or has gone (died), for
+            # at most one step timeout, then what is still in flight.
+            give_up = time.monotonic() + run.mission.step_timeout
+            while recorder.running and time.monotonic() < give_up:
+                drain(stream, recorder)
+                while not lost.empty():
+                    recorder.running.discard(lost.get())
             drain_until = time.monotonic() + DRAIN_SECONDS
             while time.monotonic() < drain_until:
-                item = stream.try_recv()
-                if item is None:
-                    time.sleep(0.01)
-                else:
-                    recorder.record(*item)
+                drain(stream, recorder)
     except BusError as exc:  # its router cannot be reached: one line, no traceback
         print(f"[logger] {exc}", file=sys.stderr)
         code = 1

@@ -327,11 +327,12 @@ class Launcher:
 
     def stop_all(self) -> None:
         """Let apps leave on their own (the lock-stepped ones exit on the mission end), then
-        escalate; the surrogate server serves until told; the logger closes its file last."""
+        escalate; the surrogate server serves until they have gone (the sim's last step may still
+        ask it about the final state, `Iteration.then`); the logger closes its file last."""
         grace = 0.0 if self.router_lost() else 3.0  # without the router the launcher's end reaches no app
         stop(self.companion_processes, grace=0.0)
-        stop([c.process for c in self.children.values() if c.role == "surrogate"], grace=0.0)
         stop([c.process for c in self.children.values() if c.role not in ("logger", "surrogate")], grace=grace)
+        stop([c.process for c in self.children.values() if c.role == "surrogate"], grace=0.0)
         stop([c.process for c in self.children.values() if c.role == "logger"], grace=5.0 if grace else 0.0)
 
     # -- the run ------------------------------------------------------------------------------

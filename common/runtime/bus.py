@@ -473,6 +473,17 @@ class Querier:
         return self.send(payload).result()
 
 
+def queue_lost(lost: queue.SimpleQueue) -> Callable[[Any], None]:
+    """A liveliness callback that queues the key of each token that goes away (an app that left
+    or died), for the main thread to read."""
+
+    def on_sample(sample) -> None:
+        if sample.kind == zenoh.SampleKind.DELETE:
+            lost.put(str(sample.key_expr))
+
+    return on_sample
+
+
 def signal_self(signum: int = signal.SIGTERM) -> Callable[[Any], None]:
     """A liveliness callback that asks this process to shut down (non-blocking, no Zenoh call);
     the signal interrupts a blocked `Stream.recv` in the main thread."""
