@@ -83,11 +83,11 @@ class Recorder:
             (self.running.add if message.state == "running" else self.running.discard)(token)
 
 
-def drain(stream, recorder: Recorder) -> None:
-    """Record the next message, or nap briefly when none is waiting."""
+def drain(stream, recorder: Recorder, nap: float = 0.01) -> None:
+    """Record the next message, or nap when none is waiting."""
     item = stream.try_recv()
     if item is None:
-        time.sleep(0.01)
+        time.sleep(nap)
     else:
         recorder.record(*item)
 
@@ -118,12 +118,8 @@ def main(argv=None) -> int:
             lost: queue.SimpleQueue[str] = queue.SimpleQueue()
             bus.on_liveliness_lost(keys.all_alive(community), queue_lost(lost))
             bus.token(keys.alive(community, "logger", args.instance))
-            while recorder.end is None:
-                item = stream.try_recv()
-                if item is None:  # read in batches: a wake-up per message cost more than the rest
-                    time.sleep(NAP)
-                else:
-                    recorder.record(*item)
+            while recorder.end is None:  # read in batches: a wake-up per message cost more than the rest
+                drain(stream, recorder, NAP)
             # An app may still be finishing the end step's follow-up work (the sim's forces at the
             # last state, `Iteration.then`): keep recording until every app has said "stopping"
             # (its last words, after its last outputs, on the same link) or has gone (died), for
