@@ -257,6 +257,25 @@ def test_rows_give_the_same_bits_alone_and_in_a_batch():
     np.testing.assert_allclose(together, model.predict(Xt), rtol=1e-6, atol=1e-9)
 
 
+def test_rows_std_from_the_triangular_product_equals_the_full_one():
+    """`predict_rows`' std reads only the triangle of L^-1 (trmv for one row, trmm for more): the
+    same std, to rounding, as the full product (thesis (2.7)), alone and in a batch."""
+    rng = np.random.default_rng(5)
+    X = rng.uniform(size=(80, 6))
+    model = MultiOutputGP(n_restarts=1, seed=0).fit(
+        X, np.column_stack([np.sin(X @ w) for w in rng.normal(size=(3, 6))])
+    )
+    p = model._predictor
+    Xt = rng.uniform(-0.2, 1.2, size=(100, 6))
+    e = np.exp(gpmod._kernel().neg_sq_distances(Xt, p.A, p.B, p.ZT))  # (3, 100, n)
+    v = np.einsum("jni,jai->jan", p.Linv_s, e)  # L^-1 e, the whole (n, n) matrix
+    expected = (np.sqrt(np.maximum(p.s2[:, None] - np.sum(v * v, axis=-1), 0.0)) * p.y_std[:, None]).T
+    _, together = model.predict_rows(Xt, return_std=True)
+    alone = np.vstack([model.predict_rows(Xt[i : i + 1], return_std=True)[1] for i in range(len(Xt))])
+    np.testing.assert_allclose(together, expected, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(alone, expected, rtol=1e-9, atol=1e-12)
+
+
 def test_rows_distances_equal_the_numpy_reference_bit_for_bit():
     """The compiled squared distances of `predict_rows` against the numpy loop they replaced."""
     rng = np.random.default_rng(4)
