@@ -179,11 +179,14 @@ def test_queries_outside_the_grid_are_clamped_and_finite(table):
 INCREMENT = [*BESIDE, "time_limit=10", "apps.sim.interaction=increment"]
 
 
-def test_multi_process_increment_equals_in_process(launches, community):
-    """The sim app asks the surrogate server which model it serves, and finds the shipped table."""
-    code, summary, err = launches.run(ALPHA, *sum((["--set", s] for s in INCREMENT), []), "--set", f"name={community}")
+@pytest.mark.parametrize("where", ["server", "in_process"])
+def test_multi_process_increment_equals_in_process(launches, community, where):
+    """The sim app asks the surrogate server which model it serves, and finds the shipped table;
+    or, with apps.sim.surrogate = "in_process", loads that model itself: the same forces either way."""
+    settings = [*INCREMENT, f"apps.sim.surrogate={where}"]
+    code, summary, err = launches.run(ALPHA, *sum((["--set", s] for s in settings), []), "--set", f"name={community}")
     assert summary.get("outcome") in ("time_limit", "collision"), err  # the run ends by itself, not by an error
-    mission = load_mission(ALPHA, INCREMENT + [f"name={community}"])
+    mission = load_mission(ALPHA, settings + [f"name={community}"])
     reference = run_inprocess(
         build_cores(mission, load_surrogate()), Schedule(mission.periods()), mission.dt, mission.max_steps
     )

@@ -242,14 +242,17 @@ def test_input_validation():
         MultiOutputGP().fit(X, y)
 
 
+def _three_outputs(rng, n: int, wave=np.sin) -> MultiOutputGP:
+    """A 3-output GP fitted to wave(X w) on n uniform points in 6 inputs."""
+    X = rng.uniform(size=(n, 6))
+    return MultiOutputGP(n_restarts=1, seed=0).fit(X, np.column_stack([wave(X @ w) for w in rng.normal(size=(3, 6))]))
+
+
 def test_rows_give_the_same_bits_alone_and_in_a_batch():
     """A vehicle asking alone and a sweep asking for many get identical means (the multi-process
     run and the batch engine must agree), and they agree with the other paths to rounding."""
     rng = np.random.default_rng(3)
-    X = rng.uniform(size=(60, 6))
-    model = MultiOutputGP(n_restarts=1, seed=0).fit(
-        X, np.column_stack([np.sin(X @ w) for w in rng.normal(size=(3, 6))])
-    )
+    model = _three_outputs(rng, 60)
     Xt = rng.uniform(size=(300, 6))
     together = model.predict_rows(Xt)
     alone = np.vstack([model.predict_rows(Xt[i : i + 1]) for i in range(len(Xt))])
@@ -261,10 +264,7 @@ def test_rows_std_from_the_triangular_product_equals_the_full_one():
     """`predict_rows`' std reads only the triangle of L^-1 (trmv for one row, trmm for more): the
     same std, to rounding, as the full product (thesis (2.7)), alone and in a batch."""
     rng = np.random.default_rng(5)
-    X = rng.uniform(size=(80, 6))
-    model = MultiOutputGP(n_restarts=1, seed=0).fit(
-        X, np.column_stack([np.sin(X @ w) for w in rng.normal(size=(3, 6))])
-    )
+    model = _three_outputs(rng, 80)
     p = model._predictor
     Xt = rng.uniform(-0.2, 1.2, size=(100, 6))
     e = np.exp(gpmod._kernel().neg_sq_distances(Xt, p.A, p.B, p.ZT))  # (3, 100, n)
@@ -279,10 +279,7 @@ def test_rows_std_from_the_triangular_product_equals_the_full_one():
 def test_rows_distances_equal_the_numpy_reference_bit_for_bit():
     """The compiled squared distances of `predict_rows` against the numpy loop they replaced."""
     rng = np.random.default_rng(4)
-    X = rng.uniform(size=(50, 6))
-    model = MultiOutputGP(n_restarts=1, seed=0).fit(
-        X, np.column_stack([np.cos(X @ w) for w in rng.normal(size=(3, 6))])
-    )
+    model = _three_outputs(rng, 50, np.cos)
     p = model._predictor
     Xt = rng.uniform(-0.2, 1.2, size=(150, 6))
     zb = Xt[None, :, :] * p.A[:, None, :] + p.B[:, None, :]

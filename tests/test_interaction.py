@@ -141,6 +141,32 @@ def test_a_lost_surrogate_server_stops_the_mission_naming_it(launches, community
     assert summary["outcome"] == "error" and "surrogate server" in summary["reason"]
 
 
+def test_a_sim_with_the_surrogate_in_process_needs_no_server(launches, community, model_file):
+    """apps.sim.surrogate = "in_process": the sim loads the model itself, so a hung surrogate
+    server (which would end a "server" mission, as above) does not stop it, and the forces are
+    those of the in-process run."""
+    settings = BESIDE + [f"surrogate.model={json.dumps(str(model_file))}", "apps.sim.surrogate=in_process"]
+    settings += ["time_limit=20"]
+    process = launches.start(
+        ALPHA, *sum((["--set", s] for s in settings), []), "--set", f"name={community}", "--warp", "5"
+    )
+    wait_registered(community)
+    pids = [int(p) for p in os.listdir("/proc") if p.isdigit() and _is_server(p, launches.log_dir)]
+    assert len(pids) == 1
+    os.kill(pids[0], signal.SIGSTOP)
+    code, summary, err = finish(process)
+    try:
+        os.kill(pids[0], signal.SIGKILL)
+    except ProcessLookupError:
+        pass  # the launcher's stop ladder already did
+    assert code == 0 and summary["outcome"] == "time_limit", err
+    mission = load_mission(ALPHA, settings + [f"name={community}"])
+    reference = run_inprocess(
+        build_cores(mission, load_surrogate(model_file)), Schedule(mission.periods()), mission.dt, mission.max_steps
+    )
+    assert per_topic(log_path(summary))["sdv/forces"] == [encode(m) for m in reference.topic("forces")]
+
+
 def _is_server(pid: str, log_dir) -> bool:
     try:
         argv = command_line(pid)

@@ -21,6 +21,7 @@ import time
 from pathlib import Path
 
 from . import moos_alpha
+from .errors import InputError
 from .envelope import grid_size
 
 DEFAULT_MISSION = Path(__file__).resolve().parents[1] / "missions" / "alpha.toml"
@@ -43,6 +44,13 @@ def add_parser(subparsers) -> None:
         help="instead: fleets of N REMUS 100s flying copies of alpha, e.g. 1,4,16 (steps/s, CPU per vehicle-step)",
     )
     t.add_argument("--fleet-time", type=float, default=60.0, metavar="T", help="simulated seconds of each fleet run")
+    t.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="a mission setting for every run, as in nearsub launch (e.g. apps.sim.surrogate=in_process)",
+    )
     t.add_argument("--json", action="store_true")
     t.set_defaults(func=bench_pipeline)
     add_bench_parser(b)
@@ -124,16 +132,16 @@ def median_spread(values: list[float]) -> dict:
     return {"median": statistics.median(values), "min": min(values), "max": max(values)}
 
 
-def bench_mission(source, log_dir: str, repeats: int, verbose: bool) -> dict | None:
+def bench_mission(source, log_dir: str, repeats: int, verbose: bool, settings: list[str] = ()) -> dict | None:
     """Steps per second, CPU-ms per step of each process, start-up and shutdown time of one mission
     (a `MissionFile` or an `AlphaFleet`). A launch of a few steps costs the start-up and shutdown:
     the CPU per step is what a full run costs beyond it (each process's CPU read at the mission
-    end); per vehicle-step it is that divided by the vehicles."""
+    end); per vehicle-step it is that divided by the vehicles. `settings`: overrides of every run."""
     name = source.name
-    short = launch_once(source, log_dir, f"{name}_short", "time_limit=0.5")
+    short = launch_once(source, log_dir, f"{name}_short", *settings, "time_limit=0.5")
     runs = []
     for index in range(repeats):
-        summary = launch_once(source, log_dir, f"{name}{index}")
+        summary = launch_once(source, log_dir, f"{name}{index}", *settings)
         if summary.outcome not in ("completed", "time_limit", "collision"):
             print(
                 f"nearsub bench: {name} run {index + 1} ended with {summary.outcome}: {summary.reason}", file=sys.stderr
@@ -150,7 +158,7 @@ def bench_mission(source, log_dir: str, repeats: int, verbose: bool) -> dict | N
             )
             print(f"  {name} run {index + 1}: {line}", file=sys.stderr)
     apps = sorted({app for _, per_app in runs for app in per_app})
-    mission = source.load([])
+    mission = source.load(list(settings))
     local = [inprocess_rate(mission)[0] for _ in range(repeats)]
     vehicles = len(mission.vehicle_names)
     return {
@@ -187,11 +195,19 @@ def bench_pipeline(args) -> int:
         sources = [AlphaFleet(n, args.fleet_time) for n in args.vehicles]
     else:
         sources = [MissionFile(Path(p)) for p in ([args.mission] if args.mission else [DEFAULT_MISSION, NUV_MISSION])]
+    from nearsub.common.mission.schema import MissionError
+
+    for source in sources:  # a bad file or --set: one line before any run
+        try:
+            source.load(args.set)
+        except (MissionError, OSError) as exc:
+            raise InputError(str(exc)) from None
     load_before = os.getloadavg()[0]
-    result = {"repeats": args.repeats, "target_steps_per_second": 1000, "target_startup_plus_shutdown_s": 2.0}
+    result = {"repeats": args.repeats, "settings": args.set}
+    result |= {"target_steps_per_second": 1000, "target_startup_plus_shutdown_s": 2.0}
     with tempfile.TemporaryDirectory() as log_dir:
         for source in sources:
-            measured = bench_mission(source, log_dir, args.repeats, not args.json)
+            measured = bench_mission(source, log_dir, args.repeats, not args.json, args.set)
             if measured is None:
                 return 1
             result[source.name] = measured

@@ -222,6 +222,14 @@ class SimSettings(AppSettings):
         description="how the surrogate's forces enter the dynamics near the submarine (dynamics.Interaction)",
     )
     divergence_speed: float = Field(default=50.0, gt=0, description="|u| beyond this ends the mission [m/s]")
+    surrogate: Literal["server", "in_process"] = Field(
+        default="server",
+        description=(
+            "where the sim app evaluates the surrogate: 'server' asks the surrogate server once per "
+            "step; 'in_process' loads the same model file into the sim process (no round trip, the same "
+            "forces bit for bit; docs/architecture.md, \"Where the sim evaluates the surrogate\")"
+        ),
+    )
 
 
 class SurrogateSettings(Strict):
