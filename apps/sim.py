@@ -20,7 +20,7 @@ def sim_core(mission: Mission, server) -> SimCore:
         try:
             return SimCore(mission, load_surrogate(mission.surrogate.model or None))
         except ModelFileError as exc:
-            raise SystemExit(f"apps.sim.surrogate = \"in_process\": {exc}") from None
+            raise SystemExit(f'apps.sim.surrogate = "in_process": {exc}') from None
     return SimCore(mission, server)
 
 

@@ -21,8 +21,8 @@ import time
 from pathlib import Path
 
 from . import moos_alpha
-from .errors import InputError
 from .envelope import grid_size
+from .errors import InputError
 
 DEFAULT_MISSION = Path(__file__).resolve().parents[1] / "missions" / "alpha.toml"
 NUV_MISSION = DEFAULT_MISSION.with_name("overtake_stern_nuv.toml")  # submarine, surrogate server, N_uv helm
@@ -49,7 +49,8 @@ def add_parser(subparsers) -> None:
         action="append",
         default=[],
         metavar="KEY=VALUE",
-        help="a mission setting for every run, as in nearsub launch (e.g. apps.sim.surrogate=in_process)",
+        help="a mission setting for every run of the measured missions, as in nearsub launch (e.g. "
+        "apps.sim.surrogate=in_process); the MOOS-IvP comparison flies alpha as shipped",
     )
     t.add_argument("--json", action="store_true")
     t.set_defaults(func=bench_pipeline)
@@ -203,8 +204,12 @@ def bench_pipeline(args) -> int:
         except (MissionError, OSError) as exc:
             raise InputError(str(exc)) from None
     load_before = os.getloadavg()[0]
-    result = {"repeats": args.repeats, "settings": args.set}
-    result |= {"target_steps_per_second": 1000, "target_startup_plus_shutdown_s": 2.0}
+    result = {
+        "repeats": args.repeats,
+        "settings": args.set,
+        "target_steps_per_second": 1000,
+        "target_startup_plus_shutdown_s": 2.0,
+    }
     with tempfile.TemporaryDirectory() as log_dir:
         for source in sources:
             measured = bench_mission(source, log_dir, args.repeats, not args.json, args.set)

@@ -227,7 +227,7 @@ class SimSettings(AppSettings):
         description=(
             "where the sim app evaluates the surrogate: 'server' asks the surrogate server once per "
             "step; 'in_process' loads the same model file into the sim process (no round trip, the same "
-            "forces bit for bit; docs/architecture.md, \"Where the sim evaluates the surrogate\")"
+            'forces bit for bit; docs/architecture.md, "Where the sim evaluates the surrogate")'
         ),
     )
 
