@@ -361,12 +361,12 @@ class SimCore:
         """The input, clipped at the vehicle's limits (the pid already saturates; anything else
         reaching the sim beyond them is clipped and reported)."""
         v = self.vehicle
-        raw = np.array([self.inp.X_prop, self.inp.delta_r])
-        command = np.clip(raw, [-v.max_thrust, -v.max_rudder], [v.max_thrust, v.max_rudder])
-        if not np.array_equal(command, raw):
-            detail = f"input {raw.tolist()} clipped at the vehicle limits"
+        raw = [self.inp.X_prop, self.inp.delta_r]  # finite (messages.Input): min/max clip as np.clip
+        command = [min(max(raw[0], -v.max_thrust), v.max_thrust), min(max(raw[1], -v.max_rudder), v.max_rudder)]
+        if command != raw:
+            detail = f"input {raw} clipped at the vehicle limits"
             result.events.append(event(self.role, step, t, "saturation", detail))
-        return command
+        return np.array(command)
 
     def check_proximity(self, step: int, t: float, result: Iteration) -> None:
         """Collision ends the mission (a normal ending); a close call is reported on entry."""
