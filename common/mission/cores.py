@@ -361,8 +361,9 @@ class SimCore:
         """The input, clipped at the vehicle's limits (the pid already saturates; anything else
         reaching the sim beyond them is clipped and reported)."""
         v = self.vehicle
-        raw = [self.inp.X_prop, self.inp.delta_r]  # finite (messages.Input): min/max clip as np.clip
-        command = [min(max(raw[0], -v.max_thrust), v.max_thrust), min(max(raw[1], -v.max_rudder), v.max_rudder)]
+        raw = [self.inp.X_prop, self.inp.delta_r]
+        limits = [v.max_thrust, v.max_rudder]
+        command = [dynamics.clip(value, -limit, limit) for value, limit in zip(raw, limits, strict=True)]
         if command != raw:
             detail = f"input {raw} clipped at the vehicle limits"
             result.events.append(event(self.role, step, t, "saturation", detail))
