@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import time
 
 import pytest
 
@@ -81,6 +82,12 @@ def test_peers_link_directly_and_get_each_message_once_in_order():
                     bus.token(f"test/alive/{id(box)}")
                 sender.meet_peers()
                 assert {first.session.zid(), second.session.zid()} <= set(sender.session.info.peers_zid())
+                # The watcher's subscription reaches the sender through the router, possibly after
+                # the peers' (direct) ones have satisfied `put_when_matched`: wait until the sender
+                # is answered the watcher's token, which the router took, and passed on, after it.
+                end = time.monotonic() + WAIT
+                while len(sender.alive("test/alive/*")) < len(boxes) and time.monotonic() < end:
+                    time.sleep(0.01)
                 publisher = sender.publisher("test/data")
                 assert sender.put_when_matched("test/data", b"first", wait=WAIT)
                 for i in range(count):
