@@ -454,7 +454,12 @@ def lf_in_loop_increment(
             with_sub, alone, held[near] = hydro_lf.lf_increment_terms(inputs[near])
             lf[near] = with_sub - alone
     if any_asked:
-        asked_free = free_stream.coefficients(clamped) - hydro_lf.lf_free_stream(clamped)
+        # LF_free depends on the speed, heading and hull alone (`low_fidelity.lf_free_stream`): where
+        # x_c keeps all three, as it does for a UUV within table 4.2's speeds and headings, it is the
+        # `alone` just computed, to the bit (the kernel's free-stream sums never read the field).
+        keeps = every_asked and every_near and np.array_equal(clamped[:, 2:], inputs[:, 2:])
+        lf_free = alone if keeps else hydro_lf.lf_free_stream(clamped)
+        asked_free = free_stream.coefficients(clamped) - lf_free
         if delta is None:
             asked_mean, std = answer()
         else:  # a sample of delta in place of its mean (`interaction_at`); a sample has no std
