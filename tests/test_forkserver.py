@@ -83,6 +83,25 @@ def test_a_forked_module_gets_its_arguments_the_environment_a_group_and_its_exit
     assert process_cpu(app) == app.cpu  # reaped by the server: the figure it reported
 
 
+def test_a_preloaded_app_module_runs_without_runpy_warnings(tmp_path, monkeypatch):
+    """The launcher preloads the apps' modules (`nearsub.apps.sim`, ...); running one again as
+    __main__ must not print runpy's warning into the app's output, which a failed start-up shows."""
+    package = tmp_path / "forkpkg"
+    package.mkdir()
+    (package / "__init__.py").write_text("")
+    (package / "app.py").write_text('if __name__ == "__main__":\n    print("ran", flush=True)\n')
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join(filter(None, [str(tmp_path), os.environ.get("PYTHONPATH")])))
+    started = ForkServer(("forkpkg.app",))
+    try:
+        out = tmp_path / "app.out"
+        with open(out, "wb") as handle:
+            app = started.spawn("forkpkg.app", [], handle, WAIT)
+        assert app.wait(WAIT) == 0
+        assert out.read_text() == "ran\n"
+    finally:
+        started.close()
+
+
 def test_an_exit_reported_with_the_pid_is_kept(server, tmp_path):
     """A module that exits at once: the server's exit report can come in the same read as its pid
     (a fresh clone once lost it and waited forever)."""

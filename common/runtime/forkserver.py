@@ -34,6 +34,7 @@ import socket
 import subprocess
 import sys
 import time
+import warnings
 from collections.abc import Iterable, Sequence
 from typing import IO
 
@@ -213,6 +214,9 @@ def _run_app(request: dict, output: int, conn: socket.socket, selector: selector
         os.environ.update(request["env"])
         module = request["module"]
         sys.argv = [module, *request["args"]]
+        # The server preloaded the app's module; running it again as __main__ is the point, so
+        # runpy's warning about that would only reach a user's screen when the app fails.
+        warnings.filterwarnings("ignore", r".*found in sys\.modules after import of package", RuntimeWarning)
         runpy.run_module(module, run_name="__main__", alter_sys=True)
         code = 0
     except SystemExit as exc:
