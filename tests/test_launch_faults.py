@@ -89,6 +89,21 @@ def test_a_malformed_network_connect_is_refused_at_once(tmp_path, runtime_dir, e
     assert not (tmp_path / "logs").exists()
 
 
+@pytest.mark.parametrize(
+    ("content", "problem"),
+    [(None, "no such file"), ("not a model", "not a nearsub model file (not an .npz archive)")],
+)
+def test_an_unusable_surrogate_model_is_refused_before_any_app_starts(tmp_path, runtime_dir, content, problem):
+    model = tmp_path / "model.npz"
+    if content is not None:
+        model.write_text(content)
+    mission = ALPHA.parent / "overtake_stern_nuv.toml"
+    out = nearsub("launch", str(mission), "--log", str(tmp_path / "logs"), "--set", f'surrogate.model="{model}"')
+    assert out.returncode == 2
+    assert one_line(out.stderr) == f"nearsub launch: surrogate.model = {str(model)!r}: {problem}"
+    assert not (tmp_path / "logs").exists()
+
+
 def test_the_router_reports_the_endpoint_it_listens_on(tmp_path):
     ready = tmp_path / "router.json"
     router = subprocess.Popen(

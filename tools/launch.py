@@ -5,6 +5,8 @@ from __future__ import annotations
 import ipaddress
 import json
 import sys
+import zipfile
+from pathlib import Path
 
 from . import registry
 
@@ -68,6 +70,18 @@ def endpoint_problem(endpoint: str) -> str | None:
     return None
 
 
+def model_file_problem(path: str) -> str | None:
+    """Why the mission's surrogate model file cannot be a model file, checked before any app
+    starts (a mistyped path otherwise surfaced seconds later as the server's failed start-up);
+    the server reads it whole and names any deeper problem."""
+    file = Path(path)
+    if not file.is_file():
+        return "no such file"
+    if not zipfile.is_zipfile(file):
+        return "not a nearsub model file (not an .npz archive)"
+    return None
+
+
 def launch_command(args) -> int:
     from nearsub.common.mission.schema import MissionError, load_mission
 
@@ -95,6 +109,10 @@ def launch_command(args) -> int:
             load(mission.network.credentials)
         except CredentialsError as exc:
             print(f"nearsub launch: network.credentials: {exc}", file=sys.stderr)
+            return 2
+    if mission.needs_surrogate and mission.surrogate.model:
+        if problem := model_file_problem(mission.surrogate.model):
+            print(f"nearsub launch: surrogate.model = {mission.surrogate.model!r}: {problem}", file=sys.stderr)
             return 2
     # The claim is held until this process exits; a second launch of the name refuses at once.
     try:
