@@ -211,16 +211,15 @@ class _Predictor:
         return mean, std
 
     def _rows_std(self, e: np.ndarray, j: int) -> np.ndarray:
-        """Latent std (a,) of output j from kernel rows e (a, n): L^-1 is triangular, so a
-        triangular product (BLAS trmv for the one row of a vehicle-step, trmm for more) reads half
-        of it. A sim asks about one row every step; with the general product over the whole
-        (n, n) matrix, the shipped model's delta at one row took 122 us, now 64 us."""
-        if len(e) == 1:
-            v = dtrmv(self.LinvT_s[j].T, e[0], lower=1)  # (n,), L^-1 e
-            var = self.s2[j] - np.array([v @ v])  # thesis (2.7), diagonal
-        else:
-            vt = dtrmm(1.0, self.LinvT_s[j].T, e.T, side=0, lower=1)  # (n, a), a copy of e.T
-            var = self.s2[j] - np.einsum("na,na->a", vt, vt)
+        """Latent std (a,) of output j from kernel rows e (a, n), which it may overwrite: L^-1 is
+        triangular, so a triangular product (BLAS trmv for the one row of a vehicle-step,
+        `_batch_std`'s trmm for more) reads half of it. A sim asks about one row every step; with
+        the general product over the whole (n, n) matrix, the shipped model's delta at one row
+        took 122 us, now 64 us."""
+        if len(e) > 1:
+            return self._batch_std(e, j)
+        v = dtrmv(self.LinvT_s[j].T, e[0], lower=1)  # (n,), L^-1 e
+        var = self.s2[j] - np.array([v @ v])  # thesis (2.7), diagonal
         return np.sqrt(np.maximum(var, 0.0))
 
     def batch(self, X: np.ndarray, return_std: bool) -> tuple[np.ndarray, np.ndarray | None]:
