@@ -5,8 +5,10 @@ instead of asking the surrogate server every step (docs/architecture.md, "Where 
 evaluates the surrogate"): the same `Surrogate` class and file as the in-process run, so the
 same forces to the bit, without the round trip."""
 
+import sys
+
 from nearsub.apps.shell import main_for
-from nearsub.common.mission.cores import SimCore, sim_forces
+from nearsub.common.mission.cores import SimCore, mission_surrogate, sim_forces
 from nearsub.common.mission.schema import Mission
 from nearsub.common.runtime.processes import leave
 
@@ -14,13 +16,13 @@ from nearsub.common.runtime.processes import leave
 def sim_core(mission: Mission, server) -> SimCore:
     """The core, with the surrogate server's client `server` or, in "in_process" mode, the model."""
     if mission.apps.sim.surrogate == "in_process" and sim_forces(mission):
-        from nearsub.common.surrogate.model import load_surrogate
         from nearsub.common.surrogate.modelfile import ModelFileError
 
         try:
-            return SimCore(mission, load_surrogate(mission.surrogate.model or None))
+            return SimCore(mission, mission_surrogate(mission))
         except ModelFileError as exc:
-            raise SystemExit(f'apps.sim.surrogate = "in_process": {exc}') from None
+            print(f"surrogate.model: {exc}", file=sys.stderr)
+            raise SystemExit(2) from None
     return SimCore(mission, server)
 
 

@@ -18,6 +18,7 @@ import statistics
 import sys
 import tempfile
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 from . import moos_alpha
@@ -63,14 +64,10 @@ def add_parser(subparsers) -> None:
 
 def inprocess_rate(mission) -> tuple[float, int]:
     """Steps per second of `run_inprocess` (the surrogate, when needed, loaded before the clock starts)."""
-    from nearsub.common.mission.cores import EncounterCheck, build_cores, build_fleet
+    from nearsub.common.mission.cores import EncounterCheck, build_cores, build_fleet, mission_surrogate
     from nearsub.common.runtime.lifecycle import Schedule, run_inprocess
 
-    surrogate = None
-    if mission.needs_surrogate:
-        from nearsub.common.surrogate.model import load_surrogate
-
-        surrogate = load_surrogate(mission.surrogate.model or None)
+    surrogate = mission_surrogate(mission) if mission.needs_surrogate else None
     if mission.fleet:
         cores, schedule, observer = build_fleet(mission, surrogate), mission.lockstep(), EncounterCheck(mission)
     else:
@@ -133,7 +130,7 @@ def median_spread(values: list[float]) -> dict:
     return {"median": statistics.median(values), "min": min(values), "max": max(values)}
 
 
-def bench_mission(source, log_dir: str, repeats: int, verbose: bool, settings: list[str] = ()) -> dict | None:
+def bench_mission(source, log_dir: str, repeats: int, verbose: bool, settings: Sequence[str] = ()) -> dict | None:
     """Steps per second, CPU-ms per step of each process, start-up and shutdown time of one mission
     (a `MissionFile` or an `AlphaFleet`). A launch of a few steps costs the start-up and shutdown:
     the CPU per step is what a full run costs beyond it (each process's CPU read at the mission

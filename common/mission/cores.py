@@ -360,11 +360,12 @@ class SimCore:
     def saturated_command(self, step: int, t: float, result: Iteration) -> np.ndarray:
         """The input, clipped at the vehicle's limits (the pid already saturates; anything else
         reaching the sim beyond them is clipped and reported)."""
-        v = self.vehicle
-        raw = [self.inp.X_prop, self.inp.delta_r]
-        limits = [v.max_thrust, v.max_rudder]
-        command = [dynamics.clip(value, -limit, limit) for value, limit in zip(raw, limits, strict=True)]
-        if command != raw:
+        v, raw = self.vehicle, [self.inp.X_prop, self.inp.delta_r]
+        command = [
+            dynamics.clip(raw[0], -v.max_thrust, v.max_thrust),
+            dynamics.clip(raw[1], -v.max_rudder, v.max_rudder),
+        ]
+        if command != raw:  # inputs are finite (messages refuse NaN), so == compares their values
             detail = f"input {raw} clipped at the vehicle limits"
             result.events.append(event(self.role, step, t, "saturation", detail))
         return np.array(command)
@@ -471,13 +472,19 @@ def build_cores(mission: Mission, surrogate: ForceModel | None = None) -> dict:
     }
 
 
+def mission_surrogate(mission: Mission):
+    """The surrogate of the mission's `surrogate.model` file, or the shipped one when it is empty
+    (`surrogate.model.load_surrogate`; raises ModelFileError for a bad file)."""
+    from nearsub.common.surrogate.model import load_surrogate
+
+    return load_surrogate(mission.surrogate.model or None)
+
+
 def run_mission(mission: Mission, surrogate: ForceModel | None = None) -> InProcessResult:
     """The whole mission in this process (the reference for the multi-process run). The surrogate
     is loaded from the mission's model file when the mission needs one and none is given."""
     if surrogate is None and mission.needs_surrogate:
-        from nearsub.common.surrogate.model import load_surrogate
-
-        surrogate = load_surrogate(mission.surrogate.model or None)
+        surrogate = mission_surrogate(mission)
     if mission.fleet:
         cores, fleet = build_fleet(mission, surrogate), mission.lockstep()
         return run_inprocess(cores, fleet, mission.dt, mission.max_steps, observer=EncounterCheck(mission))
