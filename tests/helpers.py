@@ -159,3 +159,12 @@ def run_with_poke(mission, values: dict, at_step: int):
     return run_inprocess(
         build_cores(mission), schedule, mission.dt, mission.max_steps, operator=[("helm", "poke", at_step, poke)]
     )
+
+
+def wait_until(condition, timeout: float, what: str) -> None:
+    """Poll `condition` until it holds; fails saying `what` did not happen within `timeout` s."""
+    end = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > end:
+            raise AssertionError(f"{what} within {timeout:g} s")
+        time.sleep(0.02)

@@ -13,10 +13,9 @@ from conftest import ALPHA, ROOT
 from helpers import log_path, per_topic
 from nearsub.common.hydro import free_stream as fs
 from nearsub.common.hydro import high_fidelity as hydro_hf
-from nearsub.common.mission.cores import build_cores, run_mission
+from nearsub.common.mission.cores import run_mission
 from nearsub.common.mission.schema import load_mission
 from nearsub.common.physics.vehicles import REMUS100, SDV
-from nearsub.common.runtime.lifecycle import Schedule, run_inprocess
 from nearsub.common.runtime.messages import encode
 from nearsub.common.surrogate import domain
 from nearsub.common.surrogate.interaction import GEOMETRY, IncrementError, interaction_at
@@ -186,10 +185,7 @@ def test_multi_process_increment_equals_in_process(launches, community, where):
     settings = [*INCREMENT, f"apps.sim.surrogate={where}"]
     code, summary, err = launches.run(ALPHA, *sum((["--set", s] for s in settings), []), "--set", f"name={community}")
     assert summary.get("outcome") in ("time_limit", "collision"), err  # the run ends by itself, not by an error
-    mission = load_mission(ALPHA, settings + [f"name={community}"])
-    reference = run_inprocess(
-        build_cores(mission, load_surrogate()), Schedule(mission.periods()), mission.dt, mission.max_steps
-    )
+    reference = run_mission(load_mission(ALPHA, settings + [f"name={community}"]), load_surrogate())
     logged = per_topic(log_path(summary))
     for leaf in ("state", "forces"):
         assert logged[f"sdv/{leaf}"] == [encode(m) for m in reference.topic(leaf)], leaf

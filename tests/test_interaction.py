@@ -3,17 +3,17 @@
 import json
 import os
 import signal
+from contextlib import contextmanager
 
 import numpy as np
 import pytest
 
 from conftest import ALPHA
 from helpers import command_line, finish, log_path, per_topic, wait_registered
-from nearsub.common.mission.cores import build_cores, run_mission
+from nearsub.common.mission.cores import run_mission
 from nearsub.common.mission.schema import load_mission
 from nearsub.common.physics.dynamics import Interaction, body_forces
 from nearsub.common.physics.vehicles import SDV
-from nearsub.common.runtime.lifecycle import Schedule, run_inprocess
 from nearsub.common.runtime.messages import encode
 from nearsub.common.surrogate.interaction import blend_weight, interaction_at
 from nearsub.common.surrogate.model import analytic_model, load_surrogate
@@ -115,9 +115,7 @@ def test_multi_process_with_the_surrogate_server_equals_in_process(launches, com
     settings = BESIDE + [f"surrogate.model={json.dumps(str(model_file))}", "apps.helm.behaviour=nuv_compensation"]
     code, summary, err = launches.run(ALPHA, *sum((["--set", s] for s in settings), []), "--set", f"name={community}")
     assert code == 0, err
-    mission = load_mission(ALPHA, settings + [f"name={community}"])
-    cores = build_cores(mission, load_surrogate(model_file))
-    reference = run_inprocess(cores, Schedule(mission.periods()), mission.dt, mission.max_steps)
+    reference = run_mission(load_mission(ALPHA, settings + [f"name={community}"]), load_surrogate(model_file))
     logged = per_topic(log_path(summary))
     for leaf in ("state", "desired", "input", "forces", "helm"):
         assert logged[f"sdv/{leaf}"] == [encode(m) for m in reference.topic(leaf)], leaf
@@ -129,14 +127,8 @@ def test_a_lost_surrogate_server_stops_the_mission_naming_it(launches, community
         ALPHA, *sum((["--set", s] for s in settings), []), "--set", f"name={community}", "--warp", "5"
     )
     wait_registered(community)
-    pids = [int(p) for p in os.listdir("/proc") if p.isdigit() and _is_server(p, launches.log_dir)]
-    assert len(pids) == 1
-    os.kill(pids[0], signal.SIGSTOP)  # hung, not dead: only the query timeout can notice
-    code, summary, err = finish(process)
-    try:
-        os.kill(pids[0], signal.SIGKILL)
-    except ProcessLookupError:
-        pass  # the launcher's stop ladder already did
+    with hung_server(launches):  # only the query timeout can notice
+        code, summary, err = finish(process)
     assert code == 1
     assert summary["outcome"] == "error" and "surrogate server" in summary["reason"]
 
@@ -151,20 +143,26 @@ def test_a_sim_with_the_surrogate_in_process_needs_no_server(launches, community
         ALPHA, *sum((["--set", s] for s in settings), []), "--set", f"name={community}", "--warp", "5"
     )
     wait_registered(community)
+    with hung_server(launches):
+        code, summary, err = finish(process)
+    assert code == 0 and summary["outcome"] == "time_limit", err
+    reference = run_mission(load_mission(ALPHA, settings + [f"name={community}"]), load_surrogate(model_file))
+    assert per_topic(log_path(summary))["sdv/forces"] == [encode(m) for m in reference.topic("forces")]
+
+
+@contextmanager
+def hung_server(launches):
+    """The running mission's surrogate server stopped (SIGSTOP: hung, not dead), then killed."""
     pids = [int(p) for p in os.listdir("/proc") if p.isdigit() and _is_server(p, launches.log_dir)]
     assert len(pids) == 1
     os.kill(pids[0], signal.SIGSTOP)
-    code, summary, err = finish(process)
     try:
-        os.kill(pids[0], signal.SIGKILL)
-    except ProcessLookupError:
-        pass  # the launcher's stop ladder already did
-    assert code == 0 and summary["outcome"] == "time_limit", err
-    mission = load_mission(ALPHA, settings + [f"name={community}"])
-    reference = run_inprocess(
-        build_cores(mission, load_surrogate(model_file)), Schedule(mission.periods()), mission.dt, mission.max_steps
-    )
-    assert per_topic(log_path(summary))["sdv/forces"] == [encode(m) for m in reference.topic("forces")]
+        yield
+    finally:
+        try:
+            os.kill(pids[0], signal.SIGKILL)
+        except ProcessLookupError:
+            pass  # the launcher's stop ladder already did
 
 
 def _is_server(pid: str, log_dir) -> bool:

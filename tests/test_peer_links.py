@@ -7,12 +7,11 @@ from __future__ import annotations
 
 import json
 import os
-import time
 
 import pytest
 
 from conftest import ALPHA, nearsub
-from helpers import finish, wait_registered
+from helpers import finish, wait_registered, wait_until
 from nearsub.common.mission.schema import load_mission
 from nearsub.common.runtime import credentials, keys
 from nearsub.common.runtime.bus import (
@@ -85,9 +84,11 @@ def test_peers_link_directly_and_get_each_message_once_in_order():
                 # The watcher's subscription reaches the sender through the router, possibly after
                 # the peers' (direct) ones have satisfied `put_when_matched`: wait until the sender
                 # is answered the watcher's token, which the router took, and passed on, after it.
-                end = time.monotonic() + WAIT
-                while len(sender.alive("test/alive/*")) < len(boxes) and time.monotonic() < end:
-                    time.sleep(0.01)
+                wait_until(
+                    lambda: len(sender.alive("test/alive/*")) == len(boxes),
+                    WAIT,
+                    "the sender did not see every subscriber's token",
+                )
                 publisher = sender.publisher("test/data")
                 assert sender.put_when_matched("test/data", b"first", wait=WAIT)
                 for i in range(count):

@@ -4,13 +4,13 @@ however many, stops it or changes what it computes."""
 
 import re
 import threading
-import time
 from collections import Counter
 
 import pytest
 from test_fleet import TWO
 
 from conftest import ALPHA
+from helpers import wait_until
 from nearsub.apps.shell import AppShell
 from nearsub.common.mission.cores import HelmCore, PidCore, build_cores, run_mission
 from nearsub.common.mission.schema import RunConfig, load_mission
@@ -48,14 +48,6 @@ class CountingShell(AppShell):
 
         self.stream = Counting()
         return super().loop()
-
-
-def wait_until(condition, timeout: float, what: str) -> None:
-    end = time.monotonic() + timeout
-    while not condition():
-        if time.monotonic() > end:
-            raise AssertionError(f"{what} within {timeout:g} s")
-        time.sleep(0.02)
 
 
 def test_pid_shell_receives_only_its_inputs_and_survives_bad_and_future_messages():
