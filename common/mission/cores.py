@@ -20,6 +20,7 @@ from nearsub.common.runtime.messages import Desired, Event, Forces, HelmProgress
 
 if TYPE_CHECKING:
     from nearsub.common.surrogate.interaction import ForceModel, InteractionAt
+    from nearsub.common.surrogate.model import Surrogate
 
 
 def interaction():
@@ -472,7 +473,7 @@ def build_cores(mission: Mission, surrogate: ForceModel | None = None) -> dict:
     }
 
 
-def mission_surrogate(mission: Mission):
+def mission_surrogate(mission: Mission) -> Surrogate:
     """The surrogate of the mission's `surrogate.model` file, or the shipped one when it is empty
     (`surrogate.model.load_surrogate`; raises ModelFileError for a bad file)."""
     from nearsub.common.surrogate.model import load_surrogate
