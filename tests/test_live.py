@@ -52,21 +52,25 @@ def subset(data: dict, *names: str) -> dict:
     return {name: data[name] for name in names}
 
 
-@pytest.mark.parametrize("wait_for_the_pause", [False, True])
-def test_swap_at_a_fixed_step_keeps_the_trajectory(launches, community, wait_for_the_pause):
-    """Swapping the helm for an identical one mid-mission must not change a single bit, whether
-    the swap request reaches the clock before or after it has paused at the step."""
+@pytest.mark.parametrize(
+    ("app", "wait_for_the_pause"), [("helm", False), ("helm", True), ("pid", False), ("sim", False)]
+)
+def test_swap_at_a_fixed_step_keeps_the_trajectory(launches, community, app, wait_for_the_pause):
+    """Swapping an app for an identical one mid-mission must not change a single bit, whether
+    the swap request reaches the clock before or after it has paused at the step. Step 1000 is a
+    helm step: the new pid's desired and the new sim's input are made after the pause."""
     process = launches.start(ALPHA, "--set", f"name={community}", "--set", "pause_at_step=1000", "--until", "150")
     wait_registered(community)
     if wait_for_the_pause:
         assert subset(wait_paused(community), "step", "paused") == {"step": 1000, "paused": True}
-    swap = nearsub("swap", community, "helm", "--at-step", "1000", "--with", "behaviour=waypoints", "--json")
+    settings = ["--with", "behaviour=waypoints"] if app == "helm" else []
+    swap = nearsub("swap", community, app, "--at-step", "1000", *settings, "--json")
     assert swap.returncode == 0, swap.stderr
     result = json.loads(swap.stdout)
-    assert result["step"] == 1000 and result["old"] == "helm-1" and result["new"] == "helm-2"
+    assert result["step"] == 1000 and result["old"] == f"{app}-1" and result["new"] == f"{app}-2"
     code, summary, err = finish(process)
     assert code == 0, err
-    assert summary["swaps"] == [{"old": "helm-1", "new": "helm-2", "step": 1000}]
+    assert summary["swaps"] == [{"old": f"{app}-1", "new": f"{app}-2", "step": 1000}]
 
     mission = load_mission(ALPHA, [f"name={community}", "time_limit=150"])
     reference = run_inprocess(build_cores(mission), Schedule(mission.periods()), mission.dt, mission.max_steps)
@@ -75,7 +79,7 @@ def test_swap_at_a_fixed_step_keeps_the_trajectory(launches, community, wait_for
         assert logged[f"remus100/{leaf}"] == [encode(m) for m in reference.topic(leaf)], leaf
     events = [r.value() for r in read_log(log_path(summary)).records if r.topic.endswith("/events/launcher")]
     swaps = [e for e in events if e["kind"] == "swap"]
-    assert len(swaps) == 1 and swaps[0]["step"] == 1000 and "helm-1 -> helm-2" in swaps[0]["detail"]
+    assert len(swaps) == 1 and swaps[0]["step"] == 1000 and f"{app}-1 -> {app}-2" in swaps[0]["detail"]
 
 
 def test_swap_rejects_a_bad_setting_and_the_mission_goes_on(launches, community):

@@ -3,7 +3,7 @@
 import pytest
 
 from conftest import ALPHA
-from nearsub.common.mission.cores import HelmCore, build_cores
+from nearsub.common.mission.cores import HelmCore, PidCore, SimCore, build_cores
 from nearsub.common.mission.schema import load_mission
 from nearsub.common.runtime.lifecycle import (
     ACK,
@@ -244,6 +244,19 @@ def test_a_handover_continues_without_skipping_or_repeating_a_step():
     new.grant(7)  # resumed
     after = [encode(m) for c, m in new.run() + drive(new, range(5, 8)) if c == "input"]
     assert before + after == expected
+
+
+@pytest.mark.parametrize("role", ["pid", "sim"])
+@pytest.mark.parametrize("step", [100, 103])
+def test_inprocess_swap_of_the_pid_or_the_sim_changes_nothing(role, step):
+    """At a helm step (100) the pid's desired and the sim's input are made within the step, after
+    the pause, and reach the new app; at 103 the pid goes on from the desired of step 100."""
+    mission = load_mission(ALPHA, ["time_limit=10"])
+    schedule = Schedule(mission.periods())
+    plain = run_inprocess(build_cores(mission), schedule, mission.dt, mission.max_steps)
+    core = PidCore(mission) if role == "pid" else SimCore(mission)
+    swapped = run_inprocess(build_cores(mission), schedule, mission.dt, mission.max_steps, {step: {role: core}})
+    assert [encode(m) for _, _, m in swapped.messages] == [encode(m) for _, _, m in plain.messages]
 
 
 def test_first_end_takes_the_earliest_step_then_the_most_severe():

@@ -23,7 +23,7 @@ TOOLS = {
     "launch": ("launch", "run a mission file as separate processes"),
     "tap": ("tap", "watch a running mission: list, echo, hz, pub"),
     "log": ("log", "inspect, export and plot mission logs"),
-    "swap": ("swap", "replace a running app (the helm) without stopping the mission"),
+    "swap": ("swap", "replace a running helm, pid or sim without stopping the mission"),
     "poke": ("poke", "set mission variables of a running helm (uPokeDB)"),
     "clock": ("clock", "status, pause or resume a running mission's clock"),
     "router": ("router", "run a Zenoh router (for multi-host setups)"),

@@ -451,8 +451,13 @@ class Stepper:
     # -- swap: hand the app over to a new instance at a step boundary --------------------------
     def handover(self, step: int) -> bytes | None:
         """What a successor needs to run from `step` (the core's progress and the inputs held),
-        once this app has reached `step` with its inputs; None before that."""
-        if self.step != step or self.inbox.waiting_for(step):
+        once this app has reached `step` with the inputs made before it; None before that. The
+        inputs of `step` made within it, by an app earlier in ORDER (the pid's desired, the sim's
+        input), are made only once the clock grants `step` again: the successor receives them."""
+        if self.step != step:
+            return None
+        role = ORDER.index(self.core.role)
+        if any(ORDER.index(PRODUCER[leaf]) > role for leaf in self.inbox.waiting_for(step)):
             return None
         held = {leaf: encode(message) for leaf, message in self.inbox.held.items()}
         overrides = {leaf: [(k, encode(m)) for k, m in entries] for leaf, entries in self.overrides.items()}
@@ -466,6 +471,11 @@ class Stepper:
         for leaf, raw in state["held"].items():
             self.inbox.held[leaf] = decode(raw, VEHICLE_TOPICS[leaf], f"handover {leaf}")
         self.inbox.delivered = dict(state["delivered"])
+        # The mail the predecessor's core had already taken (the pid's desired of the helm's last
+        # step): the new core starts from it, as the old one would have gone on.
+        seen = {leaf: m for leaf, m in self.inbox.held.items() if self.inbox.delivered.get(leaf) == m.step}
+        if seen:
+            self.core.new_mail(seen)
         for leaf, entries in state["overrides"].items():
             model = VEHICLE_TOPICS[leaf]
             self.overrides[leaf] = [(k, decode(raw, model, f"handover {leaf}")) for k, raw in entries]
