@@ -21,6 +21,7 @@ from nearsub.common.autonomy.behaviours import MAX_SPEED, Coordinate, Leg, Speed
 from nearsub.common.physics import dynamics
 from nearsub.common.physics.vehicles import Vehicle, get_vehicle
 from nearsub.common.runtime import keys
+from nearsub.common.runtime.clock import MAX_WARP
 from nearsub.common.runtime.lifecycle import Fleet, Schedule
 from nearsub.common.runtime.messages import describe_validation_error
 
@@ -309,7 +310,7 @@ class Mission(Strict):
     vehicle: str | Vehicle = "remus100"
     dt: float = Field(default=0.05, gt=0, le=1.0, description="base step [s]")
     time_limit: float = Field(default=600.0, gt=0, description="simulated seconds")
-    warp: float = Field(default=0.0, ge=0, description="0 = as fast as possible, 1 = real time")
+    warp: float = Field(default=0.0, ge=0, le=MAX_WARP, description="0 = as fast as possible, 1 = real time")
     step_timeout: float = Field(default=10.0, gt=0, description="wall seconds an app may take per step")
     startup_timeout: float = Field(default=30.0, gt=0)
     seed: int = 0

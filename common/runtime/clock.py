@@ -109,6 +109,9 @@ class Progress:
 # and, once it keeps up again, does not sprint for longer than that.
 TICK_INTERVAL = 0.01
 MAX_LAG = 1.0
+# The highest warp a mission or `nearsub clock ... warp` may ask for (a nearsub choice): far above
+# what any machine achieves, and low enough that the pacing arithmetic stays finite.
+MAX_WARP = 1e6
 
 
 @dataclass
@@ -281,8 +284,9 @@ class ClockCore:
             return [self.reply(request, data=self.status(now))]
         if request.cmd == "warp":
             warp = request.args.get("warp")
-            if not isinstance(warp, (int, float)) or isinstance(warp, bool) or not 0 <= warp < math.inf:
-                return [self.reply(request, ok=False, error=f"warp: must be a number >= 0, got {warp!r}")]
+            if not isinstance(warp, (int, float)) or isinstance(warp, bool) or not 0 <= warp <= MAX_WARP:
+                error = f"warp: must be a number from 0 to {MAX_WARP:g}, got {warp!r}"
+                return [self.reply(request, ok=False, error=error)]
             self.policy.warp = float(warp)
             self.policy.rebase(now, self.step)
             return [self.reply(request, data=self.status(now))]
