@@ -13,6 +13,7 @@ import argparse
 import json
 import sys
 
+from .arguments import integer, number
 from .connect import add_router_argument, open_bus
 
 
@@ -30,8 +31,8 @@ def add_parser(subparsers) -> None:
     )
     p.add_argument("--behaviour", help="shorthand for --with behaviour=NAME")
     p.add_argument("--vehicle", help="the vehicle whose app to replace (needed when the mission has several)")
-    p.add_argument("--at-step", type=int, help="swap when the clock reaches this step (default: now)")
-    p.add_argument("--timeout", type=float, default=120.0, help="wall seconds to wait for the swap")
+    p.add_argument("--at-step", type=integer(minimum=1), help="swap when the clock reaches this step (default: now)")
+    p.add_argument("--timeout", type=number(above=0.0), default=120.0, help="wall seconds to wait for the swap")
     p.add_argument("--json", action="store_true")
     add_router_argument(p)
     p.set_defaults(func=swap_command)
@@ -82,6 +83,13 @@ def swap_command(args) -> int:
         print(f"nearsub swap: the launcher of {community!r} did not answer", file=sys.stderr)
         return 1
     ok, payload = replies[0]
+    if not ok and payload == b"Timeout":  # Zenoh's own error reply when --timeout passes
+        print(
+            f"nearsub swap: the launcher of {community!r} did not finish the swap within --timeout {args.timeout:g} s "
+            f"(it goes on; `nearsub clock {community} status` shows whether the clock resumed)",
+            file=sys.stderr,
+        )
+        return 1
     if not ok:
         print(f"nearsub swap: {payload.decode(errors='replace')}", file=sys.stderr)
         return 1
