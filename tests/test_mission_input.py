@@ -30,6 +30,35 @@ def test_non_finite_and_absurd_numbers_are_refused_naming_the_override(override,
     assert f"field '{field}'" in message
 
 
+TWO = ALPHA.parent / "launch_two.toml"
+
+
+@pytest.mark.parametrize(
+    ("mission", "override", "says"),
+    [
+        (TWO, "vehicles=1", "--set vehicles=1: field 'vehicles' = 1: "),  # the value given, not the names
+        (TWO, "vehicles=[]", "--set vehicles=[]: field 'vehicles' = []: leave [[vehicles]] out for a single-vehicle"),
+        # Deeper than the bad field, and in the fleet vehicles' copies of [apps.*]: still the --set.
+        (TWO, "apps.helm.period.x=1", "--set apps.helm.period.x=1: field 'vehicles.auv1.apps.helm.period' = "),
+        (ALPHA, "apps..helm=1", "--set 'apps..helm=1': empty part in key 'apps..helm'"),
+        (ALPHA, "vehicle=3", "--set vehicle=3: field 'vehicle' = 3: Value error, expected a vehicle name"),
+    ],
+)
+def test_an_override_error_names_the_override_and_the_value_given(mission, override, says):
+    with pytest.raises(MissionError) as info:
+        load_mission(mission, [override])
+    assert str(info.value).startswith(says), str(info.value)
+    assert "function-after" not in str(info.value)  # no member of pydantic's union
+
+
+def test_a_missing_field_is_named_without_its_parent_as_the_value(tmp_path):
+    path = tmp_path / "m.toml"
+    path.write_text('name = "m"\n')
+    with pytest.raises(MissionError) as info:
+        load_mission(path)
+    assert str(info.value) == f"{path}: field 'apps': Field required"
+
+
 def test_a_bad_value_in_the_file_names_the_file(tmp_path):
     path = tmp_path / "m.toml"
     path.write_text(ALPHA.read_text().replace("x = 0.0", "x = nan", 1))

@@ -359,6 +359,14 @@ class Mission(Strict):
             raise ValueError(f"give each vehicle its type and start in its entry, not the mission's {given}")
         return value
 
+    @field_validator("vehicle", mode="before")
+    @classmethod
+    def _name_or_table(cls, value: Any) -> Any:
+        """Neither: one error naming the field, not one per member of the union."""
+        if not isinstance(value, (str, dict, Vehicle)):
+            raise ValueError("expected a vehicle name (such as 'remus100') or a [vehicle] table")
+        return value
+
     @field_validator("vehicle")
     @classmethod
     def _known_vehicle(cls, value: str | Vehicle) -> str | Vehicle:
@@ -460,8 +468,8 @@ def parse_override(text: str) -> tuple[list[str], Any]:
         raise MissionError(f"--set {text!r}: expected key=value")
     key, raw = text.split("=", 1)
     key = key.strip()
-    if not key:
-        raise MissionError(f"--set {text!r}: empty key")
+    if not key or "" in key.split("."):
+        raise MissionError(f"--set {text!r}: empty key" if not key else f"--set {text!r}: empty part in key {key!r}")
     try:
         value = tomllib.loads(f"v = {raw}")["v"]
     except tomllib.TOMLDecodeError:
@@ -563,6 +571,9 @@ def load_mission(path: str | Path, overrides: list[str] = ()) -> Mission:
     path = Path(path)
     data = resolve_includes(path)
     apply_overrides(data, list(overrides))
+    if data.get("vehicles") == []:  # a saved mission (a run file) may hold [], a user's file not
+        source = next((f"--set {o}" for o in reversed(overrides) if parse_override(o)[0] == ["vehicles"]), path)
+        raise MissionError(f"{source}: field 'vehicles' = []: leave [[vehicles]] out for a single-vehicle mission")
     return mission_from_dict(data, str(path), overrides)
 
 
@@ -586,7 +597,7 @@ def _vehicle_names(data: dict):
         if loc[:1] != ("vehicles",):
             return loc, value
         if len(loc) == 1:
-            return loc, [e.get("name") if isinstance(e, dict) else e for e in entries]
+            return loc, [e.get("name") if isinstance(e, dict) else e for e in entries] if entries else value
         index, rest = loc[1], loc[2:]
         rest = ("apps", *rest[1:]) if rest[:1] == ("settings",) else rest  # what the user wrote
         entry = entries[index] if isinstance(index, int) and index < len(entries) else None
@@ -598,11 +609,16 @@ def _vehicle_names(data: dict):
 
 
 def _source_of(error: ValidationError, where: str, overrides: list[str], name=lambda loc, value: (loc, value)) -> str:
-    """`--set KEY=VALUE` when the first bad field lies at or below an override's key, else `where`."""
-    loc = [str(p) for p in name(tuple(error.errors()[0]["loc"]), None)[0]]
+    """`--set KEY=VALUE` when a bad field lies at or below an override's key, or above it (the
+    override made it the wrong type), also within a fleet vehicle's copy of the mission's
+    `[apps.*]` (`vehicles.NAME.apps...`); else `where`."""
+    locs = []
+    for item in error.errors():
+        loc = [str(p) for p in name(tuple(item["loc"]), None)[0]]
+        locs += [loc, loc[2:]] if loc[:1] == ["vehicles"] and loc[2:3] == ["apps"] else [loc]
     for text in reversed(list(overrides)):  # the last override of a key wins, as in apply_overrides
         path, _ = parse_override(text)
-        if loc[: len(path)] == path:
+        if any(loc and (loc[: len(path)] == path or path[: len(loc)] == loc) for loc in locs):
             return f"--set {text}"
     return where
 

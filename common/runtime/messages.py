@@ -236,7 +236,12 @@ def describe_validation_error(error: ValidationError, where: str, name=None) -> 
         if name is not None:
             loc, value = name(loc, value)
         field = ".".join(str(p) for p in loc) or "<message>"
-        parts.append(f"field '{field}' = {value!r}: {item['msg']}")
+        # A missing field's input is its parent: the whole message or mission, which says nothing.
+        parts.append(
+            f"field '{field}': {item['msg']}"
+            if item["type"] == "missing"
+            else f"field '{field}' = {value!r}: {item['msg']}"
+        )
     return f"{where}: " + "; ".join(parts)
 
 
