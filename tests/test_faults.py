@@ -9,6 +9,7 @@ import time
 
 import msgpack
 import pytest
+from mcap.reader import make_reader
 
 from conftest import ALPHA, nearsub
 from helpers import finish, log_path, process_with, wait_registered
@@ -143,6 +144,34 @@ def test_a_log_cut_short_is_readable_up_to_its_last_chunk(tmp_path):
     with open(path, "r+b") as f:
         f.truncate(size - 100)
     contents = read_log(path)
-    assert contents.recovered
+    assert contents.recovered and contents.damage.startswith("the file was not finished (a crash)")
     steps = [msgpack.unpackb(r.data)["step"] for r in contents.records]
     assert steps == list(range(len(steps))) and len(steps) > 15000
+
+
+@pytest.mark.parametrize("damage", ["one bit", "a zeroed block"])
+def test_a_damaged_chunk_of_a_finished_log_is_skipped_and_the_rest_kept(tmp_path, damage):
+    path = tmp_path / "log.mcap"
+    writer = LogWriter(path)
+    for i in range(20000):
+        writer.write(
+            "nearsub/x/remus100/input",
+            msgpack.packb({"step": i, "t": i * 0.05, "source": "pid", "X_prop": 1.0, "delta_r": 0.0}),
+            i * 0.05,
+        )
+    writer.finish()
+    with open(path, "rb") as f:
+        chunks = make_reader(f).get_summary().chunk_indexes
+    hit = chunks[len(chunks) // 2]
+    data = bytearray(path.read_bytes())
+    middle = hit.chunk_start_offset + hit.chunk_length // 2
+    if damage == "one bit":  # still decompresses: only the chunk's CRC tells
+        data[middle] ^= 0x01
+    else:
+        data[middle : middle + 512] = bytes(512)
+    path.write_bytes(bytes(data))
+    contents = read_log(path)
+    steps = [msgpack.unpackb(r.data)["step"] for r in contents.records]
+    assert contents.recovered and contents.damage.startswith(f"1 of {len(chunks)} chunks damaged (bytes ")
+    assert 0 < 20000 - len(steps) < 20000 / len(chunks) * 2  # one chunk's messages, no more
+    assert steps == sorted(steps) and steps[-1] == 19999  # the chunks after it are kept

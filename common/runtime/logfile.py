@@ -6,12 +6,13 @@ JSON schema; `log_time` is simulated time in ns (for a control request, the simu
 mission had reached when it arrived), `publish_time` the wall-clock receive time. The
 mission (resolved, as JSON) is stored as metadata and the mission file as an attachment.
 
-Chunks are small, so a log cut short by a crash loses at most its last chunk: `read_log` falls
-back to a streaming read that recovers every complete chunk.
+Chunks are small, so a log cut short by a crash loses at most its last chunk, and a damaged byte
+at most its chunk: `read_log` then keeps every intact chunk (`LogContents.damage` says what).
 """
 
 from __future__ import annotations
 
+import io
 import json
 import time
 from collections.abc import Iterable
@@ -19,8 +20,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import msgpack
-from mcap.reader import make_reader
-from mcap.records import Channel, Metadata, Schema
+from mcap.exceptions import EndOfFile
+from mcap.reader import SeekingReader, make_reader
+from mcap.records import Channel, Metadata
 from mcap.records import Message as McapMessage
 from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
@@ -118,7 +120,8 @@ class LogRecord:
 class LogContents:
     records: list[LogRecord]
     metadata: dict[str, dict[str, str]]
-    recovered: bool  # True when the file had no valid summary and was read as a stream
+    recovered: bool  # True when the file could not be read in one piece (`damage` says why)
+    damage: str = ""  # what was wrong and what was kept, for a user; "" for an intact file
 
     def topics(self) -> list[str]:
         return sorted({r.topic for r in self.records})
@@ -166,12 +169,13 @@ def vehicle_spec(resolved: dict | None, name: str):
 
 
 def read_log(path: str | Path) -> LogContents:
-    """Every message of a log in file order, with its metadata. A file that was not finished
-    (crash) is read as a stream up to its last complete record."""
+    """Every message of a log in file order, with its metadata. A damaged file keeps every chunk
+    that is intact: one with its summary is read chunk by chunk, skipping the damaged ones; one
+    without (a crash before `finish`) is read as a stream up to its first damaged or torn record."""
     path = Path(path)
     try:
         with open(path, "rb") as f:
-            reader = make_reader(f)
+            reader = make_reader(f, validate_crcs=True)
             records = [
                 LogRecord(channel.topic, m.log_time, m.publish_time, m.sequence, m.data)
                 for _, channel, m in reader.iter_messages(log_time_order=False)
@@ -179,25 +183,80 @@ def read_log(path: str | Path) -> LogContents:
             metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
             return LogContents(records, metadata, recovered=False)
     except Exception:
-        return _recover(path)
+        return _by_chunks(path) or _by_stream(path)
 
 
-def _recover(path: Path) -> LogContents:
+def _records_of(stream, channels: dict[int, Channel], records: list[LogRecord], metadata: dict) -> None:
+    """Append the messages and metadata a `StreamReader` yields until it ends or raises."""
+    for record in stream.records:
+        if isinstance(record, Channel):
+            channels[record.id] = record
+        elif isinstance(record, McapMessage):
+            topic = channels[record.channel_id].topic
+            records.append(LogRecord(topic, record.log_time, record.publish_time, record.sequence, record.data))
+        elif isinstance(record, Metadata):
+            metadata[record.name] = dict(record.metadata)
+
+
+def _by_chunks(path: Path) -> LogContents | None:
+    """Each chunk the summary indexes, read on its own (with its CRC checked); None without a
+    readable summary."""
+    with open(path, "rb") as f:
+        try:
+            summary = SeekingReader(f).get_summary()
+        except Exception:
+            return None
+        if summary is None or not summary.chunk_indexes:
+            return None
+        channels, records, metadata = dict(summary.channels), [], {}
+        damaged = []
+        for index in summary.chunk_indexes:
+            f.seek(index.chunk_start_offset)
+            raw = f.read(index.chunk_length)
+            kept = len(records)
+            try:
+                _records_of(
+                    StreamReader(io.BytesIO(raw), skip_magic=True, validate_crcs=True), channels, records, metadata
+                )
+            except EndOfFile:
+                pass  # the chunk's bytes end there: read in full
+            except Exception:
+                del records[kept:]  # a damaged chunk: none of its messages, rather than some
+                damaged.append(index)
+        for index in summary.metadata_indexes:
+            f.seek(index.offset)
+            try:
+                _records_of(
+                    StreamReader(io.BytesIO(f.read(index.length)), skip_magic=True), channels, records, metadata
+                )
+            except Exception:
+                continue  # EndOfFile after the record, or a damaged one: keep what was read
+    spans = ", ".join(f"bytes {c.chunk_start_offset}-{c.chunk_start_offset + c.chunk_length}" for c in damaged[:3])
+    more = f" and {len(damaged) - 3} more" if len(damaged) > 3 else ""
+    damage = (
+        f"{len(damaged)} of {len(summary.chunk_indexes)} chunks damaged ({spans}{more}): skipped, "
+        f"{len(records)} messages kept"
+        if damaged
+        else f"an index is damaged; every chunk is intact, {len(records)} messages kept"
+    )
+    return LogContents(records, metadata, recovered=True, damage=damage)
+
+
+def _by_stream(path: Path) -> LogContents:
     channels: dict[int, Channel] = {}
     records: list[LogRecord] = []
     metadata: dict[str, dict[str, str]] = {}
+    size = path.stat().st_size
     with open(path, "rb") as f:
         try:
-            for record in StreamReader(f).records:
-                if isinstance(record, Channel):
-                    channels[record.id] = record
-                elif isinstance(record, McapMessage):
-                    topic = channels[record.channel_id].topic
-                    records.append(LogRecord(topic, record.log_time, record.publish_time, record.sequence, record.data))
-                elif isinstance(record, Metadata):
-                    metadata[record.name] = dict(record.metadata)
-                elif isinstance(record, Schema):
-                    continue
+            _records_of(StreamReader(f, validate_crcs=True), channels, records, metadata)
+            where = size
+        except EndOfFile:
+            where = size  # torn at the end: the crash of a mission that never finished its log
         except Exception:
-            pass  # the torn tail of a crashed log: keep everything read before it
-    return LogContents(records, metadata, recovered=True)
+            where = f.tell()
+    if where >= size:
+        damage = f"the file was not finished (a crash): {len(records)} messages kept, up to its last complete chunk"
+    else:
+        damage = f"damaged near byte {where} of {size}: {len(records)} messages kept, those before it"
+    return LogContents(records, metadata, recovered=True, damage=damage)
