@@ -241,3 +241,18 @@ def test_every_vehicle_of_the_keys_gets_its_own_track_and_the_first_leads(overta
     assert bravo["vehicle"]["length"] == overtake.vehicle_model.length  # not a library name: the mission's vehicle
     [event] = frame["events"]
     assert event["vehicle"] == "bravo" and (event["x"], event["y"]) == (-37.0, 20.0)  # bravo's pose at 0.15 s
+
+
+def test_the_replay_of_a_damaged_log_says_what_it_kept(alpha, tmp_path, capsys):
+    from nearsub.common.runtime.logfile import LogWriter
+    from nearsub.tools.view_server import ReplaySource
+
+    path = tmp_path / "cut.mcap"
+    writer = LogWriter(path)
+    for step in range(3000):
+        writer.write("nearsub/alpha/state", encode(state(step, 0.1 * step, 0.0)), step * 0.05)
+    writer._file.flush()  # a crash: never finished
+    path.write_bytes(path.read_bytes()[:-100])
+    source = ReplaySource(path, alpha)
+    assert source.scene["damage"].startswith("the file was not finished")
+    assert capsys.readouterr().err.startswith(f"nearsub view: {path}: the file was not finished")

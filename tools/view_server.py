@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import sys
 import time
 import uuid
 from importlib import resources
@@ -167,7 +168,9 @@ class ReplaySource:
             feed_payload(self.model, record.topic, record.data)
         start, end = self.model.time_range()
         self.scene["range"] = [start, end]
-        self.scene["recovered"] = contents.recovered
+        self.scene["damage"] = contents.damage
+        if contents.damage:  # the replay shows what was kept; the user must know it is not all
+            print(f"nearsub view: {path}: {contents.damage}", file=sys.stderr, flush=True)
         self.cursor = start
         self.playing = False
         self.rate = 1.0
