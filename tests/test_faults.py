@@ -130,15 +130,21 @@ def test_two_communities_on_one_router_do_not_cross_talk(launches, tmp_path):
         router.wait()
 
 
-def test_a_log_cut_short_is_readable_up_to_its_last_chunk(tmp_path):
-    path = tmp_path / "cut.mcap"
+def inputs_log(path, count: int = 20000) -> LogWriter:
+    """A log of `count` pid inputs, steps 0.. in order, not yet finished."""
     writer = LogWriter(path)
-    for i in range(20000):
+    for i in range(count):
         writer.write(
             "nearsub/x/remus100/input",
             msgpack.packb({"step": i, "t": i * 0.05, "source": "pid", "X_prop": 1.0, "delta_r": 0.0}),
             i * 0.05,
         )
+    return writer
+
+
+def test_a_log_cut_short_is_readable_up_to_its_last_chunk(tmp_path):
+    path = tmp_path / "cut.mcap"
+    writer = inputs_log(path)
     writer._file.flush()  # a crash: the writer never finishes
     size = path.stat().st_size
     with open(path, "r+b") as f:
@@ -152,14 +158,7 @@ def test_a_log_cut_short_is_readable_up_to_its_last_chunk(tmp_path):
 @pytest.mark.parametrize("damage", ["one bit", "a zeroed block"])
 def test_a_damaged_chunk_of_a_finished_log_is_skipped_and_the_rest_kept(tmp_path, damage):
     path = tmp_path / "log.mcap"
-    writer = LogWriter(path)
-    for i in range(20000):
-        writer.write(
-            "nearsub/x/remus100/input",
-            msgpack.packb({"step": i, "t": i * 0.05, "source": "pid", "X_prop": 1.0, "delta_r": 0.0}),
-            i * 0.05,
-        )
-    writer.finish()
+    inputs_log(path).finish()
     with open(path, "rb") as f:
         chunks = make_reader(f).get_summary().chunk_indexes
     hit = chunks[len(chunks) // 2]
