@@ -15,6 +15,7 @@ from nearsub.common.mission.schema import MissionError, load_mission
         ("environment.u_sub=-inf", "environment.u_sub"),
         ("step_timeout=nan", "step_timeout"),
         ("warp=1e308", "warp"),  # finite, but the clock's pacing would overflow
+        ("time_limit=1e307", "time_limit"),  # finite, but not its number of steps
         ("start.x=1e300", "start.x"),
         ("start.speed=1e9", "start.speed"),
         ("apps.helm.legs=[{points=[[1e12, 0.0]], speed=1.5}]", "apps.helm.legs.0.points.0.0"),

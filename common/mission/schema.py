@@ -304,6 +304,11 @@ def _named(value: Any) -> bool:
     return isinstance(value, list) and all(isinstance(v, dict) and isinstance(v.get("name"), str) for v in value)
 
 
+# The most steps a mission may have (a nearsub choice): 1,585 years at dt = 0.05 s, and step
+# numbers far inside the 64-bit integers msgpack carries.
+MAX_STEPS = 10**12
+
+
 class Mission(Strict):
     name: KeyChunk = Field(description="community name: the key-expression prefix nearsub/<name>/...")
     description: str = ""
@@ -357,6 +362,14 @@ class Mission(Strict):
         if value and (vehicle != "remus100" or start != Start()):
             given = f"vehicle = {vehicle!r}" if vehicle != "remus100" else f"[start] {start}"
             raise ValueError(f"give each vehicle its type and start in its entry, not the mission's {given}")
+        return value
+
+    @field_validator("time_limit")
+    @classmethod
+    def _countable(cls, value: float, info) -> float:
+        dt = info.data.get("dt")
+        if dt and not value / dt <= MAX_STEPS:
+            raise ValueError(f"{value / dt:.3g} steps of dt = {dt:g} s: at most {MAX_STEPS:.0e}")
         return value
 
     @field_validator("vehicle", mode="before")
