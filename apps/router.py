@@ -67,8 +67,11 @@ def main(argv=None) -> int:
     listen = args.listen or ["tcp/127.0.0.1:7447"]
     try:
         return serve(listen, args.connect, args.with_parent, args.ready_file, args.credentials)
-    except (BusError, OSError) as exc:  # e.g. the port is taken: say so in one line
-        print(f"router: cannot listen on {', '.join(listen)}: {exc}", file=sys.stderr)
+    except BusError as exc:  # a malformed endpoint, a port taken: one line naming it
+        print(f"router: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # the ready file cannot be written
+        print(f"router: {exc}", file=sys.stderr)
         return 1
 
 

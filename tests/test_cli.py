@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from conftest import nearsub
+from conftest import ALPHA, nearsub
 from nearsub.tools.cli import TOOLS, build_parser
 
 HEAVY = ("numpy", "scipy", "zenoh", "matplotlib")
@@ -86,6 +86,34 @@ def test_an_unknown_subcommand_is_named():
             "nearsub al-bench: --reference: count(s) [40]",
         ),
         (["al-bench", "park", "--methods", "nmmf,greedy"], "nearsub al-bench: unknown method(s) ['greedy']"),
+        # A malformed endpoint, named with the form wanted (was: Zenoh's Json5Err traceback).
+        *(
+            (argv, f"nearsub {argv[0]}: {role} endpoint 'garbage' is not <protocol>/<address>, e.g. tcp/127.0.0.1:7447")
+            for argv, role in [
+                (["tap", "list", "--connect", "garbage"], "connect"),
+                (["tap", "echo", "nearsub/alpha/**", "--connect", "garbage"], "connect"),
+                (["clock", "alpha", "status", "--connect", "garbage"], "connect"),
+                (["poke", "alpha", "x=1", "--vehicle", "v", "--connect", "garbage"], "connect"),
+                (["view", "alpha", "--connect", "garbage"], "connect"),
+                (["foxglove", "alpha", "--connect", "garbage"], "connect"),
+                (["swap", "alpha", "helm", "--connect", "garbage"], "connect"),
+                (["router", "--listen", "garbage"], "listen"),
+                (["router", "--connect", "garbage"], "connect"),
+            ]
+        ),
+        # A port out of range, refused at once (was: 30 s of retries before "cannot reach").
+        (["tap", "list", "--connect", "tcp/127.0.0.1:99999"], "nearsub tap: connect endpoint 'tcp/127.0.0.1:99999' "),
+        (["router", "--credentials", "/nonexistent/x.cred"], "nearsub router: --credentials /nonexistent/x.cred: "),
+        (["router", "--credentials", "/"], "nearsub router: --credentials /: is a directory"),
+        (["launch", str(ALPHA), "--log", str(ALPHA)], f"nearsub launch: --log {ALPHA}: cannot make a folder there"),
+        (["launch", str(ALPHA), "--view-port", "8080"], "nearsub launch: --view-port 8080: add --view"),
+        # Finite but beyond what a mission can count or pace: named as typed, not as a --set.
+        (["launch", str(ALPHA), "--until", "1e307"], "nearsub launch: --until 1e+307: field 'time_limit' = 1e+307: "),
+        (["launch", str(ALPHA), "--warp", "1e300"], "nearsub launch: --warp 1e+300: field 'warp' = 1e+300: "),
+        (["tap", "pub", "nearsub/a/v/desired", "{}", "--raw-hex", "zz"], "nearsub tap pub: --raw-hex 'zz': not hex"),
+        (["tap", "pub", "nearsub/a/v/desired", "[1,2]"], "nearsub tap pub: value '[1,2]': not a JSON object"),
+        (["tap", "echo", "//bad"], "nearsub tap echo: '//bad' is not a key expression: empty chunks"),
+        (["tap", "hz", "a/b*c"], "nearsub tap hz: 'a/b*c' is not a key expression: `*` may only"),
     ],
 )
 def test_bad_input_gets_one_line_and_exit_2(runtime_dir, argv, message):
@@ -97,8 +125,30 @@ def test_bad_input_gets_one_line_and_exit_2(runtime_dir, argv, message):
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
-        (["envelope", "--grid", "forty"], "argument --grid: wants NxM (e.g. 40x20), got 'forty'"),
+        (["envelope", "--grid", "forty"], "argument --grid: wants NxM"),
         (["swap", "alpha", "helm", "--with", "period"], "argument --with: item 'period' is not key=value"),
+        (["log", "play", "x.mcap", "--from", "nan"], "argument --from: wants a finite number >= 0, got 'nan'"),
+        (["log", "play", "x.mcap", "--from", "inf"], "argument --from: wants a finite number >= 0, got 'inf'"),
+        (["log", "play", "x.mcap", "--to", "inf"], "argument --to: wants a finite number >= 0, got 'inf'"),
+        (["log", "play", "x.mcap", "--warp", "-1"], "argument --warp: wants a finite number >= 0, got '-1'"),
+        (["tap", "hz", "k", "--window", "-3"], "argument --window: wants a whole number >= 2, got '-3'"),
+        (["tap", "hz", "k", "--window", "0"], "argument --window: wants a whole number >= 2, got '0'"),
+        (["tap", "hz", "k", "--duration", "-1"], "argument --duration: wants a finite number > 0, got '-1'"),
+        (["tap", "echo", "k", "--count", "-1"], "argument --count: wants a whole number >= 1, got '-1'"),
+        (["tap", "echo", "k", "--count", "0"], "argument --count: wants a whole number >= 1, got '0'"),
+        (["tap", "echo", "k", "--timeout", "-1"], "argument --timeout: wants a finite number > 0, got '-1'"),
+        (["tap", "list", "--sample", "-1"], "argument --sample: wants a finite number >= 0, got '-1'"),
+        (["tap", "list", "--sample", "nan"], "argument --sample: wants a finite number >= 0, got 'nan'"),
+        (["clock", "alpha", "pause", "--at-step", "-5"], "argument --at-step: wants a whole number >= 1"),
+        (["clock", "alpha", "pause", "--at-step", "1" + "0" * 30], "argument --at-step: wants a whole number >= 1"),
+        (["swap", "alpha", "helm", "--at-step", "1" + "0" * 30], "argument --at-step: wants a whole number >= 1"),
+        (["launch", "m.toml", "--until", "-1"], "argument --until: wants a finite number > 0, got '-1'"),
+        (["launch", "m.toml", "--warp", "-1"], "argument --warp: wants a finite number >= 0, got '-1'"),
+        (["launch", "m.toml", "--foxglove-port", "-1"], "argument --foxglove-port: wants a whole number >= 0"),
+        (["bench", "pipeline", "--repeats", "0"], "argument --repeats: wants a whole number >= 1, got '0'"),
+        (["bench", "helm", "--repeats", "-1"], "argument --repeats: wants a whole number >= 1, got '-1'"),
+        (["bench", "envelope", "--duration", "-1"], "argument --duration: wants a finite number > 0, got '-1'"),
+        (["bench", "envelope", "--sample", "0"], "argument --sample: wants a whole number >= 1, got '0'"),
     ],
 )
 def test_a_malformed_option_value_is_named_by_argparse(argv, message):

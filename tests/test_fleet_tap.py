@@ -33,11 +33,14 @@ def test_tap_lists_the_vehicles_and_echoes_one_of_them(fleet_log, runtime_dir, c
              "--json"),
             ("tap", "list", "--community", community, "--vehicle", "alfa", "--json"),
             ("tap", "list", "--community", community, "--vehicle", "zulu"),
+            ("tap", "echo", f"nearsub/{community}/*/state", "--vehicle", "zulu", "--community", community,
+             "--count", "1", "--timeout", "2"),
+            ("tap", "hz", f"nearsub/{community}/**", "--vehicle", "zulu", "--community", community, "--duration", "1"),
         ]  # fmt: skip
         # The taps run at once, each its own process: one start-up timeout per concurrent process.
         with ThreadPoolExecutor(len(calls)) as pool:
             runs = pool.map(lambda call: nearsub(*call, timeout=len(calls) * STARTUP + STEP), calls)
-            echo, listed, hz, only, unknown = runs
+            echo, listed, hz, only, unknown, unknown_echo, unknown_hz = runs
     finally:
         stop([player])
     assert echo.returncode == 0, echo.stderr
@@ -53,7 +56,10 @@ def test_tap_lists_the_vehicles_and_echoes_one_of_them(fleet_log, runtime_dir, c
     assert rows[f"nearsub/{community}/bravo/state"]["vehicle"] == "bravo"
     assert only.returncode == 0, only.stderr
     assert {row["vehicle"] for row in json.loads(only.stdout)["topics"]} == {"alfa"}
-    assert unknown.returncode == 2 and "--vehicle zulu: no such vehicle (seen: alfa, bravo)" in unknown.stderr
+    for refused, command in ((unknown, "list"), (unknown_echo, "echo"), (unknown_hz, "hz")):
+        assert refused.returncode == 2 and refused.stderr == (
+            f"nearsub tap {command}: --vehicle zulu: no such vehicle (seen: alfa, bravo)\n"
+        ), refused.stderr
 
 
 def test_play_of_one_vehicle_replays_its_keys_and_the_mission_wide_ones(fleet_log, runtime_dir, community):

@@ -103,10 +103,11 @@ def test_tap_finds_the_replay_by_name_with_a_window_and_a_warp(log, runtime_dir,
 @pytest.mark.parametrize(
     "args, named",
     [
-        (["--warp", "-1"], "--warp -1"),
         (["--community", "a b"], "--community 'a b'"),
         (["--topic", "nearsub/other/**"], "--topic nearsub/other/**"),
         (["--from", "5", "--to", "2"], "--to 2"),
+        (["--connect", "garbage"], "connect endpoint 'garbage' is not <protocol>/<address>"),
+        (["--connect", "tcp/127.0.0.1:99999"], "connect endpoint 'tcp/127.0.0.1:99999' needs a port 1-65535"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(log, runtime_dir, args, named):

@@ -62,3 +62,8 @@ def number(
 
     parse.__name__ = "number"
     return parse
+
+
+# A step number: a mission has at most 10**12 steps (common/mission/schema.py, MAX_STEPS, which
+# this light module does not import), far inside the 64-bit integers msgpack carries.
+STEP = integer(minimum=1, maximum=10**12)

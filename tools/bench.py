@@ -22,6 +22,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from . import moos_alpha
+from .arguments import integer, number
 from .envelope import grid_size
 from .errors import InputError
 
@@ -37,14 +38,16 @@ def add_parser(subparsers) -> None:
     b = p.add_subparsers(dest="bench_command", required=True)
     t = b.add_parser("pipeline", help="lock-stepped steps per second, CPU per app, start-up and shutdown")
     t.add_argument("--mission", default=None, help="one mission file (default: alpha and overtake_stern_nuv)")
-    t.add_argument("--repeats", type=int, default=3)
+    t.add_argument("--repeats", type=integer(minimum=1), default=3)
     t.add_argument(
         "--vehicles",
         type=vehicle_counts,
         metavar="N,N,...",
         help="instead: fleets of N REMUS 100s flying copies of alpha, e.g. 1,4,16 (steps/s, CPU per vehicle-step)",
     )
-    t.add_argument("--fleet-time", type=float, default=60.0, metavar="T", help="simulated seconds of each fleet run")
+    t.add_argument(
+        "--fleet-time", type=number(above=0.0), default=60.0, metavar="T", help="simulated seconds of each fleet run"
+    )
     t.add_argument(
         "--set",
         action="append",
@@ -249,11 +252,15 @@ def add_envelope_bench_parser(bench_subparsers) -> None:
     t = bench_subparsers.add_parser("envelope", help="envelope wall time, vehicle-steps/s, speed-up, thesis set")
     t.add_argument("--vehicle", default="remus100", help="vehicle of the timed envelope (default remus100)")
     t.add_argument("--grid", type=grid_size, default=(40, 20), metavar="NxM", help="cells (default 40x20 = 800)")
-    t.add_argument("--duration", type=float, default=120.0, help="simulated seconds per cell (default 120)")
-    t.add_argument("--repeats", type=int, default=3, help="timed envelopes (default 3)")
-    t.add_argument("--sample", type=int, default=10, help="cells flown one by one in-process (default 10)")
+    t.add_argument("--duration", type=number(above=0.0), default=120.0, help="simulated seconds per cell (default 120)")
+    t.add_argument("--repeats", type=integer(minimum=1), default=3, help="timed envelopes (default 3)")
+    t.add_argument(
+        "--sample", type=integer(minimum=1), default=10, help="cells flown one by one in-process (default 10)"
+    )
     t.add_argument("--skip-thesis", action="store_true", help="do not time the --thesis-figures set")
-    t.add_argument("--workers", type=int, help="time the thesis set on a local Dask cluster of N workers")
+    t.add_argument(
+        "--workers", type=integer(minimum=1), help="time the thesis set on a local Dask cluster of N workers"
+    )
     t.add_argument("--json", action="store_true")
     t.set_defaults(func=bench_envelope)
 

@@ -7,6 +7,7 @@ import math
 import sys
 import uuid
 
+from .arguments import STEP
 from .connect import add_router_argument, open_bus
 
 
@@ -15,7 +16,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("community", help="mission name")
     p.add_argument("action", choices=("status", "pause", "resume", "warp"))
     p.add_argument("warp", nargs="?", type=float, help="with warp: simulated seconds per wall second (0: flat out)")
-    p.add_argument("--at-step", type=int, help="with pause: pause when the clock reaches this step")
+    p.add_argument("--at-step", type=STEP, help="with pause: pause when the clock reaches this step")
     p.add_argument("--json", action="store_true", help="the reply as JSON (the default when piped)")
     add_router_argument(p)
     p.set_defaults(func=clock_command)

@@ -13,6 +13,9 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+from .view import PORT
+
+FOXGLOVE_PORT = 8765  # Foxglove's default
 REPUBLISH = 2.0  # wall seconds between repeats of the fixed scene, for clients that join late
 
 
@@ -20,7 +23,10 @@ def add_parser(subparsers) -> None:
     p = subparsers.add_parser("foxglove", help="serve a running mission to Foxglove (WebSocket, 127.0.0.1)")
     p.add_argument("community", metavar="MISSION_NAME", help="a running mission's name")
     p.add_argument(
-        "--port", type=int, default=8765, help="TCP port on 127.0.0.1 (default 8765, Foxglove's; 0: a free one)"
+        "--port",
+        type=PORT,
+        default=FOXGLOVE_PORT,
+        help="TCP port on 127.0.0.1 (default 8765, Foxglove's; 0: a free one)",
     )
     p.add_argument("--connect", action="append", metavar="ENDPOINT", help="router endpoint instead of the registry")
     p.add_argument("--run", metavar="RUN.json", help="the launcher's run file instead of the registry")
@@ -137,9 +143,8 @@ def serve_mission(bus, community: str, mission, port: int, ready) -> None:
 
 
 def foxglove_command(args) -> int:
-    from .view import check_port, mission_endpoints
+    from .view import mission_endpoints
 
-    check_port(args.port)
     endpoints, mission, _, credentials = mission_endpoints(args.community, args.connect, args.run)
     from nearsub.common.runtime.bus import Bus, Endpoints
 

@@ -7,12 +7,14 @@ import json
 import time
 from pathlib import Path
 
+from .arguments import integer
+
 RECOVERY = Path(__file__).resolve().parents[1] / "missions" / "recovery.toml"
 
 
 def add_bench_parser(bench_subparsers) -> None:
     t = bench_subparsers.add_parser("helm", help="arbitration cost per decision, and a helm iteration's")
-    t.add_argument("--repeats", type=int, default=2000, help="decisions timed per case")
+    t.add_argument("--repeats", type=integer(minimum=1), default=2000, help="decisions timed per case")
     t.add_argument("--json", action="store_true")
     t.set_defaults(func=bench_helm)
 

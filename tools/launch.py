@@ -9,32 +9,38 @@ import zipfile
 from pathlib import Path
 
 from . import registry
+from .arguments import number
+from .errors import InputError
+from .foxglove import FOXGLOVE_PORT
+from .view import PORT
 
 
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("launch")
     p.add_argument("mission", help="mission file (TOML)")
-    p.add_argument("--warp", type=float, help="time warp: 0 = as fast as possible, 1 = real time")
-    p.add_argument("--until", type=float, metavar="T", help="stop after T simulated seconds")
+    p.add_argument("--warp", type=number(minimum=0.0), help="time warp: 0 = as fast as possible, 1 = real time")
+    p.add_argument("--until", type=number(above=0.0), metavar="T", help="stop after T simulated seconds")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a mission setting")
     p.add_argument("--log", default="logs", metavar="DIR", help="folder for logs (default: logs)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("--view", action="store_true", help="also serve the live map in the browser (nearsub view)")
-    p.add_argument("--view-port", type=int, default=0, metavar="N", help="its port on 127.0.0.1 (default: a free one)")
+    p.add_argument("--view-port", type=PORT, metavar="N", help="its port on 127.0.0.1 (default: a free one)")
     p.add_argument("--foxglove", action="store_true", help="also serve the mission to Foxglove (nearsub foxglove)")
-    p.add_argument("--foxglove-port", type=int, default=8765, metavar="N", help="its port on 127.0.0.1 (default 8765)")
+    p.add_argument("--foxglove-port", type=PORT, metavar="N", help="its port on 127.0.0.1 (default 8765)")
     p.set_defaults(func=launch_command)
 
 
 def companions(args) -> list:
     """The servers `--view` and `--foxglove` ask for: each starts from the launcher's run file
-    once the apps are up, and prints where it listens."""
-    from .view import check_port
-
-    wanted = [(tool, port) for tool, on, port in (("view", args.view, args.view_port),
-              ("foxglove", args.foxglove, args.foxglove_port)) if on]  # fmt: skip
-    for _, port in wanted:
-        check_port(port)
+    once the apps are up, and prints where it listens. A port without its server is refused
+    rather than ignored: the user surely wanted the server."""
+    servers = {"view": (args.view, args.view_port, 0), "foxglove": (args.foxglove, args.foxglove_port, FOXGLOVE_PORT)}
+    wanted = []
+    for tool, (on, port, default) in servers.items():
+        if port is not None and not on:
+            raise InputError(f"--{tool}-port {port}: add --{tool}, which serves on it")
+        if on:
+            wanted.append((tool, default if port is None else port))
 
     def starter(tool: str, port: int):
         def start(run_file):
@@ -89,14 +95,17 @@ def launch_command(args) -> int:
 
     extra = companions(args)
     overrides = list(args.set)
-    if args.warp is not None:
-        overrides.append(f"warp={args.warp}")
-    if args.until is not None:
-        overrides.append(f"time_limit={args.until}")
+    typed = {}  # the override each option stands for -> the option as typed, for the error lines
+    for option, key, value in (("--warp", "warp", args.warp), ("--until", "time_limit", args.until)):
+        if value is not None:
+            overrides.append(f"{key}={value}")
+            typed[f"--set {key}={value}:"] = f"{option} {value:g}:"
     try:
         mission = load_mission(args.mission, overrides)
     except MissionError as exc:
-        print(f"nearsub launch: {exc}", file=sys.stderr)
+        text = str(exc)
+        given = next((g for g in typed if text.startswith(g)), None)
+        print(f"nearsub launch: {text if given is None else typed[given] + text[len(given) :]}", file=sys.stderr)
         return 2
     for endpoint in mission.network.connect:
         if problem := endpoint_problem(endpoint):
@@ -114,6 +123,10 @@ def launch_command(args) -> int:
         if problem := model_file_problem(mission.surrogate.model):
             print(f"nearsub launch: surrogate.model = {mission.surrogate.model!r}: {problem}", file=sys.stderr)
             return 2
+    try:  # here, after every other check, so that a file in the way is named as the option
+        Path(args.log).mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"--log {args.log}: cannot make a folder there ({exc.strerror})") from None
     # The claim is held until this process exits; a second launch of the name refuses at once.
     try:
         with registry.claim(mission.name):

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from . import registry
+from .arguments import number
 from .errors import InputError
 
 COMMUNITY_CHARS = "letters, digits, '_' and '-'"
@@ -43,18 +44,33 @@ class Selection:
 
 def add_arguments(t) -> None:
     t.add_argument("log")
-    t.add_argument("--warp", type=float, default=1.0, help="simulated seconds per wall second (0: as fast as possible)")
-    t.add_argument("--from", dest="start", type=float, metavar="T", help="first simulated second to replay")
-    t.add_argument("--to", dest="end", type=float, metavar="T", help="last simulated second to replay")
+    t.add_argument(
+        "--warp",
+        type=number(minimum=0.0),
+        default=1.0,
+        help="simulated seconds per wall second (0: as fast as possible)",
+    )
+    t.add_argument(
+        "--from", dest="start", type=number(minimum=0.0), metavar="T", help="first simulated second to replay"
+    )
+    t.add_argument("--to", dest="end", type=number(minimum=0.0), metavar="T", help="last simulated second to replay")
     t.add_argument("--topic", help="key expression of the logged keys to replay (wildcards * and **)")
     t.add_argument("--vehicle", metavar="NAME", help="replay one vehicle's keys and the mission-wide ones")
     t.add_argument("--community", help="publish under this community name (default: the logged one)")
     t.add_argument("--connect", action="append", metavar="ENDPOINT", help="use this router instead of starting one")
     t.add_argument(
-        "--wait", type=float, default=0.0, metavar="S", help="wait up to S wall seconds for a subscriber before playing"
+        "--wait",
+        type=number(minimum=0.0),
+        default=0.0,
+        metavar="S",
+        help="wait up to S wall seconds for a subscriber before playing",
     )
     t.add_argument(
-        "--linger", type=float, default=1.0, metavar="S", help="keep the bus up S wall seconds after the last message"
+        "--linger",
+        type=number(minimum=0.0),
+        default=1.0,
+        metavar="S",
+        help="keep the bus up S wall seconds after the last message",
     )
 
 
@@ -65,9 +81,13 @@ def select(args) -> Selection:
 
     from .log import topic_filter, vehicle_records
 
-    for name, value in (("--warp", args.warp), ("--wait", args.wait), ("--linger", args.linger)):
-        if not (value >= 0 and value < float("inf")):
-            raise PlayInputError(f"{name} {value:g}: must be a finite number >= 0")
+    if args.connect:  # before a name is claimed; a malformed endpoint is bad input, not a lost bus
+        from nearsub.common.runtime.bus import BusError, check_endpoints
+
+        try:
+            check_endpoints("connect", args.connect)
+        except BusError as exc:
+            raise PlayInputError(str(exc)) from None
     if args.start is not None and args.end is not None and args.end < args.start:
         raise PlayInputError(f"--to {args.end:g}: before --from {args.start:g}")
     if args.community is not None and not COMMUNITY_PATTERN.match(args.community):

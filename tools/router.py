@@ -16,18 +16,21 @@ def add_parser(subparsers) -> None:
 
 
 def router_command(args) -> int:
-    import sys
     from pathlib import Path
 
     from nearsub.apps.router import serve
     from nearsub.common.runtime import credentials
-    from nearsub.common.runtime.bus import BusError
 
-    if args.credentials and not Path(args.credentials).exists():
-        credentials.create(args.credentials)
-        print(f"created {args.credentials}: copy it (mode 0600) to every host that joins", flush=True)
-    try:
-        return serve(args.listen or ["tcp/127.0.0.1:7447"], args.connect, credentials=args.credentials)
-    except BusError as exc:
-        print(f"nearsub router: {exc}", file=sys.stderr)
-        return 2
+    from .errors import InputError
+
+    path = Path(args.credentials) if args.credentials else None
+    if path is not None and path.is_dir():
+        raise InputError(f"--credentials {path}: is a directory, not a credentials file")
+    if path is not None and not path.exists():
+        try:
+            credentials.create(path)
+        except OSError as exc:
+            raise InputError(f"--credentials {path}: cannot create it ({exc.strerror})") from None
+        print(f"created {path}: copy it (mode 0600) to every host that joins", flush=True)
+    # A BusError (a malformed endpoint, a port taken) is printed by the command line: one line, exit 2.
+    return serve(args.listen or ["tcp/127.0.0.1:7447"], args.connect, credentials=args.credentials)

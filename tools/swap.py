@@ -13,7 +13,7 @@ import argparse
 import json
 import sys
 
-from .arguments import integer, number
+from .arguments import STEP, number
 from .connect import add_router_argument, open_bus
 
 
@@ -31,7 +31,7 @@ def add_parser(subparsers) -> None:
     )
     p.add_argument("--behaviour", help="shorthand for --with behaviour=NAME")
     p.add_argument("--vehicle", help="the vehicle whose app to replace (needed when the mission has several)")
-    p.add_argument("--at-step", type=integer(minimum=1), help="swap when the clock reaches this step (default: now)")
+    p.add_argument("--at-step", type=STEP, help="swap when the clock reaches this step (default: now)")
     p.add_argument("--timeout", type=number(above=0.0), default=120.0, help="wall seconds to wait for the swap")
     p.add_argument("--json", action="store_true")
     add_router_argument(p)

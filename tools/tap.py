@@ -7,7 +7,9 @@ import sys
 import time
 from collections import defaultdict, deque
 
+from .arguments import integer, number
 from .connect import add_connect_arguments, open_bus
+from .errors import InputError
 
 
 def add_parser(subparsers) -> None:
@@ -15,24 +17,26 @@ def add_parser(subparsers) -> None:
     tap = p.add_subparsers(dest="tap_command", required=True)
     t = tap.add_parser("list", help="apps alive now, and topics with their message types and rates")
     add_connect_arguments(t)
-    t.add_argument("--sample", type=float, default=1.0, metavar="S", help="wall seconds to measure the rates over")
+    t.add_argument(
+        "--sample", type=number(minimum=0.0), default=1.0, metavar="S", help="wall seconds to measure the rates over"
+    )
     t.add_argument("--json", action="store_true")
     t.add_argument("--vehicle", metavar="NAME", help="only this vehicle's topics (and the apps)")
     t.set_defaults(func=tap_list)
     t = tap.add_parser("echo", help="print messages of a key expression (wildcards * and **)")
     t.add_argument("key")
     t.add_argument("--field", help="print only this field (dotted path)")
-    t.add_argument("--count", type=int, help="stop after N messages")
-    t.add_argument("--timeout", type=float, help="stop after S wall seconds")
+    t.add_argument("--count", type=integer(minimum=1), help="stop after N messages")
+    t.add_argument("--timeout", type=number(above=0.0), help="stop after S wall seconds")
     t.add_argument("--json", action="store_true", help="JSON lines (the default when piped)")
     t.add_argument("--vehicle", metavar="NAME", help="only the keys of this vehicle (nearsub/<c>/NAME/...)")
     add_connect_arguments(t)
     t.set_defaults(func=tap_echo)
     t = tap.add_parser("hz", help="message rates per key, in simulated time")
     t.add_argument("key")
-    t.add_argument("--window", type=int, default=100, help="samples per rate estimate")
+    t.add_argument("--window", type=integer(minimum=2), default=100, help="samples per rate estimate")
     t.add_argument("--vehicle", metavar="NAME", help="only the keys of this vehicle (nearsub/<c>/NAME/...)")
-    t.add_argument("--duration", type=float, default=5.0, help="wall seconds to listen")
+    t.add_argument("--duration", type=number(above=0.0), default=5.0, help="wall seconds to listen")
     t.add_argument("--json", action="store_true")
     add_connect_arguments(t)
     t.set_defaults(func=tap_hz)
@@ -80,6 +84,30 @@ def vehicle_name(key: str) -> str | None:
     return owner[0] if owner else None
 
 
+def publishing_vehicles(bus, community: str | None) -> list[str]:
+    """The vehicles with a publisher now in `community` (None: in any)."""
+    from nearsub.common.runtime import keys
+
+    prefix = keys.community_root(community) + "/" if community else "nearsub/"
+    return sorted(
+        {name for key in bus.admin_keys("publisher") if key.startswith(prefix) and (name := vehicle_name(key))}
+    )
+
+
+def check_vehicle(args, vehicles: list[str]) -> None:
+    """InputError when `--vehicle` names none of `vehicles`."""
+    if args.vehicle is not None and args.vehicle not in vehicles:
+        raise InputError(f"--vehicle {args.vehicle}: no such vehicle (seen: {', '.join(vehicles) or 'none'})")
+
+
+def check_key(key: str) -> None:
+    """InputError naming a key expression Zenoh would refuse (before the bus is opened)."""
+    from nearsub.common.runtime.bus import key_problem
+
+    if problem := key_problem(key):
+        raise InputError(f"{key!r} is not a key expression: {problem}")
+
+
 def other_vehicle(args, key: str) -> bool:
     """A key that `--vehicle` leaves out."""
     return args.vehicle is not None and vehicle_name(key) != args.vehicle
@@ -120,12 +148,7 @@ def tap_list(args) -> int:
         }
         for key in topics
     ]
-    if args.vehicle is not None and args.vehicle not in vehicles:
-        print(
-            f"nearsub tap list: --vehicle {args.vehicle}: no such vehicle (seen: {', '.join(vehicles) or 'none'})",
-            file=sys.stderr,
-        )
-        return 2
+    check_vehicle(args, vehicles)
     if args.json or not sys.stdout.isatty():
         listing = {"apps": apps, "vehicles": vehicles, "topics": rows}
         print(json.dumps(listing | {"publishers": publishers, "subscribers": subscribers}))
@@ -160,12 +183,15 @@ def rate(stamps) -> float:
 
 def tap_echo(args) -> int:
     as_json = args.json or not sys.stdout.isatty()
-    bus, _ = open_bus(args, args.key)
+    check_key(args.key)
+    bus, community = open_bus(args, args.key)
     from nearsub.common.runtime.bus import Mailbox
 
     printed = 0
     deadline = time.monotonic() + args.timeout if args.timeout else None
     with bus:
+        if args.vehicle is not None:
+            check_vehicle(args, publishing_vehicles(bus, community))
         mailbox = Mailbox()
         bus.subscribe(args.key, mailbox)
         while args.count is None or printed < args.count:
@@ -199,13 +225,16 @@ def tap_echo(args) -> int:
 
 def tap_hz(args) -> int:
     """Message rates per key, in simulated time (the message's t), like `ros2 topic hz`."""
-    bus, _ = open_bus(args, args.key)
+    check_key(args.key)
+    bus, community = open_bus(args, args.key)
     from nearsub.common.runtime.bus import Mailbox
 
     times: dict[str, deque] = defaultdict(lambda: deque(maxlen=args.window))
-    deadline = time.monotonic() + args.duration
-    next_report = time.monotonic() + 1.0
     with bus:
+        if args.vehicle is not None:
+            check_vehicle(args, publishing_vehicles(bus, community))
+        deadline = time.monotonic() + args.duration
+        next_report = time.monotonic() + 1.0
         mailbox = Mailbox()
         bus.subscribe(args.key, mailbox)
         while time.monotonic() < deadline:
@@ -248,11 +277,15 @@ def tap_pub(args) -> int:
     from nearsub.common.runtime.lifecycle import OPERATOR, OPERATOR_TOPICS
     from nearsub.common.runtime.messages import VEHICLE_TOPICS, MessageError, decode, encode, model_for_key
 
+    check_key(args.key)
     parts = args.key.split("/")
     leaf = parts[3] if len(parts) == 4 and parts[3] in VEHICLE_TOPICS else None
     operator = leaf in OPERATOR_TOPICS and args.raw_hex is None and not args.no_validate
     if args.raw_hex is not None:
-        payload = bytes.fromhex(args.raw_hex)
+        try:
+            payload = bytes.fromhex(args.raw_hex)
+        except ValueError:
+            raise InputError(f"--raw-hex {args.raw_hex!r}: not hexadecimal bytes (two hex digits a byte)") from None
     else:
         try:
             fields = json.loads(args.value)
@@ -266,6 +299,8 @@ def tap_pub(args) -> int:
             if model is None:
                 print(f"nearsub tap pub: no message schema for key {args.key!r}", file=sys.stderr)
                 return 2
+            if not isinstance(fields, dict):
+                raise InputError(f"value {args.value!r}: not a JSON object of fields")
             fields = {"step": 0, "t": 0.0, "source": OPERATOR if operator else "tap", **fields}
             try:
                 message = decode(msgpack.packb(fields), model, args.key)
@@ -297,10 +332,7 @@ def tap_pub(args) -> int:
         # A fresh session drops data put before it knows a subscriber (docs/design.md, "Transport").
         if not bus.put_when_matched(args.key, payload, wait=5.0):
             if operator:
-                community = "/".join(parts[:2])
-                running = sorted(
-                    {n for k in bus.admin_keys("publisher") if k.startswith(community + "/") and (n := vehicle_name(k))}
-                )
+                running = publishing_vehicles(bus, parts[1])
                 print(
                     f"nearsub tap pub: nobody consumes {args.key}: is vehicle {vehicle!r} running? "
                     f"(vehicles publishing: {', '.join(running) or 'none'})",

@@ -12,13 +12,16 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from .arguments import integer
 from .errors import InputError
+
+PORT = integer(minimum=0, maximum=65535)  # a TCP port; 0: a free one
 
 
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("view", help="live map of a running mission, or replay of a log, in a browser")
     p.add_argument("target", metavar="MISSION_NAME|LOG.mcap", help="a running mission's name, or a log file")
-    p.add_argument("--port", type=int, default=0, help="TCP port on 127.0.0.1 (default: a free one)")
+    p.add_argument("--port", type=PORT, default=0, help="TCP port on 127.0.0.1 (default: a free one)")
     p.add_argument("--connect", action="append", metavar="ENDPOINT", help="router endpoint instead of the registry")
     p.add_argument(
         "--run",
@@ -66,11 +69,6 @@ def start_server_process(tool: str, run_file: str | Path, port: int, timeout: fl
     return process, line.split(": ", 1)[1].strip()
 
 
-def check_port(port: int) -> None:
-    if not 0 <= port <= 65535:
-        raise InputError(f"--port {port} is not a TCP port (0-65535)")
-
-
 def is_log(target: str) -> bool:
     return target.endswith(".mcap") or Path(target).is_file()
 
@@ -98,7 +96,6 @@ def mission_of_run(entry: dict):
 
 
 def view_command(args) -> int:
-    check_port(args.port)
     if is_log(args.target):
         from .log import check_log
 

@@ -65,6 +65,8 @@ DEFAULT_CONNECT_TIMEOUT = 30.0
 LINK_VARIABLE = "NEARSUB_LINK"
 LINKS = ("client", "peer")
 PEER_LISTEN = "tcp/127.0.0.1:0"  # a peer's own listener: loopback, a free port
+IP_PROTOCOLS = ("tcp", "udp", "tls", "quic", "ws")  # Zenoh's links over IP: the address ends in :PORT
+EXAMPLE = "tcp/127.0.0.1:7447"  # the endpoint error messages show
 # Peers link pairwise and a publisher sends to each subscriber itself, so a fleet's mesh grows
 # as the square of its apps and the clock's every tick goes out once per app. Measured with
 # `nearsub bench pipeline --vehicles N` as peers against as clients (one run each, load 17-130):
@@ -121,9 +123,44 @@ def free_tcp_port(host: str = "127.0.0.1") -> int:
         return sock.getsockname()[1]
 
 
+def _split(endpoint: str) -> tuple[str, str]:
+    """(protocol, address) of a Zenoh endpoint, without its ?metadata and #config."""
+    protocol, _, address = endpoint.split("#", 1)[0].split("?", 1)[0].partition("/")
+    return protocol, address
+
+
+def check_endpoints(role: str, endpoints: Iterable[str]) -> list[str]:
+    """The endpoints a session listens on (`role` "listen") or connects to ("connect"); BusError
+    naming the first one Zenoh cannot use. Zenoh's own error names no option and carries its Rust
+    source location, and a client takes a port out of range for a router to retry until its
+    timeout (30 s by default) instead of failing."""
+    endpoints = list(endpoints)
+    lowest = 0 if role == "listen" else 1  # a listener's port 0 is a free one
+    for endpoint in endpoints:
+        try:
+            zenoh.Config().insert_json5(f"{role}/endpoints", json.dumps([endpoint]))
+        except zenoh.ZError:
+            raise BusError(f"{role} endpoint {endpoint!r} is not <protocol>/<address>, e.g. {EXAMPLE}") from None
+        protocol, address = _split(endpoint)
+        _, colon, port = address.rpartition(":")
+        if protocol in IP_PROTOCOLS and not (colon and port.isdigit() and lowest <= int(port) <= 65535):
+            raise BusError(f"{role} endpoint {endpoint!r} needs a port {lowest}-65535, e.g. {EXAMPLE}")
+    return endpoints
+
+
+def key_problem(key: str) -> str | None:
+    """Why `key` is not a Zenoh key expression, in Zenoh's words; None when it is one. For tools
+    to name a bad key before they subscribe (Zenoh's error there reads like a lost bus)."""
+    try:
+        zenoh.KeyExpr(key)
+    except zenoh.ZError as exc:
+        return _reason(exc).rpartition("`: ")[2]
+    return None
+
+
 def is_local(endpoint: str) -> bool:
     """Whether a Zenoh endpoint is on this host: a loopback address, `localhost` or a Unix socket."""
-    protocol, _, address = endpoint.split("#", 1)[0].split("?", 1)[0].partition("/")
+    protocol, address = _split(endpoint)
     if protocol.startswith("unix"):
         return True
     host = address.rsplit(":", 1)[0].strip("[]")
@@ -171,8 +208,8 @@ def make_config(
     conf = zenoh.Config()
     conf.insert_json5("mode", json.dumps(mode))
     conf.insert_json5("scouting/multicast/enabled", json.dumps(multicast_scouting))
-    conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
-    conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
+    conf.insert_json5("listen/endpoints", json.dumps(check_endpoints("listen", listen)))
+    conf.insert_json5("connect/endpoints", json.dumps(check_endpoints("connect", connect)))
     if mode == "peer":
         # Gossip from the router (one hop) names the other peers; link to each of them, and of
         # two peers only the one with the greater Zenoh id dials, so no pair races two handshakes.
