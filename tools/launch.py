@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import ipaddress
 import json
 import sys
 import zipfile
@@ -59,23 +58,6 @@ def companions(args) -> list:
     return [starter(tool, port) for tool, port in wanted]
 
 
-def endpoint_problem(endpoint: str) -> str | None:
-    """Why a `network.connect` endpoint that has the shape of one cannot be an address: a host
-    written as an IP address that is not one (tcp/256.1.1.1:7447, tcp/[::g]:7447). Host names are
-    left to the resolver: one that does not resolve is reported as unreachable."""
-    protocol, _, address = endpoint.partition("/")
-    if protocol == "unixsock-stream":
-        return None
-    host = address.rsplit(":", 1)[0]
-    literal = host[1:-1] if host.startswith("[") and host.endswith("]") else host
-    if host.startswith("[") or literal.replace(".", "").isdigit():
-        try:
-            ipaddress.ip_address(literal)
-        except ValueError:
-            return f"network.connect: {endpoint!r}: {literal!r} is not an IP address"
-    return None
-
-
 def model_file_problem(path: str) -> str | None:
     """Why the mission's surrogate model file cannot be a model file, checked before any app
     starts (a mistyped path otherwise surfaced seconds later as the server's failed start-up);
@@ -107,10 +89,6 @@ def launch_command(args) -> int:
         given = next((g for g in typed if text.startswith(g)), None)
         print(f"nearsub launch: {text if given is None else typed[given] + text[len(given) :]}", file=sys.stderr)
         return 2
-    for endpoint in mission.network.connect:
-        if problem := endpoint_problem(endpoint):
-            print(f"nearsub launch: {problem}", file=sys.stderr)
-            return 2
     if mission.network.credentials:
         from nearsub.common.runtime.credentials import CredentialsError, load
 

@@ -22,14 +22,12 @@ from nearsub.common.physics import dynamics
 from nearsub.common.physics.vehicles import Vehicle, get_vehicle
 from nearsub.common.runtime import keys
 from nearsub.common.runtime.clock import MAX_WARP
+from nearsub.common.runtime.endpoints import endpoint_problem
 from nearsub.common.runtime.lifecycle import Fleet, Schedule
 from nearsub.common.runtime.messages import describe_validation_error
 
 COMMUNITY_PATTERN = re.compile(r"^[A-Za-z0-9_\-]+$")
 # A Zenoh locator as a mission may name it: protocol/address, with a port for the IP protocols.
-ENDPOINT_PATTERN = re.compile(
-    r"^(?:(?:tcp|udp|tls|quic|ws)/(?:\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.\-]+):\d{1,5}|unixsock-stream/\S+)$"
-)
 
 
 def _key_chunk(value: str) -> str:
@@ -78,11 +76,8 @@ class Network(Strict):
     @classmethod
     def _locators(cls, value: list[str]) -> list[str]:
         for endpoint in value:
-            if not ENDPOINT_PATTERN.match(endpoint):
-                raise ValueError(f"{endpoint!r} is not a Zenoh endpoint such as 'tcp/192.0.2.10:7447'")
-            port = endpoint.rsplit(":", 1)[-1]
-            if port.isdigit() and not 0 < int(port) < 65536:
-                raise ValueError(f"{endpoint!r}: port {port} is outside 1-65535")
+            if problem := endpoint_problem(endpoint):
+                raise ValueError(problem)
         return value
 
 

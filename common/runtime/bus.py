@@ -50,6 +50,7 @@ from typing import Any
 import zenoh
 
 from . import credentials as mission_credentials
+from .endpoints import endpoint_problem, split
 
 ENCODING = "application/msgpack"
 
@@ -65,8 +66,6 @@ DEFAULT_CONNECT_TIMEOUT = 30.0
 LINK_VARIABLE = "NEARSUB_LINK"
 LINKS = ("client", "peer")
 PEER_LISTEN = "tcp/127.0.0.1:0"  # a peer's own listener: loopback, a free port
-IP_PROTOCOLS = ("tcp", "udp", "tls", "quic", "ws")  # Zenoh's links over IP: the address ends in :PORT
-EXAMPLE = "tcp/127.0.0.1:7447"  # the endpoint error messages show
 # Peers link pairwise and a publisher sends to each subscriber itself, so a fleet's mesh grows
 # as the square of its apps and the clock's every tick goes out once per app. Measured with
 # `nearsub bench pipeline --vehicles N` as peers against as clients (one run each, load 17-130):
@@ -123,28 +122,21 @@ def free_tcp_port(host: str = "127.0.0.1") -> int:
         return sock.getsockname()[1]
 
 
-def _split(endpoint: str) -> tuple[str, str]:
-    """(protocol, address) of a Zenoh endpoint, without its ?metadata and #config."""
-    protocol, _, address = endpoint.split("#", 1)[0].split("?", 1)[0].partition("/")
-    return protocol, address
-
-
 def check_endpoints(role: str, endpoints: Iterable[str]) -> list[str]:
     """The endpoints a session listens on (`role` "listen") or connects to ("connect"); BusError
-    naming the first one Zenoh cannot use. Zenoh's own error names no option and carries its Rust
-    source location, and a client takes a port out of range for a router to retry until its
-    timeout (30 s by default) instead of failing."""
+    naming the first one that cannot be used (`endpoints.endpoint_problem`, then Zenoh's own
+    parse). Zenoh's error names no option and carries its Rust source location, and a client
+    takes a port out of range for a router to retry until its timeout (30 s by default)."""
     endpoints = list(endpoints)
-    lowest = 0 if role == "listen" else 1  # a listener's port 0 is a free one
     for endpoint in endpoints:
-        try:
-            zenoh.Config().insert_json5(f"{role}/endpoints", json.dumps([endpoint]))
-        except zenoh.ZError:
-            raise BusError(f"{role} endpoint {endpoint!r} is not <protocol>/<address>, e.g. {EXAMPLE}") from None
-        protocol, address = _split(endpoint)
-        _, colon, port = address.rpartition(":")
-        if protocol in IP_PROTOCOLS and not (colon and port.isdigit() and lowest <= int(port) <= 65535):
-            raise BusError(f"{role} endpoint {endpoint!r} needs a port {lowest}-65535, e.g. {EXAMPLE}")
+        problem = endpoint_problem(endpoint, listen=role == "listen")
+        if problem is None:
+            try:
+                zenoh.Config().insert_json5(f"{role}/endpoints", json.dumps([endpoint]))
+            except zenoh.ZError as exc:
+                problem = f"{endpoint!r}: {_reason(exc)}"
+        if problem is not None:
+            raise BusError(f"{role} endpoint {problem}")
     return endpoints
 
 
@@ -160,7 +152,7 @@ def key_problem(key: str) -> str | None:
 
 def is_local(endpoint: str) -> bool:
     """Whether a Zenoh endpoint is on this host: a loopback address, `localhost` or a Unix socket."""
-    protocol, address = _split(endpoint)
+    protocol, address = split(endpoint)
     if protocol.startswith("unix"):
         return True
     host = address.rsplit(":", 1)[0].strip("[]")
