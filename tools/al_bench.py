@@ -21,6 +21,10 @@ import os
 from pathlib import Path
 from typing import Any
 
+from .arguments import integer
+from .errors import InputError
+from .outputs import output_folder
+
 _LABELS = {
     "nmmf": "NMMF",
     "myopic": "myopic MF",
@@ -241,7 +245,7 @@ def al_bench_command(args) -> int:
     from nearsub.common.learning.albench import check_request, summarise
 
     methods = tuple(args.methods.split(",")) if args.methods else None
-    out = Path(args.out)
+    out = output_folder(args.out)
     if args.learn_rho:
         out = out / "learned-rho"
     if args.methods:
@@ -250,7 +254,11 @@ def al_bench_command(args) -> int:
         result = read_outputs(args.problem, out)
     else:
         # Bad input is reported in one line before the progress bar starts.
-        check_request(args.problem, args.hf_samples, args.n_lf0, args.n_hf0, methods, tuple(args.reference))
+        _, _, n_hf0 = check_request(
+            args.problem, args.hf_samples, args.n_lf0, args.n_hf0, methods, tuple(args.reference)
+        )
+        if args.hf_samples < n_hf0:  # the budget includes the initial HF design
+            raise InputError(f"--hf-samples {args.hf_samples}: fewer than the initial HF design of {n_hf0} (--n-hf0)")
         # Repeats already in the folder are kept and only the missing ones run.
         previous = read_outputs(args.problem, out) if (out / f"{args.problem}.csv").exists() else None
         result = _run(args, methods, previous, out)
@@ -320,12 +328,12 @@ def add_parser(subparsers) -> None:
     p.add_argument(
         "problem", help="benchmark of thesis sections 2.4-2.5: park, borehole, trebuchet, wing or multi-output"
     )
-    p.add_argument("--repeats", type=int, default=10, help="paired repeats (default 10)")
-    p.add_argument("--hf-samples", type=int, default=50, help="HF budget incl. the initial design")
-    p.add_argument("--jobs", type=int, default=1, help="worker processes")
+    p.add_argument("--repeats", type=integer(minimum=1), default=10, help="paired repeats (default 10)")
+    p.add_argument("--hf-samples", type=integer(minimum=1), default=50, help="HF budget incl. the initial design")
+    p.add_argument("--jobs", type=integer(minimum=1), default=1, help="worker processes")
     p.add_argument("--seed", type=int, default=0, help="base seed: designs, candidates, test set")
-    p.add_argument("--n-lf0", type=int, help="initial LF design size (default 4 (d + 1))")
-    p.add_argument("--n-hf0", type=int, help="initial HF design size (default d + 1)")
+    p.add_argument("--n-lf0", type=integer(minimum=1), help="initial LF design size (default 4 (d + 1))")
+    p.add_argument("--n-hf0", type=integer(minimum=1), help="initial HF design size (default d + 1)")
     p.add_argument("--lookahead", type=int, default=10, help="NMMF temporary LF points (thesis: 10)")
     p.add_argument("--restarts", type=int, default=2, help="optimiser starts per GP refit")
     p.add_argument("--polish", type=int, default=3, help="candidates polished by L-BFGS-B")

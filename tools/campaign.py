@@ -24,6 +24,9 @@ from typing import Any
 
 import numpy as np
 
+from .arguments import integer
+from .outputs import output_file
+
 DEFAULT_STATE = Path("training") / "cfd-campaign.json"
 PROBLEM_NAME = "uuv-submarine-interaction, external HF"
 
@@ -69,6 +72,8 @@ def _save_answers(state: Path, request_index: int, answers: dict[str, list[float
 def _resume(state: Path):
     from nearsub.common.learning.active import Campaign
 
+    if state.is_dir():
+        raise CampaignError(f"--state {state}: is a folder; give the campaign file")
     if not state.exists():
         raise CampaignError(f"no campaign at {state}; start one with `nearsub campaign start --state {state}`")
     try:
@@ -152,15 +157,15 @@ def _report(campaign, state: Path, as_json: bool) -> None:
 def start_command(args) -> int:
     from nearsub.common.learning.active import Campaign
 
-    state = Path(args.state)
+    state = output_file(args.state, "--state", parents=True)
     if state.exists() and not args.restart:
         raise CampaignError(f"{state} exists; continue it with `nearsub campaign next` or pass --restart")
-    state.parent.mkdir(parents=True, exist_ok=True)
-    _answers_path(state).unlink(missing_ok=True)
     try:
         settings = nmmf_settings(args)
     except ValueError as exc:
         raise CampaignError(f"settings: {exc}") from None
+    state.parent.mkdir(parents=True, exist_ok=True)
+    _answers_path(state).unlink(missing_ok=True)
     campaign = Campaign(_problem(), settings, path=state)
     run_low_fidelity(campaign)
     print(f"started {state}: NMMF, {args.budget} HF samples, the first {args.n_hf0} as one design", file=sys.stderr)
@@ -231,7 +236,7 @@ def export_command(args) -> int:
     if campaign.model is None:
         raise CampaignError(f"{state}: no model yet: the initial HF design is not complete")
     high_fidelity = f"user-supplied simulations recorded with `nearsub campaign tell` ({state})"
-    n_hf, n_lf = write_campaign_model(Path(args.out), campaign, state, high_fidelity)
+    n_hf, n_lf = write_campaign_model(output_file(args.out, "--out", parents=True), campaign, state, high_fidelity)
     status = "complete" if campaign.done else f"in progress, {campaign.settings.hf_budget - n_hf} HF samples to go"
     print(f"wrote {args.out} ({n_hf} HF and {n_lf} LF samples; campaign {status})")
     return 0
@@ -241,6 +246,9 @@ def nmmf_settings(args):
     """The thesis's training settings (NMMF, maximum-variance selection (2.31)) with the design
     options of `add_design_arguments`. Raises ValueError for inconsistent sizes."""
     from nearsub.common.learning.active import CampaignSettings
+
+    if args.budget < args.n_hf0:  # the initial HF design is asked for whole, before any budget check
+        raise ValueError(f"--budget {args.budget}: smaller than the initial HF design (--n-hf0 {args.n_hf0})")
 
     return CampaignSettings(
         method="nmmf",
@@ -254,10 +262,17 @@ def nmmf_settings(args):
 
 def add_design_arguments(p) -> None:
     """--budget, --seed, --n-lf0, --n-hf0: the options `nmmf_settings` reads."""
-    p.add_argument("--budget", type=int, default=100, help="high-fidelity samples (default 100, as the thesis)")
+    p.add_argument(
+        "--budget",
+        type=integer(minimum=1),
+        default=100,
+        help="high-fidelity samples in all, the initial design included (default 100, as the thesis)",
+    )
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--n-lf0", type=int, default=30, help="initial low-fidelity design")
-    p.add_argument("--n-hf0", type=int, default=10, help="initial high-fidelity design (nested in the LF one)")
+    p.add_argument("--n-lf0", type=integer(minimum=1), default=30, help="initial low-fidelity design")
+    p.add_argument(
+        "--n-hf0", type=integer(minimum=1), default=10, help="initial high-fidelity design (nested in the LF one)"
+    )
 
 
 def write_campaign_model(out: Path, campaign, state: Path, high_fidelity: str) -> tuple[int, int]:

@@ -4,8 +4,8 @@
     nearsub envelope --vehicle small medium large --sea-state 0 6 --workers 2    # a sweep
     nearsub envelope --compare A.json B.json -o compare.png
     nearsub envelope --vehicle sdv --cell-mission=-0.3,0.065 -o cell.toml   # replay one cell
-    nearsub envelope --thesis-figures [--scheduler tcp://HOST:8786]
-    nearsub envelope --thesis-figures --reuse   # draw from OUT/data, flying only what is missing
+    nearsub envelope --thesis-figures [--scheduler tcp://HOST:8786]   # into ./thesis-envelopes
+    nearsub envelope --thesis-figures --reuse [DIR]   # draw from DIR (OUT/data), flying only what is missing
     nearsub envelope --vehicle sdv --samples 32 [--sample-seed 0] [--wave-phase random]   # P(outcome)
 
 Every option that describes the conditions takes several values; their combinations make a sweep,
@@ -21,7 +21,13 @@ import itertools
 import json
 import sys
 import time
+from contextlib import contextmanager
 from pathlib import Path
+
+from .arguments import integer, number
+from .errors import InputError
+from .outputs import output_file, output_folder
+from .schedulers import scheduler_address
 
 # numpy, matplotlib, rich and the envelope core are imported when a command runs, so that the
 # parser builds at once.
@@ -30,7 +36,7 @@ from pathlib import Path
 COLOURS = ("#4daf4a", "#ffd92f", "#ff7f00", "#e41a1c", "#d9d9d9")
 LABELS = ("safe", "large stray", "close call", "collision", "starts in the hull")
 HULL_COLOUR = "#4d4d4d"
-THESIS_OUT = Path("docs") / "envelopes"
+THESIS_OUT = Path("thesis-envelopes")  # in the working directory; the shipped set is -o docs/envelopes
 
 
 def add_parser(sub) -> None:
@@ -45,41 +51,54 @@ def add_parser(sub) -> None:
     p.add_argument(
         "--d-lead", nargs="+", default=["3"], metavar="D", help="lead distance in UUV lengths (3 or 3L) or metres (4m)"
     )
-    p.add_argument("--gamma", nargs="+", type=float, default=[None], help="N_uv compensation gain (default (6.4))")
+    p.add_argument("--gamma", nargs="+", type=number(), default=[None], help="N_uv compensation gain (default (6.4))")
     p.add_argument("--sea-state", nargs="+", type=int, default=[0], help="thesis table 5.1 (0 = no waves)")
-    p.add_argument("--depth", nargs="+", type=float, default=[50.0], help="operating depth [m]")
-    p.add_argument("--u-sub", nargs="+", type=float, default=[1.5], help="submarine speed [m/s]")
-    p.add_argument("--u-ot", nargs="+", type=float, default=[0.0], help="overtaking speed [m/s]")
+    p.add_argument("--depth", nargs="+", type=number(), default=[50.0], help="operating depth [m]")
+    p.add_argument("--u-sub", nargs="+", type=number(), default=[1.5], help="submarine speed [m/s]")
+    p.add_argument("--u-ot", nargs="+", type=number(), default=[0.0], help="overtaking speed [m/s]")
     p.add_argument("--grid", type=grid_size, metavar="NxM", help="cells along R_long x R_lat (default 40x20)")
     p.add_argument("--r-long", type=range_pair, metavar="LO,HI", help="R_long range (default -0.8,0.8)")
     p.add_argument("--r-lat", type=range_pair, metavar="LO,HI", help="R_lat range (default 0.05,0.12)")
-    p.add_argument("--duration", type=float, default=None, help="simulated seconds per cell (default 120)")
-    p.add_argument("--dt", type=float, default=None, help="base step [s] (default 0.1)")
+    p.add_argument("--duration", type=number(), default=None, help="simulated seconds per cell (default 120)")
+    p.add_argument("--dt", type=number(), default=None, help="base step [s] (default 0.1)")
     p.add_argument("--model", default="", help="surrogate model file (default: the shipped model)")
     p.add_argument(
         "-o", "--out", default=None, help="output folder, or FILE.png for one envelope (default: envelopes/)"
     )
     p.add_argument("--compare", nargs=2, metavar=("A.json", "B.json"), help="draw two envelopes side by side")
-    p.add_argument("--thesis-figures", action="store_true", help="figures 5-10..5-14 and 6-7..6-11 into docs/envelopes")
+    p.add_argument(
+        "--thesis-figures",
+        action="store_true",
+        help=f"figures 5-10..5-14 and 6-7..6-11 into -o (default ./{THESIS_OUT}; the shipped set: -o docs/envelopes)",
+    )
     p.add_argument(
         "--cell-mission",
-        type=range_pair,
+        type=point,
         metavar="R_LONG,R_LAT",
         help="write the mission file of the cell starting there (to replay it with nearsub launch) and stop",
     )
     p.add_argument("--figure", nargs="+", metavar="N", help="with --thesis-figures: only these (e.g. 5-10 6-7)")
     p.add_argument(
         "--reuse",
-        action="store_true",
-        help="with --thesis-figures: read the configurations stored in OUT/data instead of flying them "
-        "(delete a JSON to fly it again)",
+        nargs="?",
+        const="",
+        metavar="DIR",
+        help="with --thesis-figures: read the configurations stored in DIR (default OUT/data; the shipped ones: "
+        "docs/envelopes/data) instead of flying them (delete a JSON to fly it again)",
     )
-    p.add_argument("--scheduler", metavar="ADDRESS", help="run the sweep on this Dask scheduler (tcp://host:8786)")
-    p.add_argument("--workers", type=int, metavar="N", help="run the sweep on a local Dask cluster of N processes")
+    p.add_argument(
+        "--scheduler",
+        type=scheduler_address,
+        metavar="ADDRESS",
+        help="run the sweep on this Dask scheduler (tcp://host:8786)",
+    )
+    p.add_argument(
+        "--workers", type=integer(minimum=1), metavar="N", help="run the sweep on a local Dask cluster of N processes"
+    )
     p.add_argument("--json", action="store_true", help="print the summaries (fractions) as JSON lines")
     p.add_argument(
         "--samples",
-        type=int,
+        type=integer(minimum=1),
         metavar="K",
         help="fly every cell under K posterior samples of the surrogate's residual: P(outcome) per cell",
     )
@@ -91,32 +110,71 @@ def add_parser(sub) -> None:
 
 
 # --------------------------------------------------------------------------------- options
-def range_pair(text: str) -> tuple[float, float]:
-    """'LO,HI' -> (LO, HI), for argparse."""
+def point(text: str) -> tuple[float, float]:
+    """'A,B' -> (A, B), both finite, for argparse."""
+    finite = number()
     try:
-        low, high = (float(v) for v in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"wants LO,HI, got {text!r}") from None
+        a, b = (finite(v) for v in text.split(","))
+    except (ValueError, argparse.ArgumentTypeError):
+        raise argparse.ArgumentTypeError(f"wants two finite numbers A,B, got {text!r}") from None
+    return a, b
+
+
+def range_pair(text: str) -> tuple[float, float]:
+    """'LO,HI' -> (LO, HI), finite with LO < HI, for argparse."""
+    try:
+        low, high = point(text)
+    except argparse.ArgumentTypeError:
+        low = high = None
+    if low is None or not low < high:
+        raise argparse.ArgumentTypeError(f"wants LO,HI, finite with LO < HI, got {text!r}")
     return low, high
 
 
 def grid_size(text: str) -> tuple[int, int]:
-    """'NxM' -> (N, M), for argparse."""
+    """'NxM' -> (N, M), each at least 1, for argparse."""
     try:
         n_long, n_lat = (int(v) for v in text.lower().split("x"))
     except ValueError:
-        raise argparse.ArgumentTypeError(f"wants NxM (e.g. 40x20), got {text!r}") from None
+        n_long = n_lat = 0
+    if n_long < 1 or n_lat < 1:
+        raise argparse.ArgumentTypeError(f"wants NxM of whole numbers >= 1 (e.g. 40x20), got {text!r}")
     return n_long, n_lat
 
 
 def d_lead_lengths(text: str, vehicle: str) -> float:
-    """'3' or '3L' -> 3 UUV lengths; '4m' -> 4 m in UUV lengths."""
+    """'3' or '3L' -> 3 UUV lengths; '4m' -> 4 m in UUV lengths (the bounds are EnvelopeConfig's)."""
     from nearsub.common.physics.vehicles import get_vehicle
 
-    text = text.strip()
-    if text.lower().endswith("m"):
-        return float(text[:-1]) / get_vehicle(vehicle).length
-    return float(text[:-1] if text.upper().endswith("L") else text)
+    number_text = text.strip()
+    metres = number_text.lower().endswith("m")
+    if metres or number_text.upper().endswith("L"):
+        number_text = number_text[:-1]
+    try:
+        value = number()(number_text)
+    except argparse.ArgumentTypeError:
+        raise InputError(f"--d-lead {text}: wants a finite number of UUV lengths (3, 3L) or metres (4m)") from None
+    return value / get_vehicle(vehicle).length if metres else value
+
+
+def envelope_config(**fields):
+    """An EnvelopeConfig whose template mission validates: a bad value is one line naming its
+    option (the schemas' own bounds; the mission's for what only a mission checks)."""
+    from pydantic import ValidationError
+
+    from nearsub.common.analysis import envelope as env
+    from nearsub.common.mission.schema import MissionError
+
+    try:
+        config = env.EnvelopeConfig(**fields)
+        env.cell_mission(config, 0.0, 0.0)
+    except ValidationError as exc:
+        item = exc.errors()[0]
+        option = "--" + str(item["loc"][0]).replace("_", "-")
+        raise InputError(f"{option} {item['input']}: {item['msg']}") from None
+    except MissionError as exc:
+        raise InputError(str(exc)) from None
+    return config
 
 
 def shared_settings(args) -> dict:
@@ -134,7 +192,6 @@ def shared_settings(args) -> dict:
 
 def configs_from_args(args) -> list:
     """The cartesian product of the condition options (EnvelopeConfig each)."""
-    from nearsub.common.analysis import envelope as env
     from nearsub.common.mission.schema import BEHAVIOURS
     from nearsub.common.physics.vehicles import get_vehicle
 
@@ -146,7 +203,7 @@ def configs_from_args(args) -> list:
         args.vehicle, args.behaviour, args.d_lead, args.gamma, args.sea_state, args.depth, args.u_sub, args.u_ot
     ):
         configs.append(
-            env.EnvelopeConfig(
+            envelope_config(
                 vehicle=get_vehicle(vehicle).name,
                 behaviour=behaviour,
                 d_lead=d_lead_lengths(d_lead, vehicle),
@@ -287,12 +344,26 @@ def _progress():
     return Progress(*columns, console=None, disable=not sys.stderr.isatty(), transient=False)
 
 
+@contextmanager
+def model_errors():
+    """A --model file that cannot be read, or that the increment mode has no free-stream table for
+    (a model from `train --data`): one line naming it (the errors' texts do), from wherever its
+    first cell ran."""
+    from nearsub.common.surrogate.interaction import IncrementError
+    from nearsub.common.surrogate.modelfile import ModelFileError
+
+    try:
+        yield
+    except (ModelFileError, IncrementError) as exc:
+        raise InputError(str(exc)) from None
+
+
 def run_configs(configs: list, args) -> list:
     """One envelope in this process with a bar over its steps; several as a sweep with a bar over
     configurations (on Dask with --workers or --scheduler)."""
     from nearsub.common.analysis import envelope as env
 
-    with _progress() as progress:
+    with model_errors(), _progress() as progress:
         if len(configs) == 1 and not (args.workers or args.scheduler):
             n_long, n_lat = configs[0].grid
             task = progress.add_task(f"{n_long * n_lat} cells, steps", total=None)
@@ -324,8 +395,7 @@ def envelope_command(args) -> int:
         return cell_mission_command(configs, args)
     if args.samples is not None or args.wave_phase != "fixed":
         return sampled_command(configs, args)
-    out = Path(args.out or "envelopes")
-    single_file = len(configs) == 1 and out.suffix.lower() in (".png", ".json", ".csv")
+    out, single_file = envelope_output(args, configs)
     started = time.perf_counter()
     envelopes = run_configs(configs, args)
     for envelope in envelopes:
@@ -342,6 +412,14 @@ def envelope_command(args) -> int:
     return 0
 
 
+def envelope_output(args, configs: list) -> tuple[Path, bool]:
+    """-o checked before any cell flies: STEM.png|json|csv for one envelope, else a folder."""
+    out = Path(args.out or "envelopes")
+    if len(configs) == 1 and out.suffix.lower() in (".png", ".json", ".csv"):
+        return output_file(out, parents=True), True
+    return output_folder(out), False
+
+
 def cell_mission_command(configs: list, args) -> int:
     """One TOML mission per configuration: the cell whose UUV starts at (R_long, R_lat)."""
     from nearsub.common.analysis import envelope as env
@@ -349,8 +427,10 @@ def cell_mission_command(configs: list, args) -> int:
 
     r_long, r_lat = args.cell_mission
     out = Path(args.out or "envelopes")
+    single_file = out.suffix == ".toml" and len(configs) == 1
+    output_file(out, parents=True) if single_file else output_folder(out)
     for config in configs:
-        path = out if out.suffix == ".toml" and len(configs) == 1 else out / f"{config.slug()}_cell.toml"
+        path = out if single_file else out / f"{config.slug()}_cell.toml"
         path.parent.mkdir(parents=True, exist_ok=True)
         data = env.mission_data(config, r_long * L_SUB, r_lat * L_SUB, name="envelope_cell")
         path.write_text(env.mission_toml(data))
@@ -369,7 +449,7 @@ def compare_command(args) -> int:
     out = Path(args.out or "envelope-compare.png")
     if out.suffix.lower() != ".png":
         out = out / "compare.png"
-    out.parent.mkdir(parents=True, exist_ok=True)
+    output_file(out, parents=True).parent.mkdir(parents=True, exist_ok=True)
     draw_panels([(first["label"], first), (second["label"], second)], 2, "Operating envelopes compared", out)
     print(fractions_line(first))
     print(fractions_line(second))
@@ -455,10 +535,9 @@ def sampled_command(configs: list, args) -> int:
         sampling = env.Sampling(args.samples, args.sample_seed, args.wave_phase)
     except ValueError as exc:
         raise LookupError(str(exc)) from None
-    out = Path(args.out or "envelopes")
-    single_file = len(configs) == 1 and out.suffix.lower() in (".png", ".json", ".csv")
+    out, single_file = envelope_output(args, configs)
     for config in configs:
-        with _progress() as progress:
+        with model_errors(), _progress() as progress:
             task = progress.add_task(f"{sampling.samples} x {config.grid[0] * config.grid[1]} cells, steps", total=None)
             envelope = env.sampled_envelope(
                 config,
@@ -497,9 +576,9 @@ def thesis_command(args) -> int:
     per figure, and the fractions table (fractions.md, fractions.csv)."""
     from nearsub.common.analysis import envelope as env
 
-    out = Path(args.out or THESIS_OUT)
-    (out / "data").mkdir(parents=True, exist_ok=True)
+    out = output_folder(args.out or THESIS_OUT)
     overrides = shared_settings(args)
+    envelope_config(**overrides)  # a bad --grid, --duration, ... before anything is written
     figures = env.thesis_figures()
     unknown = set(args.figure or ()) - {f.number for f in figures}
     if unknown:
@@ -508,15 +587,22 @@ def thesis_command(args) -> int:
         return 2
     figures = [f for f in figures if not args.figure or f.number in args.figure]
     configs = env.unique_configs(figures, **overrides)
-    summaries = stored_summaries(configs, out / "data") if args.reuse else {}
+    reuse = None if args.reuse is None else Path(args.reuse or out / "data")
+    if args.reuse and not reuse.is_dir():
+        raise InputError(f"--reuse {reuse}: no such folder")
+    summaries = stored_summaries(configs, reuse) if reuse is not None else {}
     flown = [config for config in configs if config not in summaries]
     started = time.perf_counter()
     envelopes = run_configs(flown, args) if flown else []
     total = time.perf_counter() - started
+    data = out / "data"
+    data.mkdir(parents=True, exist_ok=True)
+    # OUT/data gets what was flown, and a copy of what was read elsewhere, for the next --reuse
+    copied = [] if reuse is None or reuse.resolve() == data.resolve() else list(summaries.items())
     for envelope in envelopes:
-        summary = envelope.summary()
-        summaries[envelope.config] = summary
-        env.save_summary(summary, out / "data" / f"{envelope.config.slug()}.json")
+        summaries[envelope.config] = envelope.summary()
+    for config, summary in copied + [(e.config, summaries[e.config]) for e in envelopes]:
+        env.save_summary(summary, data / f"{config.slug()}.json")
     rows = []
     for figure in figures:
         panels = []
@@ -528,7 +614,7 @@ def thesis_command(args) -> int:
             panels, figure.columns, f"Figure {figure.number}: {figure.title}", out / f"figure-{figure.number}.png"
         )
         print(f"wrote {path}")
-    write_fractions(rows, out)
+    write_fractions(rows, out, [f.number for f in env.thesis_figures()])
     steps = sum(s["vehicle_steps"] for s in (e.summary() for e in envelopes))
     timing = {
         "configurations": len(flown),
@@ -539,7 +625,7 @@ def thesis_command(args) -> int:
         "scheduler": args.scheduler or (f"local cluster, {args.workers} workers" if args.workers else "this process"),
     }
     (out / "timing.json").write_text(json.dumps(timing, indent=1) + "\n")
-    reused = f", {timing['reused']} read from {out / 'data'}" if timing["reused"] else ""
+    reused = f", {timing['reused']} read from {reuse}" if timing["reused"] else ""
     print(f"{len(flown)} envelopes in {total:.1f} s ({timing['vehicle_steps_per_second']} vehicle-steps/s){reused}")
     return 0
 
@@ -558,22 +644,41 @@ def stored_summaries(configs: list, folder: Path) -> dict:
     return found
 
 
-def write_fractions(rows: list[tuple[str, str, dict]], out: Path) -> None:
-    """The safe / stray / close-call / collision fractions of every panel, as CSV and Markdown."""
+def write_fractions(rows: list[tuple[str, str, dict]], out: Path, order: list[str]) -> None:
+    """The safe / stray / close-call / collision fractions of every panel, as CSV and Markdown. The
+    rows of figures this run did not draw stay as the files had them, so a `--figure` run into a
+    full set replaces its own rows only; figures in `order`."""
     from nearsub.common.analysis import envelope as env
     from nearsub.common.analysis.batch import OUTCOMES
 
     names = OUTCOMES[:-1]
-    with (out / "fractions.csv").open("w", newline="") as handle:
+    drawn = {number for number, _, _ in rows}
+    csv_header = ["figure", "panel", "configuration", *names, "feasible_cells"]
+    csv_rows = [
+        [number, caption, env.EnvelopeConfig(**s["config"]).slug(), *(f"{s['fractions'][n]:.3f}" for n in names)]
+        + [s["feasible_cells"]]
+        for number, caption, s in rows
+    ]
+    md_header = ["| figure | panel | safe | large stray | close call | collision |", "|---|---|---:|---:|---:|---:|"]
+    md_rows = [
+        f"| {number} | {caption} | " + " | ".join(f"{100 * s['fractions'][n]:.0f}%" for n in names) + " |"
+        for number, caption, s in rows
+    ]
+    csv_path, md_path = out / "fractions.csv", out / "fractions.md"
+    if csv_path.exists():
+        with csv_path.open(newline="") as handle:
+            csv_rows += [row for row in list(csv.reader(handle))[1:] if row and row[0] not in drawn]
+    if md_path.exists():
+        kept = md_path.read_text().splitlines()[len(md_header) :]
+        md_rows += [line for line in kept if line.split("|")[1].strip() not in drawn]
+
+    def figure_order(number: str) -> int:
+        return order.index(number) if number in order else len(order)
+
+    csv_rows.sort(key=lambda row: figure_order(row[0]))  # stable: a figure's panels keep their order
+    md_rows.sort(key=lambda line: figure_order(line.split("|")[1].strip()))
+    with csv_path.open("w", newline="") as handle:
         writer = csv.writer(handle)
-        writer.writerow(["figure", "panel", "configuration", *names, "feasible_cells"])
-        for number, caption, s in rows:
-            fractions = [f"{s['fractions'][n]:.3f}" for n in names]
-            writer.writerow(
-                [number, caption, env.EnvelopeConfig(**s["config"]).slug(), *fractions, s["feasible_cells"]]
-            )
-    lines = ["| figure | panel | safe | large stray | close call | collision |", "|---|---|---:|---:|---:|---:|"]
-    for number, caption, s in rows:
-        cells = " | ".join(f"{100 * s['fractions'][n]:.0f}%" for n in names)
-        lines.append(f"| {number} | {caption} | {cells} |")
-    (out / "fractions.md").write_text("\n".join(lines) + "\n")
+        writer.writerow(csv_header)
+        writer.writerows(csv_rows)
+    md_path.write_text("\n".join(md_header + md_rows) + "\n")

@@ -12,7 +12,13 @@ from pathlib import Path
 
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("lf-field", help="tabulate the LF's submarine field (the shipped table)")
-    p.add_argument("-o", "--out", type=Path, default=Path("lf-field.npz"), help="output file (default ./lf-field.npz)")
+    p.add_argument(
+        "-o",
+        "--out",
+        type=Path,
+        default=Path("lf-field.npz"),
+        help="output file, .npz added to another name (default ./lf-field.npz)",
+    )
     p.set_defaults(func=lf_field_command)
 
 
@@ -21,7 +27,10 @@ def lf_field_command(args) -> int:
 
     from nearsub.common.hydro import low_fidelity
 
+    from .outputs import numpy_file, output_file
+
+    out = output_file(numpy_file(args.out))  # numpy adds .npz to another name: check and name that file
     table = low_fidelity.tabulate_field()
-    np.savez_compressed(args.out, **table)
-    print(f"wrote {args.out}: {table['x'].size} x {table['r'].size} nodes, LF version {int(table['lf_version'])}")
+    np.savez_compressed(out, **table)
+    print(f"wrote {out}: {table['x'].size} x {table['r'].size} nodes, LF version {int(table['lf_version'])}")
     return 0

@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from .errors import InputError
+from .outputs import output_file, output_folder
 
 if TYPE_CHECKING:
     from nearsub.common.runtime.logfile import LogContents
@@ -34,7 +35,12 @@ def add_parser(subparsers) -> None:
         metavar="NAME",
         help="one vehicle's topics and the mission-wide ones (alog: that vehicle's own alog)",
     )
-    t.add_argument("-o", "--output", help="output file (json, alog, foxglove) or folder (csv)")
+    t.add_argument(
+        "-o",
+        "--output",
+        help="output file (json, alog, foxglove; default stdout, foxglove LOG-foxglove.mcap here); csv: FILE.csv "
+        "for one topic, any other name a folder of one TOPIC.csv per topic (default stdout, one topic)",
+    )
     t.set_defaults(func=export_command)
     t = lg.add_parser("play", help="republish a log onto the bus (uPlayBack, ros2 bag play)")
     from .logplay import add_arguments, play_command
@@ -43,7 +49,7 @@ def add_parser(subparsers) -> None:
     t.set_defaults(func=play_command)
     t = lg.add_parser("plot", help="trajectory in the submarine frame and time series (PNG)")
     t.add_argument("log")
-    t.add_argument("-o", "--output", help="PNG file (default: next to the log)")
+    t.add_argument("-o", "--output", help="PNG file (default: LOG.png, next to the log; .png added to a bare name)")
     t.add_argument("--title")
     t.set_defaults(func=plot_command)
 
@@ -195,25 +201,44 @@ def export_command(args) -> int:
     check_log(Path(args.log))
     if args.format == "foxglove":
         return _export_foxglove(args)
+    output = _export_output(args)
     contents = read_log(args.log)
     records = list(_select(contents, args.topic))
     if args.vehicle is not None:
         records = vehicle_records(contents, args, records)
-    out = open(args.output, "w", newline="") if args.output and args.format != "csv" else sys.stdout
+    if args.format == "csv":
+        return _write_csv(records, output, args.topic)
+    if not records:
+        raise _no_match(args.topic)
+    out = open(output, "w", newline="") if output else sys.stdout
     try:
         if args.format == "json":
             for r in records:
                 out.write(json.dumps({"topic": r.topic, "t": r.sim_time, "value": r.value()}) + "\n")
-        elif args.format == "alog":
+        else:
             from nearsub.common.runtime.alog import write_alog
 
             write_alog(contents, out, records, args.vehicle)
-        else:
-            return _write_csv(records, args.output)
     finally:
         if out is not sys.stdout:
             out.close()
     return 0
+
+
+def _export_output(args) -> Path | None:
+    """The checked -o of an export: a file, or a folder for csv unless it is named *.csv; the
+    default of foxglove is beside the working directory. Never the log itself."""
+    if args.format == "foxglove":
+        args.output = args.output or f"{Path(args.log).stem}-foxglove.mcap"
+    if args.output is None:
+        return None
+    if args.format == "csv" and Path(args.output).suffix.lower() != ".csv":
+        return output_folder(args.output)
+    return output_file(args.output, source=args.log, source_is="the log being exported")
+
+
+def _no_match(topic: str | None) -> InputError:
+    return InputError(f"--topic {topic}: no messages match" if topic else "the log has no messages to export")
 
 
 def _export_foxglove(args) -> int:
@@ -223,9 +248,7 @@ def _export_foxglove(args) -> int:
     if args.topic or args.vehicle:
         option = "--topic" if args.topic else "--vehicle"
         raise InputError(f"{option}: the Foxglove export keeps every topic (the scene needs the states and events)")
-    output = Path(args.output or f"{Path(args.log).stem}-foxglove.mcap")
-    if output.resolve() == Path(args.log).resolve():
-        raise InputError(f"-o {output}: is the log being exported")
+    output = _export_output(args)
     from nearsub.common.mission.schema import MissionError
 
     try:
@@ -236,7 +259,8 @@ def _export_foxglove(args) -> int:
     return 0
 
 
-def _write_csv(records, output: str | None) -> int:
+def _write_csv(records, output: Path | None, topic: str | None) -> int:
+    """One CSV per topic: on stdout or into -o FILE.csv for one topic, else into the folder -o."""
     from nearsub.common.runtime.logfile import INVALID_SUFFIX
     from nearsub.logs import flatten
 
@@ -245,21 +269,19 @@ def _write_csv(records, output: str | None) -> int:
         if not r.topic.endswith(INVALID_SUFFIX):
             by_topic[r.topic].append(flatten(r.value()))
     if not by_topic:
-        print("nearsub log export: no messages match", file=sys.stderr)
-        return 1
-    if output is None and len(by_topic) > 1:
-        print(
-            "nearsub log export: several topics match; pass --topic KEY or -o DIR for one CSV per topic",
-            file=sys.stderr,
-        )
-        return 2
-    for topic, rows in by_topic.items():
+        raise _no_match(topic)
+    one_file = output is None or output.suffix.lower() == ".csv"
+    if one_file and len(by_topic) > 1:
+        where = "" if output is None else f"-o {output}: "
+        raise InputError(f"{where}{len(by_topic)} topics match; pass --topic KEY, or -o DIR for one CSV per topic")
+    if not one_file:
+        output.mkdir(parents=True, exist_ok=True)
+    for name, rows in by_topic.items():
         columns = list(dict.fromkeys(c for row in rows for c in row))
         if output is None:
             target = sys.stdout
         else:
-            Path(output).mkdir(parents=True, exist_ok=True)
-            target = open(Path(output) / (topic.replace("/", "_") + ".csv"), "w", newline="")
+            target = open(output if one_file else output / (name.replace("/", "_") + ".csv"), "w", newline="")
         writer = csv.DictWriter(target, fieldnames=columns)
         writer.writeheader()
         writer.writerows(rows)
@@ -269,11 +291,19 @@ def _write_csv(records, output: str | None) -> int:
 
 
 def plot_command(args) -> int:
+    check_log(Path(args.log))
+    output = Path(args.output) if args.output else Path(args.log).with_suffix(".png")
+    if not output.suffix:  # matplotlib would add .png itself: name the file it writes
+        output = output.with_suffix(".png")
+    output_file(output, source=args.log, source_is="the log being plotted")
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    if output.suffix[1:].lower() not in FigureCanvasBase.get_supported_filetypes():
+        raise InputError(f"-o {output}: not an image type matplotlib writes (give NAME.png)")
     from .plot import plot_log
 
-    check_log(Path(args.log))
     try:
-        out = plot_log(args.log, args.output, args.title)
+        out = plot_log(args.log, output, args.title)
     except (OSError, ValueError) as exc:
         print(f"nearsub log plot: {exc}", file=sys.stderr)
         return 1

@@ -49,6 +49,8 @@ from nearsub.common.surrogate.validation import (
     validation_summary,
 )
 
+from .arguments import integer
+
 # Targets (docs/design.md, "Performance targets"): in-process point and batch, query round trip, fit.
 TARGETS = {
     "lf_in_loop_point_us": 1000.0,
@@ -218,9 +220,13 @@ def info_command(args) -> int:
 
 
 # ------------------------------------------------------------------------------- predict
+POSITIVE_INPUTS = ("u_kn", "d_ratio", "ld_ratio")
+
+
 def parse_point(items: list[str]) -> tuple[str | None, np.ndarray]:
     """[MODEL] NAME=VALUE ... -> (model path or None, the point in INPUT_NAMES order).
-    Raises ValueError naming the unknown, missing or unreadable inputs."""
+    Raises ValueError naming the unknown, missing, unreadable or impossible inputs: a value must be
+    finite, and the speed and hull ratios above zero (the physics divides by them)."""
     model = items[0] if items and "=" not in items[0] else None
     values: dict[str, float] = {}
     for item in items[1:] if model is not None else items:
@@ -231,6 +237,10 @@ def parse_point(items: list[str]) -> tuple[str | None, np.ndarray]:
             values[name] = float(text)
         except ValueError:
             raise ValueError(f"{name}: not a number: {text!r}") from None
+        if not math.isfinite(values[name]):
+            raise ValueError(f"{name}={text}: not a finite number")
+        if name in POSITIVE_INPUTS and not values[name] > 0.0:
+            raise ValueError(f"{name}={text}: must be > 0 (no UUV has that speed or size)")
     missing = [name for name in INPUT_NAMES if name not in values]
     if missing:
         raise ValueError(f"missing inputs: {', '.join(missing)}")
@@ -631,7 +641,12 @@ def add_parser(subparsers) -> None:
 def add_bench_parser(bench_subparsers) -> None:
     """Register `bench surrogate`."""
     t = bench_subparsers.add_parser("surrogate", help="surrogate prediction, query round trip and fit timings")
-    t.add_argument("--repeats", type=int, default=2000, help="timed single-point calls (default 2000)")
-    t.add_argument("--fit-repeats", type=int, default=3, help="timed fits (default 3)")
+    t.add_argument(
+        "--repeats",
+        type=integer(minimum=4),
+        default=2000,
+        help="timed single-point calls (default 2000; at least 4: a quarter times the shipped model)",
+    )
+    t.add_argument("--fit-repeats", type=integer(minimum=1), default=3, help="timed fits (default 3)")
     t.add_argument("--json", action="store_true")
     t.set_defaults(func=bench_surrogate)

@@ -48,6 +48,10 @@ from nearsub.common.surrogate import model as sg
 from nearsub.common.surrogate import training as tr
 from nearsub.common.surrogate.validation import read_number_table
 
+from .arguments import integer
+from .outputs import output_file
+from .schedulers import scheduler_address
+
 DEFAULT_STATE = Path("training") / "hf-samples.csv"
 
 
@@ -102,8 +106,10 @@ def train_command(args) -> int:
         specs = envelope_specs(args)
         if args.compare:
             return compare_command(args, specs)
+        # sobol has no seed points: the adaptive designs' default must not refuse its small budgets
+        n_seed = args.n_seed or (min(tr.DEFAULT_N_SEED, args.budget) if args.design == "sobol" else tr.DEFAULT_N_SEED)
         settings = tr.DesignSettings(
-            design=args.design, budget=args.budget, seed=args.seed, n_seed=args.n_seed, batch=args.batch
+            design=args.design, budget=args.budget, seed=args.seed, n_seed=n_seed, batch=args.batch
         )
         if settings.design == "envelope" and not specs:
             raise ValueError("--design envelope: name the envelope(s) to aim at with --envelope KEY=VALUE,...")
@@ -111,10 +117,8 @@ def train_command(args) -> int:
     except (ValueError, LookupError) as exc:
         print(f"nearsub train: {exc}", file=sys.stderr)
         return 2
-    if args.workers is not None and args.workers < 1:
-        print(f"nearsub train: --workers {args.workers}: need at least 1", file=sys.stderr)
-        return 2
-    state = Path(args.state)
+    out = output_file(args.out or "surrogate.npz", "--out", parents=True)  # never over the shipped model unless asked
+    state = output_file(args.state, "--state", parents=True) if pool is None else Path(args.state)
     if args.restart and pool is None:
         state.unlink(missing_ok=True)
     try:
@@ -150,7 +154,6 @@ def train_command(args) -> int:
     began = time.perf_counter()
     model = tr.fit_model(X, Y, seed=args.seed)
     fit_seconds = time.perf_counter() - began
-    out = Path(args.out or "surrogate.npz")  # never over the shipped model unless asked
     out.parent.mkdir(parents=True, exist_ok=True)
     hf_seconds = sum(store.rows[store._key(x)][1] for x in X)
     where = {"hf_store": tr.file_reference(state)} if pool is None else {}
@@ -337,8 +340,9 @@ def data_command(args) -> int:
     if args.out is None:
         print("nearsub train: --data needs --out MODEL.npz", file=sys.stderr)
         return 2
+    out = output_file(args.out, "--out", parents=True)
     try:
-        rows = fit_from_data(Path(args.data), Path(args.out), seed=args.seed)
+        rows = fit_from_data(Path(args.data), out, seed=args.seed)
     except DataFileError as exc:
         print(f"nearsub train: {exc}", file=sys.stderr)
         return 2
@@ -351,10 +355,21 @@ def add_parser(subparsers) -> None:
     p.add_argument("--design", choices=tr.DESIGNS, default="sobol", help="where the HF runs (default sobol)")
     p.add_argument("--budget", type=int, default=300, help="HF samples (default 300)")
     p.add_argument("--seed", type=int, default=tr.DEFAULT_SEED, help="design seed (0 is the held-out set's)")
-    p.add_argument("--n-seed", type=int, default=tr.DEFAULT_N_SEED, help="space-filling seed points (adaptive designs)")
+    p.add_argument(
+        "--n-seed",
+        type=integer(minimum=2),
+        help=f"space-filling seed points of the adaptive designs (default {tr.DEFAULT_N_SEED})",
+    )
     p.add_argument("--batch", type=int, default=10, help="residual-us picks per round")
-    p.add_argument("--workers", type=int, metavar="N", help="run the HF on a local Dask cluster of N processes")
-    p.add_argument("--scheduler", metavar="ADDRESS", help="run the HF on this Dask scheduler (tcp://host:8786)")
+    p.add_argument(
+        "--workers", type=integer(minimum=1), metavar="N", help="run the HF on a local Dask cluster of N processes"
+    )
+    p.add_argument(
+        "--scheduler",
+        type=scheduler_address,
+        metavar="ADDRESS",
+        help="run the HF on this Dask scheduler (tcp://host:8786)",
+    )
     p.add_argument("--state", default=str(DEFAULT_STATE), help="HF runs CSV, appended as each run finishes")
     p.add_argument("--restart", action="store_true", help="discard the HF runs in --state")
     p.add_argument("--out", help="model file to write (default: ./surrogate.npz; required with --data)")
