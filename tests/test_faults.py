@@ -174,3 +174,5 @@ def test_a_damaged_chunk_of_a_finished_log_is_skipped_and_the_rest_kept(tmp_path
     assert contents.recovered and contents.damage.startswith(f"1 of {len(chunks)} chunks damaged (bytes ")
     assert 0 < 20000 - len(steps) < 20000 / len(chunks) * 2  # one chunk's messages, no more
     assert steps == sorted(steps) and steps[-1] == 19999  # the chunks after it are kept
+    info = nearsub("log", "info", str(path), "--json")
+    assert info.returncode == 0 and json.loads(info.stdout)["damage"] == contents.damage

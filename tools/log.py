@@ -142,6 +142,7 @@ def log_summary(path: Path) -> dict:
     return {
         "file": str(path),
         "recovered": contents.recovered,
+        "damage": contents.damage,
         "messages": len(contents.records),
         "sim_start": min((r.sim_time for r in contents.records), default=0.0),
         "sim_end": max((r.sim_time for r in contents.records), default=0.0),
@@ -168,7 +169,7 @@ def print_summary(summary: dict) -> None:
     from . import tables
 
     outcome = summary["outcome"]
-    recovered = "  (recovered: the file was not finished)" if summary["recovered"] else ""
+    recovered = f"  (recovered: {summary['damage']})" if summary["recovered"] else ""
     caption = f"{summary['messages']} messages, simulated {summary['sim_start']:.2f} .. {summary['sim_end']:.2f} s"
     if outcome:
         caption += f"; {outcome.get('outcome')} after {outcome.get('steps')} steps: {outcome.get('reason', '')}"
