@@ -86,7 +86,11 @@ def test_swap_rejects_a_bad_setting_and_the_mission_goes_on(launches, community)
     process = launches.start(ALPHA, "--set", f"name={community}", "--warp", "10", "--until", "40")
     wait_registered(community)
     swap = nearsub("swap", community, "helm", "--with", "period=0")
-    assert swap.returncode == 1 and "period" in swap.stderr
+    assert swap.returncode == 2, swap.stderr  # bad input: one line naming the setting and its value
+    assert swap.stderr.startswith("nearsub swap: --with: field 'apps.helm.period' = 0: ")
+    assert len(swap.stderr.strip().splitlines()) == 1
+    refused = nearsub("swap", community, "logger")
+    assert refused.returncode == 2 and refused.stderr.startswith("nearsub swap: cannot swap 'logger': only helm, pid")
     code, summary, err = finish(process)
     assert code == 0 and summary["outcome"] == "time_limit" and summary["swaps"] == [], err
 

@@ -80,6 +80,11 @@ class LaunchError(RuntimeError):
         self.app = app
 
 
+class SwapRefused(LaunchError):
+    """A swap request that is wrong in itself (the app, the vehicle, a setting): refused before the
+    clock pauses, and answered as bad input (`nearsub swap` exits 2)."""
+
+
 @dataclass
 class Child:
     instance: str
@@ -711,6 +716,9 @@ class Launcher:
                 None if at is None else int(at),
                 None if vehicle is None else str(vehicle),
             )
+        except SwapRefused as exc:
+            mail.reply(msgpack.packb({"ok": False, "refused": str(exc)}))
+            return
         except LaunchError as exc:
             mail.reply_error(str(exc))
             return
@@ -719,21 +727,21 @@ class Launcher:
     def swap(self, role: str, overrides: list[str], at_step: int | None = None, vehicle: str | None = None) -> dict:
         """Replace `role` (of `vehicle`, which a mission of several vehicles needs) at a step boundary."""
         if role not in ORDER:
-            raise LaunchError(f"cannot swap {role!r}: only {', '.join(ORDER)} can be swapped")
+            raise SwapRefused(f"cannot swap {role!r}: only {', '.join(ORDER)} can be swapped")
         vehicle = self.swapped_vehicle(vehicle)
         app = keys.app_name(vehicle, role)
         old = next(
             (c for c in self.children.values() if c.role == app and not c.retiring and c.process.poll() is None), None
         )
         if old is None:
-            raise LaunchError(f"no running {app} to swap")
+            raise SwapRefused(f"no running {app} to swap")
         prefixed = [o if o.startswith("apps.") else f"apps.{role}.{o}" for o in overrides]
         if vehicle is not None:  # that vehicle's own settings
             prefixed = [f"vehicles.{vehicle}.{o}" for o in prefixed]
         try:
-            mission_from_dict(apply_overrides(self.mission.model_dump(mode="json"), prefixed), "swap")
+            mission_from_dict(apply_overrides(self.mission.model_dump(mode="json"), prefixed), "--with")
         except MissionError as exc:
-            raise LaunchError(str(exc)) from None
+            raise SwapRefused(str(exc)) from None
         wait = self.mission.step_timeout + 5
         if at_step is not None:
             wait += 600.0  # the clock answers when it reaches the step
@@ -771,12 +779,12 @@ class Launcher:
         names = self.mission.vehicle_names
         if not self.mission.fleet:
             if vehicle is not None:
-                raise LaunchError(f"vehicle {vehicle!r}: mission {self.community!r} has no [[vehicles]]")
+                raise SwapRefused(f"vehicle {vehicle!r}: mission {self.community!r} has no [[vehicles]]")
             return None
         if vehicle is None and len(names) > 1:
-            raise LaunchError(f"mission {self.community!r} has several vehicles ({', '.join(names)}): name one")
+            raise SwapRefused(f"mission {self.community!r} has several vehicles ({', '.join(names)}): name one")
         if vehicle is not None and vehicle not in names:
-            raise LaunchError(f"no vehicle named {vehicle!r} (the mission's vehicles: {', '.join(names)})")
+            raise SwapRefused(f"no vehicle named {vehicle!r} (the mission's vehicles: {', '.join(names)})")
         return vehicle or names[0]
 
 

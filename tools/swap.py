@@ -94,5 +94,8 @@ def swap_command(args) -> int:
         print(f"nearsub swap: {payload.decode(errors='replace')}", file=sys.stderr)
         return 1
     result = msgpack.unpackb(payload)
+    if "refused" in result:  # the request itself is wrong (the app, the vehicle, a setting)
+        print(f"nearsub swap: {result['refused']}", file=sys.stderr)
+        return 2
     print(json.dumps(result) if args.json else f"swapped {result['old']} -> {result['new']} at step {result['step']}")
     return 0

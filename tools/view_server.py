@@ -149,6 +149,8 @@ class LiveSource:
         if not ok:
             return {"type": "reply", "cmd": "swap", "ok": False, "text": payload.decode(errors="replace")}
         result = msgpack.unpackb(payload)
+        if "refused" in result:
+            return {"type": "reply", "cmd": "swap", "ok": False, "text": result["refused"]}
         text = f"swapped {result['old']} -> {result['new']} at step {result['step']}"
         return {"type": "reply", "cmd": "swap", "ok": True, "text": text}
 
