@@ -182,7 +182,7 @@ def test_a_local_missions_apps_link_each_to_every_other(launches, community):
     process = launches.start(ALPHA, *[a for s in settings for a in ("--set", s)])
     entry = wait_registered(community, timeout=5 * mission.startup_timeout)
     with Bus(Endpoints("client", tuple(entry["connect"]), credentials=entry["credentials"])) as bus:
-        apps = bus.alive(keys.all_alive(community))
+        apps = bus.alive(keys.all_alive(community), timeout=WAIT)
         assert len(apps) == 6, apps  # logger, sim, pid, helm, clock and the launcher
         peers = {}
         for reply in bus.session.get("@/*/peer", timeout=WAIT):
