@@ -152,6 +152,7 @@ class AppShell:
                 mission.max_steps,
                 recoverable=(ServiceError,),
                 ends_itself=not shared,
+                window=self.lockstep.window,
             )
             pokes = [leaf for leaf, role in OPERATOR_ONLY.items() if role == self.core.role]
             self.input_of_key = {self.input_key(leaf, schedule): leaf for leaf in (*self.core.inputs, *pokes)}
@@ -222,8 +223,8 @@ class AppShell:
                 self.on_input(self.input_of_key[key], payload)
             elif key == self.tick_key:
                 tick = self.decode_or_report(payload, Tick, key)
-                if tick is not None:
-                    stepper.grant(tick.step)
+                if tick is not None and (error := stepper.grant(tick.step)):
+                    self.report_error(error)
             elif key.startswith(self.ack_prefix):
                 ack = self.decode_or_report(payload, Ack, key)
                 if ack is not None and ack.end is not None:

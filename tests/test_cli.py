@@ -112,6 +112,10 @@ def test_an_unknown_subcommand_is_named():
         (["launch", str(ALPHA), "--warp", "1e300"], "nearsub launch: --warp 1e+300: field 'warp' = 1e+300: "),
         (["tap", "pub", "nearsub/a/v/desired", "{}", "--raw-hex", "zz"], "nearsub tap pub: --raw-hex 'zz': not hex"),
         (["tap", "pub", "nearsub/a/v/desired", "[1,2]"], "nearsub tap pub: value '[1,2]': not a JSON object"),
+        (
+            ["tap", "pub", "nearsub/alpha/clock/tick", '{"step": 999999999}'],
+            "nearsub tap pub: nearsub/alpha/clock/tick: a Tick is the lock-step's own",
+        ),
         (["tap", "echo", "//bad"], "nearsub tap echo: '//bad' is not a key expression: empty chunks"),
         (["tap", "hz", "a/b*c"], "nearsub tap hz: 'a/b*c' is not a key expression: `*` may only"),
     ],

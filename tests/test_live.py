@@ -171,3 +171,22 @@ def test_an_operator_steers_a_running_mission_and_the_log_replays_it(launches, c
     unsteered = run_inprocess(build_cores(mission), schedule, mission.dt, mission.max_steps)
     assert logged["remus100/state"][:101] == [encode(m) for m in unsteered.topic("state")][:101]
     assert logged["remus100/state"][102] != encode(unsteered.topic("state")[102])  # it was steered
+
+
+def test_a_forged_tick_far_ahead_is_refused_and_changes_nothing(launches, community):
+    """A Tick granting a step the clock would never grant yet (`tap pub --no-validate`, fault
+    injection) must not let the apps run ahead of the clock: the mission ends as it would have."""
+    process = launches.start(ALPHA, "--set", f"name={community}", "--set", "pause_at_step=100", "--until", "20")
+    wait_registered(community)
+    assert wait_paused(community)["step"] == 100
+    tick = json.dumps({"step": 10**6, "t": 0.0, "source": "clock"})
+    forged = nearsub("tap", "pub", f"nearsub/{community}/clock/tick", tick, "--no-validate")
+    assert forged.returncode == 0, forged.stderr
+    assert nearsub("clock", community, "resume").returncode == 0
+    code, summary, err = finish(process)
+    assert code == 0 and summary["outcome"] == "time_limit" and summary["steps"] == 400, err
+    mission = load_mission(ALPHA, [f"name={community}", "time_limit=20"])
+    reference = run_inprocess(build_cores(mission), Schedule(mission.periods()), mission.dt, mission.max_steps)
+    assert per_topic(log_path(summary))["remus100/state"] == [encode(m) for m in reference.topic("state")]
+    errors = [r.value() for r in read_log(log_path(summary)).records if "/events/" in r.topic]
+    assert any("tick to step 1000000 ignored" in e.get("detail", "") for e in errors)

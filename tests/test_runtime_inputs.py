@@ -91,12 +91,13 @@ def test_pid_shell_receives_only_its_inputs_and_survives_bad_and_future_messages
         bad = 1 + 3000
         for i in range(bad - 1):
             put(key["desired"], b"\xc1" if i % 2 else encode(Desired(step=0, t=0.0, source="tap", u_d=1.0, psi_d=0.0)))
-        put(keys.tick(c), encode(Tick(step=mission.max_steps - 1, t=0.0, source="clock")))
         desired = iter(desireds)
         for state in states[:-1]:  # the last state is the sim's x_N, which no pid step reads
             if state.step % mission.periods()["helm"] == 0:
                 put(key["desired"], encode(next(desired)))
             put(key["state"], encode(state))
+            # The clock's grant of the step (it never grants further ahead than its window).
+            put(keys.tick(c), encode(Tick(step=state.step, t=0.0, source="clock")))
             for k, payload in noise.items():
                 world.put(k, payload)
 
@@ -166,7 +167,6 @@ def test_a_fleet_vehicles_pid_receives_only_its_own_vehicles_inputs():
             world.put_when_matched(k, payload, wait=timeout) if not sent[k] else world.put(k, payload)
             sent[k] += 1
 
-        put(keys.tick(c), encode(Tick(step=mission.max_steps - 1, t=0.0, source="clock")))
         desired = iter(desireds)
         for state in states[:-1]:
             for k, payload in others.items():
@@ -174,6 +174,7 @@ def test_a_fleet_vehicles_pid_receives_only_its_own_vehicles_inputs():
             if state.step % mission.members()[1].periods()["helm"] == 0:
                 put(own["desired"], encode(next(desired)))
             put(own["state"], encode(state))
+            put(keys.tick(c), encode(Tick(step=state.step, t=0.0, source="clock")))  # a fleet's window: 1
         expected = reference.topic("input", "auv2")
         wait_until(lambda: len(outputs) >= len(expected), timeout, "auv2's pid did not publish every input")
         put(keys.mission_end(c), encode(MissionEnd(step=mission.max_steps, t=0.0, source="clock", outcome="x")))
@@ -209,11 +210,11 @@ def test_the_helm_wakes_only_for_the_states_of_its_own_steps():
             world.put_when_matched(k, payload, wait=timeout) if not sent[k] else world.put(k, payload)
             sent[k] += 1
 
-        put(keys.tick(c), encode(Tick(step=mission.max_steps - 1, t=0.0, source="clock")))
-        for state in states[:-1]:  # as the sim's shell publishes them
+        for state in states[:-1]:  # as the sim's shell publishes them, each step granted as the clock does
             world.put(plain, encode(state))
             if state.step % period == 0:
                 put(feed, encode(state))
+            put(keys.tick(c), encode(Tick(step=state.step, t=0.0, source="clock")))
         expected = reference.topic("desired")
         wait_until(lambda: len(outputs) >= len(expected), timeout, "the helm did not publish every desired state")
         put(keys.mission_end(c), encode(MissionEnd(step=mission.max_steps, t=0.0, source="clock", outcome="x")))

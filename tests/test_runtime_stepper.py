@@ -259,6 +259,16 @@ def test_inprocess_swap_of_the_pid_or_the_sim_changes_nothing(role, step):
     assert [encode(m) for _, _, m in swapped.messages] == [encode(m) for _, _, m in plain.messages]
 
 
+def test_a_grant_further_ahead_than_the_clocks_window_is_refused():
+    """A forged tick far ahead would let the apps run past the clock's pacing and its checks."""
+    mission = load_mission(ALPHA, ["time_limit=10"])
+    waiting = Stepper(
+        build_cores(mission)["pid"], Schedule(mission.periods()), mission.dt, mission.max_steps, window=20
+    )
+    assert waiting.grant(19) is None and waiting.granted == 19  # the clock's first grant
+    assert "tick to step 150 ignored" in waiting.grant(150) and waiting.granted == 19
+
+
 def test_first_end_takes_the_earliest_step_then_the_most_severe():
     completed = EndRequest(5, "completed")
     assert first_end(None, completed) == completed

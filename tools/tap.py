@@ -262,6 +262,11 @@ def _print_rates(times, as_json: bool) -> None:
             print(f"{key}: {hz:.2f} Hz (simulated time) over {len(stamps)} samples", flush=True)
 
 
+# The clock's grants and ends and the apps' acks: one forged would let the apps run past the
+# clock's pacing, or end a mission (docs/design.md, "The lock-step protocol").
+LOCKSTEP_MESSAGES = ("Tick", "Ack", "MissionEnd")
+
+
 def tap_pub(args) -> int:
     """Publish one message by hand (uPokeDB). It is validated against the topic's schema unless
     --no-validate; --raw-hex sends arbitrary bytes (for fault injection).
@@ -307,6 +312,11 @@ def tap_pub(args) -> int:
             except MessageError as exc:
                 print(f"nearsub tap pub: {exc}", file=sys.stderr)
                 return 2
+            if message.__class__.__name__ in LOCKSTEP_MESSAGES:
+                raise InputError(
+                    f"{args.key}: a {message.__class__.__name__} is the lock-step's own (the clock and the apps "
+                    "publish it); --no-validate sends it anyway, for fault injection"
+                )
             if leaf is not None and not operator:
                 print(
                     f"nearsub tap pub: {leaf} is accepted only from the app that computes it; an operator may "

@@ -319,7 +319,9 @@ class Stepper:
     Exceptions of the `recoverable` types from `startup` or `iterate` (a service that stopped answering) end
     the mission with "error" and an error event instead of crashing the app. In a fleet
     (`ends_itself` False) an app's own end request does not stop it: the clock decides the end
-    (`Ends`) and never grants past it.
+    (`Ends`) and never grants past it. With a `window` (the clock's, `Fleet.window`), a grant
+    further ahead of this app than the clock ever gives is refused: the clock grants at most
+    `window` steps past the last step every app has finished, which is before this app's step.
     """
 
     def __init__(
@@ -330,12 +332,14 @@ class Stepper:
         max_steps: int,
         recoverable: tuple[type[Exception], ...] = (),
         ends_itself: bool = True,
+        window: int | None = None,
     ):
         self.core = core
         self.schedule = schedule
         self.dt = dt
         self.recoverable = recoverable
         self.ends_itself = ends_itself
+        self.window = window
         self.inbox = Inbox(core.inputs, schedule, core.role)
         self.granted = -1
         self.stop_after = max_steps - 1
@@ -379,8 +383,15 @@ class Stepper:
                 self.overrides[leaf] = [due[-1], *(entry for entry in entries if entry[0] > step)]
         return mail
 
-    def grant(self, step: int) -> None:
+    def grant(self, step: int) -> str | None:
+        """Let the app run up to `step`; an error text (and no grant) for a grant out of protocol."""
+        if self.window is not None and step > self.step - 1 + self.window:
+            return (
+                f"tick to step {step} ignored: the clock grants at most {self.window} steps past the "
+                f"last finished one, and this app is at step {self.step}"
+            )
         self.granted = max(self.granted, step)
+        return None
 
     def end_after(self, step: int) -> None:
         self.stop_after = min(self.stop_after, step)
