@@ -154,6 +154,7 @@ def test_bad_input_gets_one_line_and_exit_2(runtime_dir, argv, message):
         (["bench", "envelope", "--duration", "-1"], "argument --duration: wants a finite number > 0, got '-1'"),
         (["bench", "envelope", "--sample", "0"], "argument --sample: wants a whole number >= 1, got '0'"),
         (["bench", "envelope", "--grid", "0x0"], "argument --grid: wants NxM"),
+        (["surrogate", "validate", "--seed", "-1"], "argument --seed: wants a whole number >= 0, got '-1'"),
     ],
 )
 def test_a_malformed_option_value_is_named_by_argparse(argv, message):

@@ -189,3 +189,19 @@ def test_predict_refuses_impossible_inputs(capsys, point, says):
     assert main(["surrogate", "predict", *(f"{k}={v}" for k, v in inputs.items())]) == 2
     out = capsys.readouterr()
     assert says in one_line(out.err) and out.out == ""
+
+
+def test_surrogate_validate_and_sweep_never_write_over_what_they_read(tmp_path):
+    points = tmp_path / "points.csv"
+    shutil.copyfile(ROOT / "docs" / "hydro" / "validation-points.csv", points)
+    before = points.read_bytes()
+    done = nearsub("surrogate", "validate", "--points-file", str(points), "--out", str(points))
+    assert done.returncode == 2 and "is the --points-file it reads" in one_line(done.stderr)
+    table = tmp_path / "sweeps" / "sweeps.csv"
+    table.parent.mkdir()
+    table.write_text("anything")
+    done = nearsub("surrogate", "sweep", "--hf-from", str(table), "-o", str(table.parent))
+    assert done.returncode == 2 and "is the --hf-from it reads" in one_line(done.stderr)
+    assert points.read_bytes() == before and table.read_text() == "anything"
+    done = nearsub("surrogate", "sweep", "-o", str(points))
+    assert done.returncode == 2 and "is a file, not a folder" in one_line(done.stderr)

@@ -50,6 +50,7 @@ from nearsub.common.surrogate.validation import (
 )
 
 from .arguments import integer
+from .outputs import output_file, output_folder
 
 # Targets (docs/design.md, "Performance targets"): in-process point and batch, query round trip, fit.
 TARGETS = {
@@ -361,6 +362,8 @@ def validate_command(args) -> int:
             file=sys.stderr,
         )
         return 2
+    if out is not None:
+        output_file(out, "--out", source=args.points_file, source_is="the --points-file it reads", parents=True)
     X = Y_hf = None
     if args.points_file:
         try:
@@ -561,8 +564,8 @@ def sweep_command(args) -> int:
         except (OSError, UnicodeDecodeError) as exc:
             print(f"nearsub surrogate sweep: --hf-from {args.hf_from}: {exc}", file=sys.stderr)
             return 2
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = output_folder(args.out)
+    table = output_file(out / "sweeps.csv", "-o", source=args.hf_from, source_is="the --hf-from it reads", parents=True)
     started = time.perf_counter()
     try:
         rows = sweeps.sweep_table(
@@ -571,12 +574,13 @@ def sweep_command(args) -> int:
     except ValueError as exc:
         print(f"nearsub surrogate sweep: --hf-from {args.hf_from}: {exc}", file=sys.stderr)
         return 2
-    with open(out / "sweeps.csv", "w", newline="") as handle:
+    out.mkdir(parents=True, exist_ok=True)  # only now: a refused --hf-from leaves no empty folder
+    with open(table, "w", newline="") as handle:
         writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
         writer.writeheader()
         writer.writerows(rows)
     window = surrogate_window("sdv")
-    for path in [out / "sweeps.csv", *draw_sweeps(rows, out, window)]:
+    for path in [table, *draw_sweeps(rows, out, window)]:
         print(path)
     print(f"{len(rows)} points in {time.perf_counter() - started:.0f} s", file=sys.stderr)
     return 0
@@ -611,7 +615,10 @@ def add_parser(subparsers) -> None:
     t.add_argument("--points", type=int, default=THESIS_TEST_POINTS, help="test points (default 500, as the thesis)")
     t.add_argument("--panels", choices=PANEL_CHOICES, default="medium", help="HF panel spec (default medium)")
     t.add_argument(
-        "--seed", type=int, default=HELD_OUT_SEED, help=f"seed of the Latin hypercube (default {HELD_OUT_SEED})"
+        "--seed",
+        type=integer(minimum=0),
+        default=HELD_OUT_SEED,
+        help=f"seed of the Latin hypercube (default {HELD_OUT_SEED})",
     )
     t.add_argument("--jobs", type=int, default=1, help="HF processes (default 1)")
     t.add_argument(
