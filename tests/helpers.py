@@ -119,6 +119,8 @@ def poke_while_paused(launches, path: Path, community: str, assignment: str):
     process = launches.start(str(path), "--set", f"name={community}")
     wait_registered(community, timeout=mission.startup_timeout)
     wait_paused(community, timeout=mission.startup_timeout)
+    nobody = nearsub("poke", community, assignment, "--vehicle", "nosuch")  # refused at once, not after 10 s
+    assert nobody.returncode == 2 and nobody.stderr.startswith("nearsub poke: no vehicle 'nosuch' in mission")
     poked = nearsub("poke", community, assignment, "--vehicle", "remus100")
     assert poked.returncode == 0, poked.stderr
     assert "remus100/helm: operator poke from step 100" in poked.stdout  # the vehicle, the app, the step

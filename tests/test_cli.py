@@ -116,6 +116,8 @@ def test_an_unknown_subcommand_is_named():
             ["tap", "pub", "nearsub/alpha/clock/tick", '{"step": 999999999}'],
             "nearsub tap pub: nearsub/alpha/clock/tick: a Tick is the lock-step's own",
         ),
+        (["poke", "alpha", "X=nan", "--vehicle", "v"], "nearsub poke: 'X=nan': nan is not a finite number"),
+        (["poke", "alpha", "=5", "--vehicle", "v"], "nearsub poke: '=5': variable name '' is not letters"),
         (["tap", "echo", "//bad"], "nearsub tap echo: '//bad' is not a key expression: empty chunks"),
         (["tap", "hz", "a/b*c"], "nearsub tap hz: 'a/b*c' is not a key expression: `*` may only"),
     ],

@@ -48,7 +48,7 @@ def test_a_poke_of_a_fleet_mission_file_must_name_one_of_its_vehicles(monkeypatc
     import argparse
 
     from nearsub.common.mission import schema
-    from nearsub.tools import poke
+    from nearsub.tools import poke, tap
 
     mission = load_mission_text(tmp_path)
     dumped = mission.model_dump() | {"vehicles": [{"name": "alfa"}, {"name": "bravo"}]}
@@ -61,6 +61,14 @@ def test_a_poke_of_a_fleet_mission_file_must_name_one_of_its_vehicles(monkeypatc
         assert poke.run(args) == 2
         err = capsys.readouterr().err
         assert err.startswith(f"nearsub poke: {text}") and "(its vehicles: alfa, bravo)" in err, err
+    # A fleet of one: its vehicle is the default, as for a mission without [[vehicles]].
+    dumped["vehicles"] = [{"name": "solo"}]
+    published = []
+    monkeypatch.setattr(tap, "tap_pub", lambda pub: published.append(pub.key) or 0)
+    args = argparse.Namespace(
+        mission=str(tmp_path / "pokeend.toml"), assignments=["X=1"], vehicle=None, connect=None, credentials=None
+    )
+    assert poke.run(args) == 0 and published == [f"nearsub/{mission.name}/solo/poke"]
 
 
 def write_mission(folder):

@@ -7,6 +7,7 @@ waits for and prints, and the log replays it (docs/design.md, "The helm")."""
 from __future__ import annotations
 
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -30,12 +31,14 @@ def parse_assignments(texts: list[str]) -> dict:
     for text in texts:
         if "=" not in text:
             raise ValueError(f"{text!r}: expected NAME=VALUE")
-        path, value = parse_override(text)
-        name = ".".join(path)
+        name = text.split("=", 1)[0].strip()
         if not VARIABLE_PATTERN.match(name):
             raise ValueError(f"{text!r}: variable name {name!r} is not letters, digits and '_'")
+        _, value = parse_override(text)
         if not isinstance(value, str | int | float | bool):
             raise ValueError(f"{text!r}: value {value!r} is not a string, number or boolean")
+        if isinstance(value, float) and not math.isfinite(value):
+            raise ValueError(f"{text!r}: {value} is not a finite number")
         values[name] = float(value) if isinstance(value, int) and not isinstance(value, bool) else value
     return values
 
@@ -58,6 +61,7 @@ def run(args) -> int:
             print(f"nearsub poke: {exc}", file=sys.stderr)
             return 2
         fleet = [entry["name"] for entry in mission.model_dump().get("vehicles") or []]
+        vehicle = fleet[0] if vehicle is None and len(fleet) == 1 else vehicle
         if fleet and vehicle not in fleet:  # several vehicles: the poke names whose helm it sets
             given = f"--vehicle {vehicle}: not a vehicle of {args.mission}" if vehicle else "give --vehicle NAME"
             print(f"nearsub poke: {given} (its vehicles: {', '.join(fleet)})", file=sys.stderr)

@@ -337,6 +337,11 @@ def tap_pub(args) -> int:
     with bus:
         mailbox = Mailbox()
         if operator:
+            # The logger hears every key, so an override for a vehicle nobody flies would be
+            # "delivered" and wait for a confirmation that never comes: name it at once instead.
+            running = publishing_vehicles(bus, parts[1])
+            if running and vehicle not in running:
+                raise InputError(f"no vehicle {vehicle!r} in mission {parts[1]!r} (its vehicles: {', '.join(running)})")
             # The consumer's event: from a mission-wide app instance, or one of the vehicle's.
             bus.subscribe(keys.all_events(parts[1]), mailbox)
         # A fresh session drops data put before it knows a subscriber (docs/design.md, "Transport").
@@ -373,5 +378,5 @@ def _confirm_override(mailbox, leaf: str, vehicle: str, timeout: float = 10.0) -
         if mine and event.kind == "info" and event.data.get("leaf") == leaf and event.detail.startswith("operator"):
             print(f"{vehicle}/{event.source}: {event.detail}")
             return 0
-    print(f"nearsub tap pub: no app confirmed the {leaf} override within {timeout:g} s", file=sys.stderr)
+    print(f"nearsub: no app confirmed the {leaf} override within {timeout:g} s", file=sys.stderr)
     return 1
