@@ -116,6 +116,7 @@ def test_an_unknown_subcommand_is_named():
             ["tap", "pub", "nearsub/alpha/clock/tick", '{"step": 999999999}'],
             "nearsub tap pub: nearsub/alpha/clock/tick: a Tick is the lock-step's own",
         ),
+        (["clock", "alpha", "warp", "1e308"], "nearsub clock: warp needs a number from 0 to 1e+06"),
         (["poke", "alpha", "X=nan", "--vehicle", "v"], "nearsub poke: 'X=nan': nan is not a finite number"),
         (["poke", "alpha", "=5", "--vehicle", "v"], "nearsub poke: '=5': variable name '' is not letters"),
         (["tap", "echo", "//bad"], "nearsub tap echo: '//bad' is not a key expression: empty chunks"),

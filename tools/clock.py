@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import math
 import sys
 import uuid
 
@@ -33,8 +32,13 @@ def status_line(data: dict) -> str:
 
 
 def clock_command(args) -> int:
-    if args.action == "warp" and (args.warp is None or not 0 <= args.warp < math.inf):
-        print("nearsub clock: warp needs a number >= 0, e.g. `nearsub clock alpha warp 20`", file=sys.stderr)
+    from nearsub.common.runtime.clock import MAX_WARP
+
+    if args.action == "warp" and (args.warp is None or not 0 <= args.warp <= MAX_WARP):
+        print(
+            f"nearsub clock: warp needs a number from 0 to {MAX_WARP:g}, e.g. `nearsub clock alpha warp 20`",
+            file=sys.stderr,
+        )
         return 2
     if args.action != "warp" and args.warp is not None:
         print(f"nearsub clock: {args.action} takes no value", file=sys.stderr)
