@@ -70,6 +70,9 @@ def test_plot_names_the_file_it_writes_and_refuses_a_missing_folder(log, tmp_pat
     assert done.stdout.strip() == str(tmp_path / "foo.png") and (tmp_path / "foo.png").exists()
     missing = nearsub("log", "plot", str(log), "-o", str(tmp_path / "no" / "x.png"))
     assert missing.returncode == 2 and "no folder" in one_line(missing.stderr)
+    folder = nearsub("log", "plot", str(log), "-o", str(tmp_path))  # not <folder>.png beside it
+    assert folder.returncode == 2 and "is a folder" in one_line(folder.stderr)
+    assert not tmp_path.with_suffix(".png").exists()
 
 
 def test_maps_draw_into_the_working_directory_by_default(tmp_path, monkeypatch, capsys):

@@ -294,7 +294,7 @@ def _write_csv(records, output: Path | None, topic: str | None) -> int:
 def plot_command(args) -> int:
     check_log(Path(args.log))
     output = Path(args.output) if args.output else Path(args.log).with_suffix(".png")
-    if not output.suffix:  # matplotlib would add .png itself: name the file it writes
+    if not output.suffix and not output.is_dir():  # matplotlib would add .png itself: name the file it writes
         output = output.with_suffix(".png")
     output_file(output, source=args.log, source_is="the log being plotted")
     from matplotlib.backend_bases import FigureCanvasBase
