@@ -208,3 +208,13 @@ def test_surrogate_validate_and_sweep_never_write_over_what_they_read(tmp_path):
     assert points.read_bytes() == before and table.read_text() == "anything"
     done = nearsub("surrogate", "sweep", "-o", str(points))
     assert done.returncode == 2 and "is a file, not a folder" in one_line(done.stderr)
+
+
+def test_plot_of_a_log_without_states_is_bad_input(tmp_path):
+    from nearsub.common.runtime.logfile import LogWriter
+
+    path = tmp_path / "empty.mcap"
+    writer = LogWriter(path)
+    writer.finish()
+    done = nearsub("log", "plot", str(path), "-o", str(tmp_path / "x.png"))
+    assert done.returncode == 2 and one_line(done.stderr) == f"nearsub log plot: {path}: no state messages to plot"

@@ -305,7 +305,9 @@ def plot_command(args) -> int:
 
     try:
         out = plot_log(args.log, output, args.title)
-    except (OSError, ValueError) as exc:
+    except ValueError as exc:  # the log holds nothing to plot: bad input, as for `view`
+        raise InputError(str(exc)) from None
+    except OSError as exc:
         print(f"nearsub log plot: {exc}", file=sys.stderr)
         return 1
     print(out)
