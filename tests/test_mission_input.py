@@ -95,3 +95,13 @@ def test_launch_of_a_nan_start_exits_2_with_one_line(tmp_path, runtime_dir):
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and "start.x" in lines[0] and "Traceback" not in result.stderr
     assert not logs.exists() or list(logs.iterdir()) == []  # nothing started, no half-empty log folder
+
+
+def test_a_bad_value_from_an_included_file_names_that_file(tmp_path):
+    text = "\n".join(line for line in ALPHA.read_text().splitlines() if not line.startswith("dt ="))
+    (tmp_path / "top.toml").write_text('include = ["middle.toml"]\n' + text)
+    (tmp_path / "middle.toml").write_text('include = ["bottom.toml"]\n')
+    (tmp_path / "bottom.toml").write_text("dt = -1\n")
+    with pytest.raises(MissionError) as info:
+        load_mission(tmp_path / "top.toml")
+    assert str(info.value) == f"{tmp_path / 'bottom.toml'}: field 'dt' = -1: Input should be greater than 0"

@@ -574,6 +574,26 @@ def resolve_includes(path: Path, chain: tuple[Path, ...] = ()) -> dict:
     return merge(base, data)
 
 
+def file_setting(path: Path, loc: list[str]) -> Path | None:
+    """The file of the include tree of `path` whose own text sets the field at `loc` (or the
+    array holding it), the one whose value the merge keeps; None if none does."""
+    data = read_toml(path)
+    includes = data.pop("include", [])
+    node = data
+    for part in loc:
+        if isinstance(node, list):
+            return path  # an array of tables: merged from several files, named by the first
+        if not isinstance(node, dict) or part not in node:
+            break
+        node = node[part]
+    else:
+        return path
+    for name in reversed([includes] if isinstance(includes, str) else includes):
+        if found := file_setting(path.parent / name, loc):
+            return found
+    return None
+
+
 def load_mission(path: str | Path, overrides: list[str] = ()) -> Mission:
     """Read (with its includes), override and validate a mission file."""
     path = Path(path)
@@ -582,16 +602,20 @@ def load_mission(path: str | Path, overrides: list[str] = ()) -> Mission:
     if data.get("vehicles") == []:  # a saved mission (a run file) may hold [], a user's file not
         source = next((f"--set {o}" for o in reversed(overrides) if parse_override(o)[0] == ["vehicles"]), path)
         raise MissionError(f"{source}: field 'vehicles' = []: leave [[vehicles]] out for a single-vehicle mission")
-    return mission_from_dict(data, str(path), overrides)
+    return mission_from_dict(data, str(path), overrides, lambda loc: str(file_setting(path, loc) or path))
 
 
-def mission_from_dict(data: dict, where: str = "mission", overrides: list[str] = ()) -> Mission:
-    """Validate a mission; an error names `where`, or the `--set` override that gave the bad value."""
+def mission_from_dict(data: dict, where: str = "mission", overrides: list[str] = (), file_of=None) -> Mission:
+    """Validate a mission; an error names `where` (with `file_of(loc)`, the file of the include
+    tree that set the bad field), or the `--set` override that gave the bad value."""
     try:
         return Mission.model_validate(data)
     except ValidationError as exc:
         name = _vehicle_names(data)
-        text = describe_validation_error(exc, _source_of(exc, where, overrides, name), name)
+        source = _source_of(exc, where, overrides, name)
+        if source == where and file_of is not None:
+            source = file_of([str(p) for p in exc.errors()[0]["loc"]])
+        text = describe_validation_error(exc, source, name)
         raise MissionError(text) from None
 
 
