@@ -66,15 +66,28 @@ def test_play_of_one_vehicle_replays_its_keys_and_the_mission_wide_ones(fleet_lo
     player = start_player(fleet_log, "--warp", 0, "--vehicle", "bravo", "--community", community, "--wait", STARTUP)
     try:
         wait_registered(community, player)
+        # The player names its message count before it waits for a subscriber: the tap stops at the
+        # last one (delivery is lossless) instead of listening out its whole --timeout.
+        count = played_count(player)
         tap = nearsub(
-            "tap", "echo", f"nearsub/{community}/**", "--community", community, "--timeout", str(STARTUP), "--json",
-            timeout=2 * STARTUP + STEP,
+            "tap", "echo", f"nearsub/{community}/**", "--community", community, "--count", str(count),
+            "--timeout", str(STARTUP), "--json", timeout=2 * STARTUP + STEP,
         )  # fmt: skip
         player.communicate(timeout=STARTUP + STEP)
     finally:
         stop([player])
+    assert tap.returncode == 0, tap.stderr
+    assert len(tap.stdout.splitlines()) == count
     keys = {json.loads(line)["key"] for line in tap.stdout.splitlines()}
     assert f"nearsub/{community}/bravo/state" in keys and f"nearsub/{community}/clock/end" in keys
     assert not any("/alfa/" in key for key in keys)
     bad = nearsub("log", "play", str(fleet_log), "--vehicle", "zulu", timeout=STARTUP)
     assert bad.returncode == 2 and bad.stderr.startswith("nearsub log play: --vehicle zulu: not a vehicle")
+
+
+def played_count(player) -> int:
+    """The number of messages `nearsub log play` says it is about to play (its "playing N messages" line)."""
+    for line in player.stdout:
+        if line.startswith("playing "):
+            return int(line.split()[1])
+    raise AssertionError(f"the player ended without a playing line: {player.communicate()}")
