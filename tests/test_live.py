@@ -190,3 +190,47 @@ def test_a_forged_tick_far_ahead_is_refused_and_changes_nothing(launches, commun
     assert per_topic(log_path(summary))["remus100/state"] == [encode(m) for m in reference.topic("state")]
     errors = [r.value() for r in read_log(log_path(summary)).records if "/events/" in r.topic]
     assert any("tick to step 1000000 ignored" in e.get("detail", "") for e in errors)
+
+
+def test_a_launch_on_a_terminal_prints_its_start_up_the_status_line_and_the_achieved_warp(tmp_path, community):
+    """As pAntler and ros2 launch do: each app as it starts, the mission running, then (stdout a
+    terminal) a status line each second with the achieved warp, and the summary's requested vs
+    achieved warp."""
+    import os
+    import pty
+    import re
+    import subprocess
+    import sys
+
+    mission = load_mission(ALPHA)
+    until, warp = 8.0, 2.0  # 4 s of running: the status line, once a second, shows even on a busy machine
+    primary, secondary = pty.openpty()
+    argv = [sys.executable, "-m", "nearsub", "launch", str(ALPHA), "--set", f"name={community}"]
+    argv += ["--warp", str(warp), "--until", str(until), "--log", str(tmp_path / "logs")]
+    process = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=secondary, stderr=secondary, process_group=0)
+    os.close(secondary)
+    output = b""
+    try:
+        deadline = time.monotonic() + 2 * mission.startup_timeout + until / warp + mission.step_timeout
+        while time.monotonic() < deadline:
+            try:
+                chunk = os.read(primary, 65536)
+            except OSError:  # the terminal closes when the launcher and its apps have left it
+                break
+            if not chunk:
+                break
+            output += chunk
+        process.wait(timeout=mission.step_timeout)
+    finally:
+        if process.poll() is None:
+            process.kill()
+        os.close(primary)
+    text = output.decode(errors="replace")
+    assert process.returncode == 0, text
+    started = re.findall(r"\[launch +[\d.]+ s\] started (\S+) \(pid \d+\)", text)
+    for app in ("router", "logger", "sim-1", "pid-1", "helm-1", "clock"):
+        assert app in started, (app, started)
+    assert re.search(rf"\[launch +[\d.]+ s\] mission {community} running: \d+ processes up", text), text
+    status = re.findall(r"\r\x1b\[Kt +([\d.]+) s +step +(\d+) +warp ([\d.]+) of 2 +u +[\d.-]+ m/s +at \(", text)
+    assert status, text
+    assert re.search(r"warp 2 requested, [\d.]+ achieved", text), text
