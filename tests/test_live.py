@@ -1,6 +1,11 @@
 """Tap, swap and the clock controls against running missions."""
 
 import json
+import os
+import pty
+import re
+import subprocess
+import sys
 import time
 
 import pytest
@@ -196,12 +201,6 @@ def test_a_launch_on_a_terminal_prints_its_start_up_the_status_line_and_the_achi
     """As pAntler and ros2 launch do: each app as it starts, the mission running, then (stdout a
     terminal) a status line each second with the achieved warp, and the summary's requested vs
     achieved warp."""
-    import os
-    import pty
-    import re
-    import subprocess
-    import sys
-
     mission = load_mission(ALPHA)
     until, warp = 8.0, 2.0  # 4 s of running: the status line, once a second, shows even on a busy machine
     primary, secondary = pty.openpty()
@@ -231,6 +230,5 @@ def test_a_launch_on_a_terminal_prints_its_start_up_the_status_line_and_the_achi
     for app in ("router", "logger", "sim-1", "pid-1", "helm-1", "clock"):
         assert app in started, (app, started)
     assert re.search(rf"\[launch +[\d.]+ s\] mission {community} running: \d+ processes up", text), text
-    status = re.findall(r"\r\x1b\[Kt +([\d.]+) s +step +(\d+) +warp ([\d.]+) of 2 +u +[\d.-]+ m/s +at \(", text)
-    assert status, text
+    assert re.search(r"\r\x1b\[Kt +[\d.]+ s +step +\d+ +warp [\d.]+ of 2 +u +[\d.-]+ m/s +at \(", text), text
     assert re.search(r"warp 2 requested, [\d.]+ achieved", text), text
