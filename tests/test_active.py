@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from nearsub.common.analysis.albench import run_benchmark, summarise
 from nearsub.common.learning.active import (
     Campaign,
     CampaignSettings,
@@ -11,7 +12,6 @@ from nearsub.common.learning.active import (
     run_campaign,
     select_point,
 )
-from nearsub.common.learning.albench import run_benchmark, summarise
 from nearsub.common.learning.testproblems import Problem, get_problem
 
 PARK = get_problem("park")
@@ -210,7 +210,7 @@ def test_fair_variants_keep_as_many_lf_runs_as_nmmf_makes():
     matched, pattern = _pattern(CampaignSettings(method="myopic", myopic_lf_picks=3, **base))
     assert pattern == [("lf", 12), ("hf", 5)] + [("hf", 1), ("lf", 4)] * 2
     assert len(matched.data("lf")[0]) == len(X_lf)
-    from nearsub.common.learning.albench import method_settings
+    from nearsub.common.analysis.albench import method_settings
 
     assert method_settings("myopic-matched", {"n_lookahead": 3})["myopic_lf_picks"] == 3
 

@@ -6,7 +6,7 @@ import sys
 import numpy as np
 import pytest
 
-from nearsub.common.learning.albench import summarise
+from nearsub.common.analysis.albench import summarise
 from nearsub.tools.al_bench import markdown_tables, read_outputs, write_outputs
 
 
@@ -68,7 +68,7 @@ def _csv_rows(path):
 def test_resumed_run_equals_one_run_row_for_row(tmp_path):
     """Repeats 0-1, then a run resumed to 4 repeats, write the same files, row for row, as one
     run of repeats 0-3: each repeat depends only on its seed."""
-    from nearsub.common.learning.albench import run_benchmark
+    from nearsub.common.analysis.albench import run_benchmark
     from nearsub.common.learning.reference_gp import missing
 
     kw = dict(
@@ -106,7 +106,7 @@ def test_resumed_run_equals_one_run_row_for_row(tmp_path):
 def test_resume_refuses_another_configuration(tmp_path):
     """A folder made with other settings is not extended: the differing field is named, in one
     line, before anything runs."""
-    from nearsub.common.learning.albench import resume_conflict
+    from nearsub.common.analysis.albench import resume_conflict
 
     result = _result(np.random.default_rng(3))
     write_outputs(result, summarise(result), tmp_path)

@@ -11,13 +11,13 @@ from test_interaction import BESIDE
 
 from conftest import ALPHA, ROOT
 from helpers import log_path, per_topic
-from nearsub.common.hydro import free_stream as fs
 from nearsub.common.hydro import high_fidelity as hydro_hf
 from nearsub.common.mission.cores import run_mission
 from nearsub.common.mission.schema import load_mission
 from nearsub.common.physics.vehicles import REMUS100, SDV
 from nearsub.common.runtime.messages import encode
 from nearsub.common.surrogate import domain
+from nearsub.common.surrogate import free_stream as fs
 from nearsub.common.surrogate.interaction import GEOMETRY, IncrementError, interaction_at
 from nearsub.common.surrogate.model import analytic_model, load_surrogate
 from nearsub.tools import free_stream as free_stream_tool

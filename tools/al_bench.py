@@ -1,6 +1,6 @@
 """`nearsub al-bench PROBLEM`: the thesis's active-learning comparisons, as files and tables.
 
-The runner and its statistics are `nearsub.common.learning.albench`; this module draws and writes.
+The runner and its statistics are `nearsub.common.analysis.albench`; this module draws and writes.
 Outputs in --out: PROBLEM.csv (MAPE (2.18) in percent per method, repeat, HF count and output),
 PROBLEM.png (median and interquartile band against the number of HF samples), PROBLEM.json
 (median, quartiles, mean +/- 95 % CI, the paired win rate of the reference method over each
@@ -51,7 +51,7 @@ THESIS_CLAIMS = {
 # ---------------------------------------------------------------------- outputs
 def write_outputs(result: dict[str, Any], summary: dict[str, Any], out: Path, plot: bool = True) -> dict[str, Path]:
     """CSV of every MAPE, JSON summary and (plot) PNG figure in `out`; returns their paths."""
-    from nearsub.common.learning.albench import repeat_seed
+    from nearsub.common.analysis.albench import repeat_seed
 
     out.mkdir(parents=True, exist_ok=True)
     stem = out / result["problem"]
@@ -242,7 +242,7 @@ def markdown_tables(result: dict[str, Any], summary: dict[str, Any]) -> str:
 
 
 def al_bench_command(args) -> int:
-    from nearsub.common.learning.albench import check_request, summarise
+    from nearsub.common.analysis.albench import check_request, summarise
 
     methods = tuple(args.methods.split(",")) if args.methods else None
     out = output_folder(args.out)
@@ -273,7 +273,7 @@ def al_bench_command(args) -> int:
 def _run(args, methods, previous, out) -> dict[str, Any]:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
 
-    from nearsub.common.learning.albench import run_benchmark, summarise
+    from nearsub.common.analysis.albench import run_benchmark, summarise
 
     settings = {"n_lookahead": args.lookahead, "n_restarts": args.restarts, "n_polish": args.polish}
     if args.learn_rho:

@@ -6,7 +6,7 @@ MODEL defaults to the shipped surrogate, and the table goes next to the model as
 `<stem>-free-stream.npz` (for the shipped model: nearsub/data/surrogate-free-stream.npz). The table
 is the free stream of the high-fidelity panel model (common/hydro/high_fidelity.py), so the model must have
 been trained on it: a model whose provenance names another high fidelity (a user's CFD, the
-analytic test fixture) is refused unless --force. Takes a few seconds (common/hydro/free_stream.py).
+analytic test fixture) is refused unless --force. Takes a few seconds (common/surrogate/free_stream.py).
 """
 
 from __future__ import annotations
@@ -19,8 +19,8 @@ from nearsub.common.runtime.processes import single_blas_thread
 
 single_blas_thread()  # before numpy loads
 
-from nearsub.common.hydro import free_stream as fs  # noqa: E402
 from nearsub.common.hydro import high_fidelity as hydro_hf  # noqa: E402
+from nearsub.common.surrogate import free_stream as fs  # noqa: E402
 from nearsub.common.surrogate.model import default_model_path, load_surrogate  # noqa: E402
 from nearsub.common.surrogate.modelfile import ModelFileError  # noqa: E402
 

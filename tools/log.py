@@ -217,9 +217,10 @@ def export_command(args) -> int:
             for r in records:
                 out.write(json.dumps({"topic": r.topic, "t": r.sim_time, "value": r.value()}) + "\n")
         else:
+            from nearsub.common.physics.vehicles import get_vehicle
             from nearsub.common.runtime.alog import write_alog
 
-            write_alog(contents, out, records, args.vehicle)
+            write_alog(contents, out, get_vehicle, records, args.vehicle)
     finally:
         if out is not sys.stdout:
             out.close()

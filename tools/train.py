@@ -13,7 +13,7 @@ HF runs go in parallel on a local Dask cluster (`--workers N`, on 127.0.0.1) or 
 run continues where it stopped (the designs replay the stored runs; `--restart` discards them).
 At the end the model is written with its provenance, its HF samples as CSV beside it
 (<stem>-hf-samples.csv) and the HF's free-stream table for the increment mode
-(<stem>-free-stream.npz, `common/hydro/free_stream.py`).
+(<stem>-free-stream.npz, `common/surrogate/free_stream.py`).
 
 `--design envelope` aims the HF runs at the outcome boundary of one or two envelopes
 (`--envelope KEY=VALUE,...` with the keys of `nearsub envelope`: vehicle, behaviour, d_lead,
@@ -41,9 +41,9 @@ from pathlib import Path
 import numpy as np
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
-from nearsub.common.hydro import free_stream as fs
 from nearsub.common.learning.gp import FINAL_FIT_RESTARTS, MultiOutputGP
 from nearsub.common.surrogate import domain
+from nearsub.common.surrogate import free_stream as fs
 from nearsub.common.surrogate import model as sg
 from nearsub.common.surrogate import training as tr
 from nearsub.common.surrogate.validation import read_number_table

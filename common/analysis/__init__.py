@@ -1,4 +1,4 @@
-"""Analysis: many missions at once, and what they show.
+"""Analysis: many runs at once (missions, benchmark campaigns), and what they show.
 
 - batch: the vectorised engine, N UUVs through the very functions the apps call.
 - envelope: operating envelopes (thesis 5.11, 6.4) and sweeps.
@@ -6,4 +6,5 @@
 - scenarios: figures of merit of the thesis scenarios.
 - fleet: figures of merit of a mission of several vehicles.
 - validation: the thesis section 5.10 validation cases.
+- albench: the NMMF benchmark runner (repeats in parallel processes) and its summaries.
 """

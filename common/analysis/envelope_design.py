@@ -20,10 +20,10 @@ import numpy as np
 
 from nearsub.common.analysis.batch import OUTCOMES
 from nearsub.common.analysis.envelope import EnvelopeConfig, Sampling, compute_envelope, compute_sampled
-from nearsub.common.hydro import free_stream as fs
 from nearsub.common.learning.envelope_design import envelope_picks
 from nearsub.common.learning.gp import MultiOutputGP
 from nearsub.common.physics.vehicles import get_vehicle
+from nearsub.common.surrogate import free_stream as fs
 from nearsub.common.surrogate import model as sg
 from nearsub.common.surrogate import training as tr
 from nearsub.common.surrogate.modelfile import LFInLoopModel

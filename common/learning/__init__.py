@@ -4,6 +4,5 @@
 - mfgp: two-fidelity AR(1) GP (thesis 2.2.4).
 - active: acquisitions, NMMF (thesis algorithm 1) and its baselines, ask/tell campaigns.
 - testproblems: benchmark problems of thesis sections 2.4-2.5.
-- albench: the NMMF benchmark runner and its summaries.
 - envelope_design: the envelope design's acquisition (variance explained along doubtful cells' trajectories).
 """

@@ -37,13 +37,17 @@ from __future__ import annotations
 import json
 import math
 import time
-from collections.abc import Iterable
-from typing import TYPE_CHECKING, TextIO
+from collections.abc import Callable, Iterable
+from typing import TYPE_CHECKING, Any, TextIO
 
 from nearsub.common.runtime.logfile import INVALID_SUFFIX, vehicle_spec
 
 if TYPE_CHECKING:
     from nearsub.common.runtime.logfile import LogContents, LogRecord
+
+# A vehicle library by name (physics.vehicles.get_vehicle, which the caller passes: the runtime knows
+# no physics): anything with `length` [m] and `max_thrust` [N]; KeyError for an unknown name.
+VehicleLibrary = Callable[[str], Any]
 
 BANNER_RULE = "%" * 59  # pLogger's DoBanner rule line
 
@@ -96,12 +100,10 @@ def _community(contents: LogContents) -> str:
     return "nearsub"
 
 
-def _vehicle_figures(vehicle: str, contents: LogContents) -> dict[str, float]:
+def _vehicle_figures(vehicle: str, contents: LogContents, library: VehicleLibrary) -> dict[str, float]:
     """The vehicle's length [m] and thrust limit [N], from the log's mission (a vehicle given
-    by name or in full, or its `[[vehicles]]` entry) or the vehicle library; an empty dict when
-    neither knows it."""
-    from nearsub.common.physics.vehicles import get_vehicle
-
+    by name or in full, or its `[[vehicles]]` entry) or `library`; an empty dict when neither
+    knows it."""
     resolved = contents.metadata.get("mission", {}).get("resolved")
     try:
         spec = vehicle_spec(json.loads(resolved), vehicle) if resolved else None
@@ -110,7 +112,7 @@ def _vehicle_figures(vehicle: str, contents: LogContents) -> dict[str, float]:
     if isinstance(spec, dict) and spec.get("length") and spec.get("max_thrust"):
         return {"length": float(spec["length"]), "max_thrust": float(spec["max_thrust"])}
     try:
-        model = get_vehicle(spec if isinstance(spec, str) else vehicle)
+        model = library(spec if isinstance(spec, str) else vehicle)
     except KeyError:
         return {}
     return {"length": model.length, "max_thrust": model.max_thrust}
@@ -127,9 +129,13 @@ class _Lines:
 
 
 def alog_lines(
-    contents: LogContents, records: Iterable[LogRecord] | None = None, vehicle: str | None = None
+    contents: LogContents,
+    library: VehicleLibrary,
+    records: Iterable[LogRecord] | None = None,
+    vehicle: str | None = None,
 ) -> list[str]:
-    """The alog's lines (banner included, no newlines) for `records` (default: every record).
+    """The alog's lines (banner included, no newlines) for `records` (default: every record);
+    `library` gives the length and thrust limit of a vehicle the log's mission names only by name.
     With several vehicles, each NODE_REPORT names its vehicle (NAME=<vehicle>, as a shoreside's
     alog); `vehicle` writes that vehicle's own alog (`LogContents.vehicle_records`), whose MOOSDB is named
     after it, as alogview reads one alog per vehicle."""
@@ -144,7 +150,7 @@ def alog_lines(
 
     def figures(vehicle: str) -> dict[str, float]:
         if vehicle not in known:
-            known[vehicle] = _vehicle_figures(vehicle, contents)
+            known[vehicle] = _vehicle_figures(vehicle, contents, library)
         return known[vehicle]
 
     vehicles = set(contents.vehicles())
@@ -172,11 +178,15 @@ def alog_lines(
 
 
 def write_alog(
-    contents: LogContents, out: TextIO, records: Iterable[LogRecord] | None = None, vehicle: str | None = None
+    contents: LogContents,
+    out: TextIO,
+    library: VehicleLibrary,
+    records: Iterable[LogRecord] | None = None,
+    vehicle: str | None = None,
 ) -> int:
     """Write the alog (of one `vehicle`, see `alog_lines`) to `out`; returns the number of postings
     (lines after the banner)."""
-    lines = alog_lines(contents, records, vehicle)
+    lines = alog_lines(contents, library, records, vehicle)
     for line in lines:
         out.write(line + "\n")
     return sum(1 for line in lines if not line.startswith("%"))

@@ -34,13 +34,13 @@ from typing import Protocol
 
 import numpy as np
 
-from nearsub.common.hydro import free_stream as fs
 from nearsub.common.hydro import low_fidelity as hydro_lf
 from nearsub.common.physics import proximity
 from nearsub.common.physics.dynamics import PSI, Interaction, U, X, Y
 from nearsub.common.physics.hull import R_SUB
 from nearsub.common.physics.vehicles import Vehicle
 from nearsub.common.surrogate import domain
+from nearsub.common.surrogate import free_stream as fs
 from nearsub.common.surrogate import query as sg
 from nearsub.common.surrogate.query import ServiceError
 
@@ -86,6 +86,7 @@ class IncrementError(ServiceError):
 
 class ForceModel(Protocol):
     kind: str  # "lf_in_loop", "multi_fidelity" or "gp"
+    model_id: str | None  # the model's content hash (the server's model: from its first reply)
 
     def predict(self, inputs: np.ndarray, return_std: bool = True) -> sg.Prediction: ...
 
@@ -262,18 +263,6 @@ def geometry_outside(vehicle: Vehicle) -> str | None:
 _TABLES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # force model -> its free-stream table
 
 
-def _served_model_id(model: ForceModel) -> str | None:
-    """The content hash of the model behind `model`: `Surrogate.model_id`, or, for the surrogate
-    server (apps.services.RemoteSurrogate, which does not keep it), the model_id of one reply."""
-    if getattr(model, "model_id", None) is not None or not hasattr(model, "_querier"):
-        return getattr(model, "model_id", None)
-    try:
-        payload = model._querier.ask(sg.encode_query(domain.BOUNDS.mean(axis=1)))
-        return sg.decode_reply(payload).model_id
-    except (RuntimeError, ValueError) as exc:  # bus.ReplyError, messages.MessageError (no Zenoh import here)
-        raise ServiceError(f"surrogate server: {exc}") from None
-
-
 def increment_table(model: ForceModel) -> fs.FreeStreamTable:
     """The free-stream table made for this model (cached per model object); raises IncrementError,
     naming the mission field and the model file, when there is none: adding the surrogate's total
@@ -282,7 +271,7 @@ def increment_table(model: ForceModel) -> fs.FreeStreamTable:
         return _TABLES[model]
     except (KeyError, TypeError):
         pass
-    model_id = _served_model_id(model)
+    model_id = getattr(model, "model_id", None)
     loaded = getattr(model, "loaded", None)
     path = getattr(loaded, "path", None)
     try:
@@ -422,7 +411,7 @@ def lf_in_loop_increment(
 
     delta is the GP of HF - LF of the total coefficients, so it holds HF_free - LF_free, the two
     models' difference for the UUV alone, which is no interaction: it is taken out with the HF's
-    free stream `free_stream` (the model's free-stream table, `hydro.free_stream`) and the LF's own
+    free stream `free_stream` (the model's free-stream table, `surrogate.free_stream`) and the LF's own
     (`low_fidelity.lf_free_stream`) at x_c. x_c and w: `discrepancy_inputs`, `discrepancy_weight`;
     w ignores the heading, so the LF alone carries it beyond +/-2 deg, continuously. LF_free is the
     same model's lone UUV at the same hull, speed and heading, so the increment tends to zero away
