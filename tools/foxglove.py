@@ -67,7 +67,7 @@ def export_foxglove(path: str | Path, output: str | Path) -> int:
     from nearsub.common.viewer.foxglove import FoxgloveScene
     from nearsub.logs import decode_payload
 
-    from .view import mission_of_log
+    from .log_input import mission_of_log
 
     contents = read_log(path)
     start_ms = round(log_start(contents) * 1e3)  # the logger records its start to the millisecond

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import csv
-import glob
 import json
 import sys
 from collections import Counter, defaultdict
@@ -11,10 +10,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from .errors import InputError
+from .log_input import check_log, log_paths, select_topic, vehicle_records
 from .outputs import output_file, output_folder
 
 if TYPE_CHECKING:
-    from nearsub.common.runtime.logfile import LogContents
+    pass
 
 
 def add_parser(subparsers) -> None:
@@ -52,70 +52,6 @@ def add_parser(subparsers) -> None:
     t.add_argument("-o", "--output", help="PNG file (default: LOG.png, next to the log; .png added to a bare name)")
     t.add_argument("--title")
     t.set_defaults(func=plot_command)
-
-
-MCAP_MAGIC = b"\x89MCAP0\r\n"  # the first 8 bytes of every MCAP file (MCAP specification, "Magic")
-
-
-class LogInputError(InputError):
-    """A path that is not a readable MCAP log; the one-line text names it."""
-
-
-def log_paths(patterns: list[str]) -> list[Path]:
-    """The files named, a pattern with wildcards standing for the files it matches, each checked
-    to exist and to start as an MCAP file does."""
-    paths: list[Path] = []
-    for pattern in patterns:
-        if not Path(pattern).exists() and glob.has_magic(pattern):
-            matched = sorted(glob.glob(pattern))
-            if not matched:
-                raise LogInputError(f"{pattern}: no file matches")
-            paths += [Path(m) for m in matched]
-        else:
-            paths.append(Path(pattern))
-    for path in paths:
-        check_log(path)
-    return paths
-
-
-def check_log(path: Path) -> None:
-    try:
-        with open(path, "rb") as f:
-            head = f.read(len(MCAP_MAGIC))
-    except FileNotFoundError:
-        raise LogInputError(f"{path}: no such file") from None
-    except IsADirectoryError:
-        raise LogInputError(f"{path}: is a folder, not a log file") from None
-    except OSError as exc:
-        raise LogInputError(f"{path}: cannot read ({exc.strerror})") from None
-    if head != MCAP_MAGIC:
-        raise LogInputError(f"{path}: not an MCAP log (it does not start with the MCAP magic bytes)")
-
-
-def _select(contents: LogContents, topic: str | None):
-    wanted = topic_filter(topic)
-    for record in contents.records:
-        if wanted(record.topic):
-            yield record
-
-
-def vehicle_records(contents: LogContents, args, records=None, error=InputError) -> list:
-    """The records of `--vehicle` (`LogContents.vehicle_records`); a vehicle the log does not
-    have is bad input (`error`), naming the ones it has."""
-    if args.vehicle not in contents.vehicles():
-        known = ", ".join(contents.vehicles()) or "none"
-        raise error(f"--vehicle {args.vehicle}: not a vehicle of {args.log} (its vehicles: {known})")
-    return contents.vehicle_records(args.vehicle, records)
-
-
-def topic_filter(pattern: str | None):
-    """`nearsub.logs.topic_filter` for a `--topic` option: a bad pattern is bad input."""
-    from nearsub.logs import topic_filter as logs_topic_filter
-
-    try:
-        return logs_topic_filter(pattern, "--topic")
-    except ValueError as exc:
-        raise InputError(str(exc)) from None
 
 
 def info_command(args) -> int:
@@ -204,7 +140,7 @@ def export_command(args) -> int:
         return _export_foxglove(args)
     output = _export_output(args)
     contents = read_log(args.log)
-    records = list(_select(contents, args.topic))
+    records = list(select_topic(contents, args.topic))
     if args.vehicle is not None:
         records = vehicle_records(contents, args, records)
     if args.format == "csv":

@@ -14,6 +14,7 @@ from pathlib import Path
 
 from .arguments import integer
 from .errors import InputError
+from .log_input import check_log, is_log, mission_of_log
 
 PORT = integer(minimum=0, maximum=65535)  # a TCP port; 0: a free one
 
@@ -69,21 +70,6 @@ def start_server_process(tool: str, run_file: str | Path, port: int, timeout: fl
     return process, line.split(": ", 1)[1].strip()
 
 
-def is_log(target: str) -> bool:
-    return target.endswith(".mcap") or Path(target).is_file()
-
-
-def mission_of_log(path: Path):
-    """The resolved mission stored in a log's metadata, or None."""
-    import json
-
-    from nearsub.common.mission.schema import mission_from_dict
-    from nearsub.common.runtime.logfile import read_log
-
-    resolved = read_log(path).metadata.get("mission", {}).get("resolved")
-    return mission_from_dict(json.loads(resolved), f"{path} metadata") if resolved else None
-
-
 def mission_of_run(entry: dict):
     """The mission of a running launcher: its run file sits beside the log it writes."""
     from nearsub.common.mission.schema import RunConfig
@@ -97,8 +83,6 @@ def mission_of_run(entry: dict):
 
 def view_command(args) -> int:
     if is_log(args.target):
-        from .log import check_log
-
         path = Path(args.target)
         check_log(path)
         return _replay(path, args.port)
