@@ -10,5 +10,8 @@
 - sweeps: heading and lateral sweeps of the interaction increment (HF, LF, applied).
 - maps: the thesis section 4.5 colour maps as data.
 - validation: MAE against the high fidelity in the form of thesis table 4.3.
+- sampling: posterior function samples of the residual GP, consistent along a trajectory.
+- sampling_kernel: the compiled kernels of `sampling`.
+- query: the surrogate server's query and reply messages.
 - campaign_cases: a surrogate input as the dimensional case a CFD user sets up.
 """

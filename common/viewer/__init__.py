@@ -1,2 +1,5 @@
-"""The viewer's scene model (what the page draws), its page (static files shipped as package data),
-and `foxglove`: the same run as Foxglove channels."""
+"""What the browser map and Foxglove draw, and the page (static/, shipped as package data).
+
+- scene: the viewer's scene model, computed from a mission and the messages of a run.
+- foxglove: the same run as Foxglove channels.
+"""
