@@ -172,12 +172,12 @@ class _NoTokens:
 def test_an_app_exiting_while_the_launcher_waits_for_it(tmp_path, code):
     """Exit code 0 between the token check and the exit check is an app that ended the mission
     (the sim refusing its settings at step 0): not a start-up failure. Another code is one."""
-    from nearsub.tools.launcher import Child, Launcher, LaunchError
+    from nearsub.tools.launcher.processes import Child, LaunchError, Processes
 
-    launcher = Launcher(load_mission(ALPHA), None, str(tmp_path), quiet=True)
-    launcher.children["sim-1"] = Child("sim-1", "sim", _ExitsWhileAsked(code), tmp_path / "sim-1.out")
+    processes = Processes(tmp_path, load_mission(ALPHA).startup_timeout, say=print)
+    processes.children["sim-1"] = Child("sim-1", "sim", _ExitsWhileAsked(code), tmp_path / "sim-1.out")
     if code == 0:
-        launcher.wait_alive(_NoTokens(), [("sim", "sim-1")], timeout=5.0)
+        processes.wait_alive(_NoTokens(), "alpha", [("sim", "sim-1")], timeout=5.0)
     else:
         with pytest.raises(LaunchError, match="sim-1 exited with code 1 during start-up"):
-            launcher.wait_alive(_NoTokens(), [("sim", "sim-1")], timeout=5.0)
+            processes.wait_alive(_NoTokens(), "alpha", [("sim", "sim-1")], timeout=5.0)

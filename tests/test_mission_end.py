@@ -7,7 +7,7 @@ from types import SimpleNamespace
 from nearsub.apps.logger import Recorder
 from nearsub.common.runtime import keys
 from nearsub.common.runtime.messages import AppStatus, MissionEnd, encode
-from nearsub.tools import launcher
+from nearsub.tools.launcher import processes
 
 
 class Writer:
@@ -40,10 +40,10 @@ def test_the_logger_knows_which_apps_have_not_yet_said_stopping():
 
 def test_the_surrogate_server_is_stopped_after_the_apps_that_ask_it(monkeypatch):
     order = []
-    monkeypatch.setattr(launcher, "stop", lambda processes, grace=0.0: order.extend(p for p in processes))
+    monkeypatch.setattr(processes, "stop", lambda stopped, grace=0.0: order.extend(p for p in stopped))
     roles = ("logger", "surrogate", "clock", "helm", "pid", "sim")
     children = {role: SimpleNamespace(role=role, process=role) for role in roles}
-    owner = SimpleNamespace(children=children, companion_processes=[], router_lost=lambda: False)
-    launcher.Launcher.stop_all(owner)
+    owner = SimpleNamespace(children=children, companions=[], router_lost=lambda: False)
+    processes.Processes.stop_all(owner)
     assert order.index("surrogate") > max(order.index(role) for role in ("clock", "helm", "pid", "sim"))
     assert order[-1] == "logger"

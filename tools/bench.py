@@ -123,7 +123,7 @@ FLEET_SPACING = 250.0  # m between two vehicles' copies of alpha (its survey spa
 
 def launch_once(source, log_dir: str, tag: str, *overrides: str):
     """One launch at warp 0 through the multi-process launcher: its `Summary`."""
-    from .launcher import Launcher
+    from .launcher.supervision import Launcher
 
     mission = source.load([f"name=bench{tag}_{int(time.time())}", "warp=0", *overrides])
     return Launcher(mission, source.path and str(source.path), log_dir, quiet=True).run()

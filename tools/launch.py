@@ -1,4 +1,4 @@
-"""`nearsub launch MISSION`: run a mission file as separate processes, supervised by `launcher`."""
+"""`nearsub launch MISSION`: run a mission file as separate processes, supervised by the `launcher` package."""
 
 from __future__ import annotations
 
@@ -30,8 +30,8 @@ def add_parser(subparsers) -> None:
 
 
 def companions(args) -> list:
-    """The servers `--view` and `--foxglove` ask for: each starts from the launcher's run file
-    once the apps are up, and prints where it listens. A port without its server is refused
+    """The servers `--view` and `--foxglove` ask for: each starts from the launcher's run file, with
+    the apps' environment, once the apps are up, and prints where it listens. A port without its server is refused
     rather than ignored: the user surely wanted the server."""
     servers = {"view": (args.view, args.view_port, 0), "foxglove": (args.foxglove, args.foxglove_port, FOXGLOVE_PORT)}
     wanted = []
@@ -42,12 +42,12 @@ def companions(args) -> list:
             wanted.append((tool, default if port is None else port))
 
     def starter(tool: str, port: int):
-        def start(run_file):
-            from .launcher import LaunchError
+        def start(run_file, env):
+            from .launcher.processes import LaunchError
             from .view import start_server_process
 
             try:
-                process, url = start_server_process(tool, run_file, port)
+                process, url = start_server_process(tool, run_file, port, env=env)
             except RuntimeError as exc:
                 raise LaunchError(str(exc), app=tool) from None
             print(f"nearsub launch: {tool} at {url}", file=sys.stderr, flush=True)
@@ -73,7 +73,8 @@ def model_file_problem(path: str) -> str | None:
 def launch_command(args) -> int:
     from nearsub.common.mission.schema import MissionError, load_mission
 
-    from .launcher import Launcher, exit_code
+    from .launcher.status import exit_code
+    from .launcher.supervision import Launcher
 
     extra = companions(args)
     overrides = list(args.set)

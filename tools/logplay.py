@@ -8,7 +8,7 @@ Under `--community NAME` the keys move from `nearsub/<logged>/...` to `nearsub/<
 payloads stay as logged, so a control request's `reply_to` still names the logged community.
 
 Without `--connect` the player starts a router on a free loopback port as the launcher does
-(`launcher.spawn_router`) and prints its endpoint. It claims the community name and registers the
+(`launcher.processes.spawn_router`) and prints its endpoint. It claims the community name and registers the
 replay like a launched mission (`registry`), so `nearsub tap echo KEY --community NAME` and
 `nearsub view NAME` find it by name; a live mission of that name is refused rather than mixed with.
 """
@@ -145,7 +145,7 @@ def play_command(args) -> int:
         with claim:
             from nearsub.common.runtime.processes import stop
 
-            from .launcher import LaunchError, spawn_router
+            from .launcher.processes import LaunchError, spawn_router
 
             credentials = None  # with --connect: $NEARSUB_CREDENTIALS, if the router needs any
             try:

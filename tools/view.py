@@ -39,10 +39,10 @@ def start_viewer(run_file: str | Path, port: int = 0, timeout: float = 30.0):
     return start_server_process("view", run_file, port, timeout)
 
 
-def start_server_process(tool: str, run_file: str | Path, port: int, timeout: float | None = None):
+def start_server_process(tool: str, run_file: str | Path, port: int, timeout: float | None = None, env=None):
     """Start `nearsub TOOL MISSION --run RUN_FILE --port PORT` (view, foxglove) in its own process
-    group; returns (process, URL) once it prints `nearsub TOOL: URL` (within `timeout`, by
-    default the mission's start-up timeout)."""
+    group with the environment `env` (default: this process's); returns (process, URL) once it
+    prints `nearsub TOOL: URL` (within `timeout`, by default the mission's start-up timeout)."""
     import queue
     import subprocess
     import threading
@@ -52,7 +52,9 @@ def start_server_process(tool: str, run_file: str | Path, port: int, timeout: fl
     mission = RunConfig.load(run_file).mission
     community, timeout = mission.name, mission.startup_timeout if timeout is None else timeout
     argv = [sys.executable, "-m", "nearsub", tool, community, "--run", str(run_file), "--port", str(port)]
-    process = subprocess.Popen(argv, stdout=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL, process_group=0)
+    process = subprocess.Popen(
+        argv, stdout=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL, process_group=0, env=env
+    )
     lines: queue.Queue = queue.Queue()
     # Every line, then None when its output closes (it exited: its stderr has said why).
     threading.Thread(target=lambda: [*map(lines.put, process.stdout), lines.put(None)], daemon=True).start()

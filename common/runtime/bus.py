@@ -42,7 +42,7 @@ import queue
 import signal
 import socket
 import time
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
@@ -174,6 +174,24 @@ def app_link(connect: Iterable[str], apps: int | None = None) -> str:
     connect = list(connect)
     local = bool(connect) and all(is_local(e) for e in connect)
     return "peer" if local and (apps is None or apps <= PEER_APPS) else "client"
+
+
+def app_environment(
+    connect: Iterable[str], apps: int, timeout: float, credentials: str | None, environ: Mapping[str, str] = os.environ
+) -> dict[str, str]:
+    """The environment of the processes a launcher starts for a mission of `apps` apps on the
+    router at `connect`: `environ` (its own) with how long a client keeps trying to reach the
+    router (`timeout` seconds), the mission's `credentials` file (None: as `environ` has it), how
+    the apps link (`app_link`) and their Zenoh runtime (APP_RUNTIME unless `environ` sets one).
+    Handed to each child, so the launcher's own environment stays as it was and a second launch in
+    the same process inherits nothing of the first."""
+    env = dict(environ)
+    env[CONNECT_TIMEOUT_VARIABLE] = f"{timeout:g}"
+    if credentials:
+        env[mission_credentials.VARIABLE] = credentials
+    env[LINK_VARIABLE] = app_link(connect, apps)
+    env.setdefault(RUNTIME_VARIABLE, APP_RUNTIME)
+    return env
 
 
 def app_endpoints(connect: Iterable[str]) -> Endpoints:

@@ -35,7 +35,7 @@ import subprocess
 import sys
 import time
 import warnings
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from typing import IO
 
 from nearsub.common.runtime.processes import (
@@ -107,12 +107,15 @@ class ForkServer:
         self.buffer = b""
         self.replies: list[dict] = []
 
-    def spawn(self, module: str, args: Iterable[str], output: IO[bytes], timeout: float) -> ForkedApp:
+    def spawn(
+        self, module: str, args: Iterable[str], output: IO[bytes], timeout: float, env: Mapping[str, str] | None = None
+    ) -> ForkedApp:
         """Fork `python -m MODULE ARGS` (an app: nearsub.apps.X) with stdout and stderr into
-        `output`, as `processes.spawn_app` starts one. The first answer waits for the preload;
+        `output` and the environment `env` (default: this process's at the request), as
+        `processes.spawn_app` starts one. The first answer waits for the preload;
         a server that has not answered within `timeout` wall seconds is killed (so that it never
         forks the app late, beside the one the caller then starts itself)."""
-        request = {"module": module, "args": list(args), "env": dict(single_blas_thread(dict(os.environ)))}
+        request = {"module": module, "args": list(args), "env": dict(single_blas_thread(dict(os.environ if env is None else env)))}
         try:
             socket.send_fds(self.socket, [json.dumps(request).encode() + b"\n"], [output.fileno()])
         except OSError as exc:

@@ -11,7 +11,7 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Iterable, Iterator, MutableMapping
+from collections.abc import Callable, Iterable, Iterator, Mapping, MutableMapping
 from contextlib import contextmanager
 from typing import IO, NoReturn
 
@@ -83,16 +83,18 @@ def module_command(module: str, args: Iterable[str]) -> list[str]:
     return [sys.executable, "-u", "-m", module, *args]
 
 
-def spawn_app(app: str, args: Iterable[str], output: IO[bytes] | int) -> subprocess.Popen:
+def spawn_app(
+    app: str, args: Iterable[str], output: IO[bytes] | int, env: Mapping[str, str] | None = None
+) -> subprocess.Popen:
     """Start `python -m nearsub.apps.<app> ARGS` with one BLAS thread, stdin closed, stdout and
     stderr into `output`, in a process group of its own so that `stop` reaches the workers it
-    starts too."""
+    starts too; its environment is `env` (default: this process's)."""
     return subprocess.Popen(
         module_command(f"nearsub.apps.{app}", args),
         stdout=output,
         stderr=subprocess.STDOUT,
         stdin=subprocess.DEVNULL,
-        env=single_blas_thread(dict(os.environ)),
+        env=single_blas_thread(dict(os.environ if env is None else env)),
         process_group=0,
     )
 
