@@ -115,7 +115,8 @@ class ForkServer:
         `processes.spawn_app` starts one. The first answer waits for the preload;
         a server that has not answered within `timeout` wall seconds is killed (so that it never
         forks the app late, beside the one the caller then starts itself)."""
-        request = {"module": module, "args": list(args), "env": dict(single_blas_thread(dict(os.environ if env is None else env)))}
+        environment = single_blas_thread(dict(os.environ if env is None else env))
+        request = {"module": module, "args": list(args), "env": environment}
         try:
             socket.send_fds(self.socket, [json.dumps(request).encode() + b"\n"], [output.fileno()])
         except OSError as exc:
