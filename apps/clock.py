@@ -25,6 +25,7 @@ import time
 
 import msgpack
 
+from nearsub.apps.entry import load_run, run_app
 from nearsub.apps.shell import wait_for_roles
 from nearsub.common.mission.schema import RunConfig
 from nearsub.common.runtime import keys
@@ -39,7 +40,7 @@ from nearsub.common.runtime.messages import (
     decode,
     encode,
 )
-from nearsub.common.runtime.processes import leave, prepare_process
+from nearsub.common.runtime.processes import leave
 
 
 class Clock:
@@ -164,16 +165,15 @@ def main(argv=None) -> int:
     parser.add_argument(
         "--after", action="append", default=[], metavar="ROLE", help="wait for this role's liveliness token too"
     )
-    args = parser.parse_args(argv)
-    prepare_process()
-    run = RunConfig.load(args.run)
-    try:
-        with Bus(app_endpoints(run.connect)) as bus:
-            clock = Clock(run, bus, args.after)
-            bus.token(keys.alive(run.mission.name, "clock", args.instance))
-            return clock.run()
-    except KeyboardInterrupt:
-        return 130
+    return run_app(parser, serve, argv)
+
+
+def serve(args) -> int:
+    run = load_run(args.run)
+    with Bus(app_endpoints(run.connect)) as bus:
+        clock = Clock(run, bus, args.after)
+        bus.token(keys.alive(run.mission.name, "clock", args.instance))
+        return clock.run()
 
 
 if __name__ == "__main__":

@@ -16,9 +16,9 @@ import time
 from pathlib import Path
 
 from nearsub import __version__
-from nearsub.common.mission.schema import RunConfig
+from nearsub.apps.entry import load_run, run_app
 from nearsub.common.runtime import keys
-from nearsub.common.runtime.bus import Bus, BusError, app_endpoints, queue_lost, signal_self
+from nearsub.common.runtime.bus import Bus, app_endpoints, queue_lost, signal_self
 from nearsub.common.runtime.lifecycle import OPERATOR
 from nearsub.common.runtime.logfile import LogWriter
 from nearsub.common.runtime.messages import (
@@ -31,7 +31,7 @@ from nearsub.common.runtime.messages import (
     encode,
     model_for_key,
 )
-from nearsub.common.runtime.processes import prepare_process
+from nearsub.common.runtime.processes import leave
 
 DRAIN_SECONDS = 0.3  # after the last app has left, keep what is still in flight (app_left)
 # Wall seconds between two reads of an empty stream: about 50 messages at 1000 steps/s, far below
@@ -98,9 +98,12 @@ def main(argv=None) -> int:
     parser.add_argument("--instance", default="logger")
     parser.add_argument("--output", required=True, help="MCAP file to write")
     parser.add_argument("--mission-file", help="mission file to attach")
-    args = parser.parse_args(argv)
-    prepare_process()
-    run = RunConfig.load(args.run)
+    return run_app(parser, record, argv)
+
+
+def record(args) -> int:
+    """Record the mission of the run file `args.run` until its end (then its apps' last words)."""
+    run = load_run(args.run)
     community = run.mission.name
     writer = LogWriter(args.output)
     writer.metadata("mission", {"name": community, "resolved": run.mission.model_dump_json()})
@@ -110,7 +113,6 @@ def main(argv=None) -> int:
         writer.metadata("mission_file", {"path": args.mission_file, "toml": text.decode(errors="replace")})
         writer.attach(Path(args.mission_file).name, text, "application/toml")
     recorder = Recorder(writer, community)
-    code = 0
     try:
         with Bus(app_endpoints(run.connect)) as bus:
             stream = bus.stream(keys.everything(community))
@@ -132,14 +134,7 @@ def main(argv=None) -> int:
             drain_until = time.monotonic() + DRAIN_SECONDS
             while time.monotonic() < drain_until:
                 drain(stream, recorder)
-    except BusError as exc:  # its router cannot be reached: one line, no traceback
-        print(f"[logger] {exc}", file=sys.stderr)
-        code = 1
-    except KeyboardInterrupt:
-        code = 130
-    except SystemExit as exc:  # SIGTERM from the launcher or the lost-launcher watch
-        code = exc.code if isinstance(exc.code, int) else 1
-    finally:
+    finally:  # also on a lost router, Ctrl-C or SIGTERM (the launcher's, or the lost-launcher watch)
         end = recorder.end
         if end is not None:
             writer.metadata(
@@ -147,8 +142,8 @@ def main(argv=None) -> int:
             )
         writer.finish()
         print(f"[logger] wrote {writer.count} messages to {writer.path}", file=sys.stderr)
-    return code
+    return 0
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    leave(main())

@@ -15,10 +15,10 @@ import argparse
 import json
 import os
 import signal
-import sys
 import threading
 from pathlib import Path
 
+from nearsub.apps.entry import AppError, run_app
 from nearsub.common.runtime.bus import Bus, BusError, make_config
 from nearsub.common.runtime.processes import leave, prepare_process
 
@@ -63,16 +63,19 @@ def main(argv=None) -> int:
     parser.add_argument("--with-parent", action="store_true", help="exit when the parent process dies")
     parser.add_argument("--ready-file", help="write the endpoints listened on (JSON list) here once listening")
     parser.add_argument("--credentials", help="admit only sessions with the user:password in this file (mode 0600)")
-    args = parser.parse_args(argv)
-    listen = args.listen or ["tcp/127.0.0.1:7447"]
-    try:
-        return serve(listen, args.connect, args.with_parent, args.ready_file, args.credentials)
-    except BusError as exc:  # a malformed endpoint, a port taken: one line naming it
-        print(f"router: {exc}", file=sys.stderr)
-        return 2
-    except OSError as exc:  # the ready file cannot be written
-        print(f"router: {exc}", file=sys.stderr)
-        return 1
+
+    def body(args) -> int:
+        try:
+            return serve(
+                args.listen or ["tcp/127.0.0.1:7447"], args.connect, args.with_parent, args.ready_file, args.credentials
+            )
+        except BusError as exc:  # a malformed endpoint, a port taken: bad input, one line naming it
+            raise AppError(str(exc), 2) from None
+        except OSError as exc:  # the ready file cannot be written
+            raise AppError(str(exc), 1) from None
+
+    # Not prepared for a launcher unless --with-parent: a router of its own stops on SIGINT/SIGTERM.
+    return run_app(parser, body, argv, prepare=False, name="router")
 
 
 if __name__ == "__main__":

@@ -29,7 +29,8 @@ import time
 import uuid
 from collections.abc import Callable
 
-from nearsub.common.mission.schema import MissionError, RunConfig, apply_overrides, mission_from_dict
+from nearsub.apps.entry import AppError, load_run, run_app
+from nearsub.common.mission.schema import RunConfig
 from nearsub.common.runtime import keys
 from nearsub.common.runtime.bus import Bus, DeadlineExceeded, app_endpoints, deadline, signal_self
 from nearsub.common.runtime.lifecycle import (
@@ -57,7 +58,6 @@ from nearsub.common.runtime.messages import (
     decode,
     encode,
 )
-from nearsub.common.runtime.processes import prepare_process
 from nearsub.common.surrogate.query import ServiceError
 
 HANDOVER_TIMEOUT = 30.0
@@ -87,14 +87,6 @@ def wait_for_roles(bus: Bus, community: str, roles: list[str], timeout: float) -
         if not missing or time.monotonic() > end:
             return missing
         time.sleep(0.02)
-
-
-def load_run(args) -> RunConfig:
-    run = RunConfig.load(args.run)
-    if args.set:
-        data = apply_overrides(run.mission.model_dump(mode="json"), args.set)
-        run = run.model_copy(update={"mission": mission_from_dict(data, "--set")})
-    return run
 
 
 class AppShell:
@@ -133,9 +125,7 @@ class AppShell:
             c = self.community
             mission = self.mission
             if missing := wait_for_roles(bus, c, list(after), mission.startup_timeout):
-                raise SystemExit(
-                    f"{self.instance}: {', '.join(missing)} did not start within {mission.startup_timeout:g} s"
-                )
+                raise AppError(f"{', '.join(missing)} did not start within {mission.startup_timeout:g} s")
             surrogate = None
             if mission.needs_surrogate:
                 from nearsub.apps.services import RemoteSurrogate  # the pid never asks: no import
@@ -207,11 +197,9 @@ class AppShell:
                     if reply.request_id == request.request_id:
                         break
         except DeadlineExceeded:
-            raise SystemExit(
-                f"{self.instance}: no handover from {old_instance} within {HANDOVER_TIMEOUT:g} s"
-            ) from None
+            raise AppError(f"no handover from {old_instance} within {HANDOVER_TIMEOUT:g} s") from None
         if not reply.ok:
-            raise SystemExit(f"{self.instance}: handover from {old_instance} failed: {reply.error}")
+            raise AppError(f"handover from {old_instance} failed: {reply.error}")
         self.stepper.take_over(bytes.fromhex(reply.data["handover"]), resume_step)
 
     # -- the loop -----------------------------------------------------------------------------
@@ -322,21 +310,15 @@ class AppShell:
 
 
 def main_for(core_factory, description: str, argv=None) -> int:
-    """Entry point shared by the helm, pid and sim processes."""
-    args = app_arguments(description).parse_args(argv)
-    prepare_process()
-    try:
-        run = load_run(args)
-    except MissionError as exc:
-        print(f"[{args.instance}] {exc}", file=sys.stderr)
-        return 2
-    try:
-        run.mission.member(args.vehicle)
-    except KeyError as exc:
-        print(f"[{args.instance}] --vehicle: {exc.args[0]}", file=sys.stderr)
-        return 2
-    shell = AppShell(core_factory, run, args.instance, args.vehicle)
-    try:
+    """The `main` of the helm, pid and sim: `core_factory(mission, surrogate)` builds the core."""
+
+    def body(args) -> int:
+        run = load_run(args.run, args.set)
+        try:
+            run.mission.member(args.vehicle)
+        except KeyError as exc:
+            raise AppError(f"--vehicle: {exc.args[0]}", 2) from None
+        shell = AppShell(core_factory, run, args.instance, args.vehicle)
         return shell.serve(args.takeover, args.resume_step, args.after)
-    except KeyboardInterrupt:
-        return 130
+
+    return run_app(app_arguments(description), body, argv)

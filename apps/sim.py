@@ -5,8 +5,7 @@ instead of asking the surrogate server every step (docs/architecture.md, "Where 
 evaluates the surrogate"): the same `Surrogate` class and file as the in-process run, so the
 same forces to the bit, without the round trip."""
 
-import sys
-
+from nearsub.apps.entry import AppError
 from nearsub.apps.shell import main_for
 from nearsub.common.mission.cores import SimCore, mission_surrogate, sim_forces
 from nearsub.common.mission.schema import Mission
@@ -21,8 +20,7 @@ def sim_core(mission: Mission, server) -> SimCore:
         try:
             return SimCore(mission, mission_surrogate(mission))
         except ModelFileError as exc:
-            print(f"surrogate.model: {exc}", file=sys.stderr)
-            raise SystemExit(2) from None
+            raise AppError(f"surrogate.model: {exc}", 2) from None
     return SimCore(mission, server)
 
 

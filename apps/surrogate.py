@@ -23,11 +23,11 @@ import argparse
 import sys
 from typing import NoReturn
 
+from nearsub.apps.entry import AppError, load_run, run_app
 from nearsub.apps.services import MAX_BATCH, discrepancy_key, kind_key
-from nearsub.common.mission.schema import MissionError, RunConfig
 from nearsub.common.runtime import keys
 from nearsub.common.runtime.bus import Bus, Publisher, app_endpoints, signal_self
-from nearsub.common.runtime.processes import leave, prepare_process
+from nearsub.common.runtime.processes import leave
 from nearsub.common.surrogate.domain import constraints_ok, in_domain
 from nearsub.common.surrogate.model import (
     Prediction,
@@ -124,29 +124,23 @@ def main(argv=None) -> int:
     parser.add_argument("--community", help="mission (community) name; overrides --run")
     parser.add_argument("--connect", action="append", metavar="ENDPOINT", help="router endpoint; overrides --run")
     parser.add_argument("--instance", default="surrogate", help="instance name for the liveliness token")
-    args = parser.parse_args(argv)
-    prepare_process()
-    community, connect, model = args.community, args.connect, args.model
-    if args.run:
+
+    def body(args) -> int:
+        community, connect, model = args.community, args.connect, args.model
+        if args.run:
+            run = load_run(args.run)
+            community, connect = community or run.mission.name, connect or run.connect
+            model = model or run.mission.surrogate.model or None
+        if not community or not connect:
+            parser.error("give --run RUNFILE, or --community NAME and --connect ENDPOINT")
         try:
-            run = RunConfig.load(args.run)
-        except (OSError, ValueError, MissionError) as exc:
-            print(f"[{args.instance}] cannot read {args.run}: {exc}", file=sys.stderr)
-            return 2
-        community, connect = community or run.mission.name, connect or run.connect
-        model = model or run.mission.surrogate.model or None
-    if not community or not connect:
-        parser.error("give --run RUNFILE, or --community NAME and --connect ENDPOINT")
-    try:
-        surrogate = load_surrogate(model)
-    except ModelFileError as exc:
-        print(f"[{args.instance}] {exc}", file=sys.stderr)
-        return 2
-    try:
+            surrogate = load_surrogate(model)
+        except ModelFileError as exc:
+            raise AppError(str(exc), 2) from None
         with Bus(app_endpoints(connect)) as bus:
             serve(bus, community, surrogate, args.instance)
-    except KeyboardInterrupt:
-        return 130
+
+    return run_app(parser, body, argv)
 
 
 if __name__ == "__main__":

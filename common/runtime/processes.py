@@ -51,14 +51,19 @@ def keep_malloc_arenas(environ: MutableMapping[str, str] = os.environ) -> Mutabl
     return environ
 
 
+class Terminated(SystemExit):
+    """SIGTERM (the stop ladder's second rung, or the launcher's death), raised in the main thread
+    so that `with` blocks close the session and files; its code is 128 + the signal."""
+
+
 def prepare_process() -> None:
-    """Exit cleanly on SIGTERM (so `with` blocks close the session and files), and ask Linux to
-    send SIGTERM when the launcher dies, so no app outlives it. SIGINT, the ladder's first rung,
+    """Exit cleanly on SIGTERM (Terminated, so `with` blocks close the session and files), and ask
+    Linux to send SIGTERM when the launcher dies, so no app outlives it. SIGINT, the ladder's first rung,
     raises KeyboardInterrupt even when the launcher was started as a background job of a script,
     which starts every child with SIGINT ignored."""
 
     def handler(signum, frame):
-        raise SystemExit(128 + signum)
+        raise Terminated(128 + signum)
 
     signal.signal(signal.SIGTERM, handler)
     signal.signal(signal.SIGINT, signal.default_int_handler)
