@@ -36,7 +36,7 @@ def per_topic(path: Path, skip=WALL_CLOCK_TOPICS) -> dict[str, list[bytes]]:
 
 def wait_registered(community: str, timeout: float = STARTUP_TIMEOUT) -> dict:
     """Block until `nearsub launch` has registered the mission (its apps are all up)."""
-    from nearsub.tools import registry
+    from nearsub.tools.support import registry
 
     end = time.monotonic() + timeout
     while time.monotonic() < end:

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from nearsub.common.analysis.albench import summarise
-from nearsub.tools.al_bench import markdown_tables, read_outputs, write_outputs
+from nearsub.tools.commands.al_bench import markdown_tables, read_outputs, write_outputs
 
 
 def _result(rng):

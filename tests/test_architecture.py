@@ -92,8 +92,8 @@ def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
 
 
 def package_of(module: str) -> str:
-    """`nearsub.common.physics.hull` -> `nearsub.common.physics`; a module of tools/ or a package in
-    it is its own unit (`nearsub.tools.log`, `nearsub.tools.launcher`)."""
+    """`nearsub.common.physics.hull` -> `nearsub.common.physics`, `nearsub.tools.commands.log` ->
+    `nearsub.tools.commands`; a module directly in tools/ is its own unit (`nearsub.tools.plot`)."""
     parts = module.split(".")
     return ".".join(parts[:3])
 
@@ -169,6 +169,23 @@ def test_the_table_is_in_import_order():
     order = list(MAP)
     for package, row in MAP.items():
         assert row["may"] <= set(order[: order.index(package)]), package
+
+
+def test_inside_tools_support_and_the_launcher_import_down_and_no_part_imports_a_command():
+    """docs/architecture.md: `support/` imports nothing else of tools/, `launcher/` only `support/`,
+    the modules of one subcommand (directly in tools/) nothing of `commands/`."""
+    allowed = {"nearsub.tools.support": set(), "nearsub.tools.launcher": {"nearsub.tools.support"}}
+    wrong = []
+    for module, out in GRAPH.items():
+        if not module.startswith("nearsub.tools.") or module == "nearsub.tools.cli":
+            continue
+        mine = package_of(module)
+        for other in {package_of(o) for o in out if o.startswith("nearsub.tools.")} - {mine}:
+            if mine in allowed and other not in allowed[mine]:
+                wrong.append(f"{module} -> {other}")
+            elif mine not in allowed and mine != "nearsub.tools.commands" and other == "nearsub.tools.commands":
+                wrong.append(f"{module} -> {other}")
+    assert wrong == []
 
 
 def test_every_import_between_packages_of_common_is_one_the_doc_allows():

@@ -173,7 +173,7 @@ def test_training_commands_check_their_paths_and_sizes(tmp_path, argv, says):
 
 
 def test_train_sobol_does_not_ask_for_seed_points():
-    from nearsub.tools import train
+    from nearsub.tools.commands import train
 
     parser = __import__("argparse").ArgumentParser()
     train.add_parser(parser.add_subparsers())

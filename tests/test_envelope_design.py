@@ -19,7 +19,7 @@ from nearsub.common.learning.gp import MultiOutputGP
 from nearsub.common.surrogate import training as tr
 from nearsub.common.surrogate.domain import constraints_ok, in_domain
 from nearsub.common.surrogate.modelfile import load_model
-from nearsub.tools.train import command_line, train_command
+from nearsub.tools.commands.train import command_line, train_command
 
 pytestmark = pytest.mark.timeout(600)
 

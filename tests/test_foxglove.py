@@ -104,7 +104,7 @@ def test_live_server_advertises_the_channels_and_streams_poses(launches, communi
     from conftest import ALPHA
     from helpers import wait_registered
     from nearsub.common.mission.schema import load_mission
-    from nearsub.tools.view import start_server_process
+    from nearsub.tools.commands.view import start_server_process
 
     mission = load_mission(ALPHA)
     startup, step = mission.startup_timeout, mission.step_timeout

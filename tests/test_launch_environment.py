@@ -15,9 +15,9 @@ from conftest import ALPHA
 from nearsub.common.mission.schema import load_mission
 from nearsub.common.runtime import credentials
 from nearsub.common.runtime.bus import CONNECT_TIMEOUT_VARIABLE, LINK_VARIABLE, free_tcp_port
-from nearsub.tools import registry
 from nearsub.tools.launcher.processes import Processes
 from nearsub.tools.launcher.supervision import Launcher
+from nearsub.tools.support import registry
 
 
 def test_two_launches_in_one_process_do_not_inherit_each_others_credentials(tmp_path, runtime_dir, monkeypatch):

@@ -18,7 +18,7 @@ from conftest import ALPHA, nearsub
 from nearsub.common.mission.schema import load_mission
 from nearsub.common.runtime.bus import free_tcp_port
 from nearsub.common.runtime.logfile import LogWriter
-from nearsub.tools import registry
+from nearsub.tools.support import registry
 
 
 def one_line(text: str) -> str:
@@ -134,7 +134,7 @@ def test_a_name_is_claimed_by_one_process_until_it_releases_or_dies(runtime_dir)
         [
             sys.executable,
             "-c",
-            "import sys, time; from nearsub.tools import registry; c = registry.claim('alpha'); "
+            "import sys, time; from nearsub.tools.support import registry; c = registry.claim('alpha'); "
             "print('held', flush=True); time.sleep(600)",
         ],
         stdout=subprocess.PIPE,

@@ -16,7 +16,7 @@ from nearsub.common.mission.schema import load_mission
 from nearsub.common.runtime.bus import Bus, Endpoints, Mailbox
 from nearsub.common.runtime.logfile import INVALID_SUFFIX, read_log
 from nearsub.common.runtime.processes import stop
-from nearsub.tools import registry
+from nearsub.tools.support import registry
 
 MISSION = load_mission(ALPHA, [])
 STARTUP, STEP = MISSION.startup_timeout, MISSION.step_timeout

@@ -8,7 +8,7 @@ from nearsub.common.surrogate.maps import THESIS_MAPS, evaluate_map, mid_window_
 from nearsub.common.surrogate.model import load_surrogate
 from nearsub.tools import map_figures
 from nearsub.tools.cli import main
-from nearsub.tools.surrogate import write_analytic_model
+from nearsub.tools.commands.surrogate import write_analytic_model
 
 pytestmark = pytest.mark.timeout(180)
 

@@ -9,7 +9,7 @@ import pytest
 
 from nearsub.common.mission.schema import load_mission
 from nearsub.tools import moos_alpha
-from nearsub.tools.bench import DEFAULT_MISSION
+from nearsub.tools.commands.bench import DEFAULT_MISSION
 
 MOOS_FILE = """\
 ServerHost   = localhost

@@ -48,7 +48,7 @@ def test_a_poke_of_a_fleet_mission_file_must_name_one_of_its_vehicles(monkeypatc
     import argparse
 
     from nearsub.common.mission import schema
-    from nearsub.tools import poke, tap
+    from nearsub.tools.commands import poke, tap
 
     mission = load_mission_text(tmp_path)
     dumped = mission.model_dump() | {"vehicles": [{"name": "alfa"}, {"name": "bravo"}]}

@@ -12,7 +12,7 @@ from nearsub.common.runtime.messages import MessageError
 from nearsub.common.surrogate import domain
 from nearsub.common.surrogate import model as sg
 from nearsub.common.surrogate.modelfile import ModelFileError, load_model
-from nearsub.tools.surrogate import write_analytic_model
+from nearsub.tools.commands.surrogate import write_analytic_model
 
 # A feasible mid-domain point: Explorer-like UUV (table 4.1: D_sub/D_uuv 14.0, L/D 7.24).
 MID = np.array([0.1, 0.07, 3.5, 0.5, 14.0, 7.24])

@@ -12,7 +12,13 @@ import pytest
 from nearsub.common.surrogate import domain
 from nearsub.common.surrogate import model as sg
 from nearsub.common.surrogate.modelfile import load_model
-from nearsub.tools.surrogate import add_bench_parser, add_parser, bench_surrogate, child_env, write_analytic_model
+from nearsub.tools.commands.surrogate import (
+    add_bench_parser,
+    add_parser,
+    bench_surrogate,
+    child_env,
+    write_analytic_model,
+)
 
 POINT = {"R_long": 0.1, "R_lat": 0.07, "u_kn": 3.5, "psi_deg": 0.5, "d_ratio": 14.0, "ld_ratio": 7.24}
 
@@ -113,7 +119,7 @@ def test_bench_reports_every_figure():
     # In a child with one BLAS thread, as the apps run: threaded BLAS on a busy machine makes the
     # timed fits 10x slower and this test slow.
     code = (
-        "import argparse, sys; from nearsub.tools.surrogate import bench_surrogate; "
+        "import argparse, sys; from nearsub.tools.commands.surrogate import bench_surrogate; "
         "sys.exit(bench_surrogate(argparse.Namespace(repeats=50, fit_repeats=1, json=True)))"
     )
     done = subprocess.run([sys.executable, "-c", code], env=child_env(), capture_output=True, text=True, timeout=100)

@@ -17,7 +17,7 @@ from nearsub.common.runtime.bus import ReplyError
 from nearsub.common.surrogate import domain, query
 from nearsub.common.surrogate import model as sg
 from nearsub.common.surrogate.modelfile import load_model
-from nearsub.tools.surrogate import child_env, local_server, write_analytic_model
+from nearsub.tools.commands.surrogate import child_env, local_server, write_analytic_model
 
 pytestmark = pytest.mark.timeout(90)
 

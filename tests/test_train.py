@@ -14,7 +14,7 @@ from nearsub.common.surrogate.domain import constraints_ok, in_domain, sample_fe
 from nearsub.common.surrogate.model import Surrogate
 from nearsub.common.surrogate.modelfile import LFInLoopModel, load_model
 from nearsub.common.surrogate.validation import HELD_OUT_POINTS, HELD_OUT_SEED, latin_hypercube_feasible
-from nearsub.tools.train import train_command
+from nearsub.tools.commands.train import train_command
 
 pytestmark = pytest.mark.timeout(300)
 

@@ -29,7 +29,7 @@ from conftest import ALPHA
 from helpers import finish, wait_registered
 from nearsub.common.mission.schema import load_mission
 from nearsub.common.runtime.logfile import LogWriter, read_log
-from nearsub.tools.view import start_viewer
+from nearsub.tools.commands.view import start_viewer
 
 MISSION = load_mission(ALPHA)
 # Every wait below is derived from the mission's own timeouts: start-up, and one step.

@@ -1,7 +1,13 @@
-"""The `nearsub` command line: `cli` dispatches to one module per subcommand (listed in `cli.TOOLS`).
+"""The `nearsub` command: `cli` parses the command line and runs one subcommand.
 
-Beside them: the `launcher` package runs and supervises a launched mission's processes, `connect`
-and `registry` find a running mission, `caller` sends control requests, `errors` is the bad-input error `cli` prints, `plot` and
-`map_figures` draw, `hydro_bench` measures the hydrodynamic fidelities, `free_stream` builds a
-model's free-stream table (`python -m`).
+- cli: the program; `cli.TOOLS` lists the subcommands and the module of each.
+- commands/: one module per subcommand (`commands/log.py` is `nearsub log`).
+- support/: what the subcommands share (arguments, outputs, errors, tables, registry, connect,
+  caller, schedulers, log input).
+- launcher/: the launch of a mission as processes (`nearsub launch`, `nearsub bench`, the tests).
+- What one subcommand draws, measures or serves: logplay and plot (`log play`, `log plot`),
+  view_server (`view`), helm_bench, hydro_bench and moos_alpha (`bench`), map_figures (`maps`),
+  sweep_figures (`surrogate sweep`).
+- Scripts run with `python -m`: free_stream (a model's free-stream table), fleet_figure (a fleet
+  mission's figure).
 """

@@ -18,7 +18,7 @@ import sys
 from nearsub import __version__
 from nearsub.common.runtime.processes import single_blas_thread
 
-# subcommand: (module in tools/, one line for `nearsub --help`)
+# subcommand: (module in tools/commands/, one line for `nearsub --help`)
 TOOLS = {
     "launch": ("launch", "run a mission file as separate processes"),
     "tap": ("tap", "watch a running mission: list, echo, hz, pub"),
@@ -53,7 +53,7 @@ def build_parser(command: str | None = None, every: bool = False) -> argparse.Ar
     sub.add_parser = lambda name, **kw: add(name, **({"help": TOOLS[name][1]} if name in TOOLS else {}) | kw)
     for name, (module, help_line) in TOOLS.items():
         if every or name == command:
-            importlib.import_module(f"{__package__}.{module}").add_parser(sub)
+            importlib.import_module(f"{__package__}.commands.{module}").add_parser(sub)
         else:
             sub.add_parser(name, help=help_line, add_help=False)
     return parser

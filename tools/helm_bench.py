@@ -7,7 +7,7 @@ import json
 import time
 from pathlib import Path
 
-from .arguments import integer
+from .support.arguments import integer
 
 RECOVERY = Path(__file__).resolve().parents[1] / "missions" / "recovery.toml"
 

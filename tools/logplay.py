@@ -23,9 +23,9 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from . import registry
-from .arguments import number
-from .errors import InputError
+from .support import registry
+from .support.arguments import number
+from .support.errors import InputError
 
 COMMUNITY_CHARS = "letters, digits, '_' and '-'"
 
@@ -79,7 +79,7 @@ def select(args) -> Selection:
     from nearsub.common.mission.schema import COMMUNITY_PATTERN
     from nearsub.common.runtime.logfile import INVALID_SUFFIX, read_log
 
-    from .log_input import topic_filter, vehicle_records
+    from .support.log_input import topic_filter, vehicle_records
 
     if args.connect:  # before a name is claimed; a malformed endpoint is bad input, not a lost bus
         from nearsub.common.runtime.bus import BusError, check_endpoints
@@ -126,7 +126,7 @@ def select(args) -> Selection:
 
 
 def play_command(args) -> int:
-    from .log_input import check_log
+    from .support.log_input import check_log
 
     check_log(Path(args.log))
     selection = select(args)

@@ -30,7 +30,7 @@ from nearsub.common.runtime.bus import Bus, Mailbox
 from nearsub.common.runtime.logfile import read_log
 from nearsub.common.viewer.scene import SceneModel, feed_payload, static_scene
 
-from .caller import Caller
+from .support.caller import Caller
 
 TICK = 0.1  # wall seconds between frames pushed to the page
 MAX_MAIL_PER_TICK = 20000  # keep the server responsive at warp 0 (the newest state is what counts)

@@ -1,5 +1,5 @@
 """A launch's mission name: refused when another launcher uses it on the same bus, entered in the
-registry (tools/registry.py) once the apps are up so that the tools find the mission, and removed
+registry (tools/support/registry.py) once the apps are up so that the tools find the mission, and removed
 with the credentials of the launcher's own router at the end."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from pathlib import Path
 from nearsub.common.mission.schema import Mission
 from nearsub.common.runtime import keys
 
-from .. import registry
+from ..support import registry
 
 
 def credentials_file(mission: Mission) -> str | None:

@@ -18,7 +18,7 @@ from nearsub.common.runtime.bus import Bus, BusError, Endpoints, Mailbox, app_en
 from nearsub.common.runtime.lifecycle import ORDER
 from nearsub.common.runtime.messages import Event, MessageError, MissionEnd, decode, encode, model_for_key
 
-from ..caller import Caller
+from ..support.caller import Caller
 from . import registration, swap
 from .processes import LaunchError, Processes, fork_preload, spawn_router
 from .status import NORMAL_OUTCOMES, Console, Summary

@@ -24,8 +24,8 @@ from typing import Any
 
 import numpy as np
 
-from .arguments import integer
-from .outputs import output_file
+from ..support.arguments import integer
+from ..support.outputs import output_file
 
 DEFAULT_STATE = Path("training") / "cfd-campaign.json"
 PROBLEM_NAME = "uuv-submarine-interaction, external HF"

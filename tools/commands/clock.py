@@ -6,8 +6,8 @@ import json
 import sys
 import uuid
 
-from .arguments import STEP
-from .connect import add_router_argument, open_bus
+from ..support.arguments import STEP
+from ..support.connect import add_router_argument, open_bus
 
 
 def add_parser(subparsers) -> None:
@@ -44,7 +44,7 @@ def clock_command(args) -> int:
         print(f"nearsub clock: {args.action} takes no value", file=sys.stderr)
         return 2
     bus, community = open_bus(args)  # no such mission: the command line reports it, exit 2
-    from .caller import Caller
+    from ..support.caller import Caller
 
     extra = {"at": args.at_step} if args.action == "pause" and args.at_step is not None else {}
     if args.action == "warp":

@@ -49,8 +49,8 @@ from nearsub.common.surrogate.validation import (
     validation_summary,
 )
 
-from .arguments import integer
-from .outputs import output_file, output_folder
+from ..support.arguments import integer
+from ..support.outputs import output_file, output_folder
 
 # Targets (docs/design.md, "Performance targets"): in-process point and batch, query round trip, fit.
 TARGETS = {
@@ -188,7 +188,7 @@ def info_command(args) -> int:
     print(f"training    {info['training_points']} points, {len(info['inputs'])} inputs, {len(outputs)} outputs")
     from rich.table import Table
 
-    from . import tables
+    from ..support import tables
 
     console = tables.console()
     print(f"inputs, with the GP's length scales in (warped) input units ({', '.join(outputs)})")
@@ -544,7 +544,7 @@ def sweep_command(args) -> int:
     from nearsub.common.physics.vehicles import get_vehicle
     from nearsub.common.surrogate import sweeps
 
-    from .sweep_figures import draw_sweeps
+    from ..sweep_figures import draw_sweeps
 
     surrogate = _load_or_report(args.model)
     if surrogate is None:

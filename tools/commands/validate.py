@@ -9,7 +9,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-MISSIONS = Path(__file__).resolve().parents[1] / "missions"
+MISSIONS = Path(__file__).resolve().parents[2] / "missions"
 
 
 def add_parser(subparsers) -> None:

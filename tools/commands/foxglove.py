@@ -67,7 +67,7 @@ def export_foxglove(path: str | Path, output: str | Path) -> int:
     from nearsub.common.viewer.foxglove import FoxgloveScene
     from nearsub.logs import decode_payload
 
-    from .log_input import mission_of_log
+    from ..support.log_input import mission_of_log
 
     contents = read_log(path)
     start_ms = round(log_start(contents) * 1e3)  # the logger records its start to the millisecond
@@ -104,7 +104,7 @@ def serve_mission(bus, community: str, mission, port: int, ready) -> None:
     from nearsub.common.viewer.foxglove import FoxgloveScene
     from nearsub.logs import decode_payload
 
-    from .errors import InputError
+    from ..support.errors import InputError
 
     context = foxglove.Context()
     try:

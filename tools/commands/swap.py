@@ -13,8 +13,8 @@ import argparse
 import json
 import sys
 
-from .arguments import STEP, number
-from .connect import add_router_argument, open_bus
+from ..support.arguments import STEP, number
+from ..support.connect import add_router_argument, open_bus
 
 
 def add_parser(subparsers) -> None:
@@ -52,7 +52,7 @@ def vehicle_problem(args, community: str) -> str | None:
     mission reached with --connect, which the launcher checks itself)."""
     if args.connect:
         return None
-    from . import registry
+    from ..support import registry
 
     vehicles = registry.lookup(community).get("vehicles", [])
     if args.vehicle is None and len(vehicles) > 1:

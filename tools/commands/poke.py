@@ -11,7 +11,7 @@ import math
 import sys
 from pathlib import Path
 
-from .connect import add_router_argument
+from ..support.connect import add_router_argument
 
 
 def add_parser(subparsers) -> None:

@@ -7,9 +7,9 @@ import sys
 import time
 from collections import defaultdict, deque
 
-from .arguments import integer, number
-from .connect import add_connect_arguments, open_bus
-from .errors import InputError
+from ..support.arguments import integer, number
+from ..support.connect import add_connect_arguments, open_bus
+from ..support.errors import InputError
 
 
 def add_parser(subparsers) -> None:
@@ -155,7 +155,7 @@ def tap_list(args) -> int:
         return 0
     from rich.table import Table
 
-    from . import tables
+    from ..support import tables
 
     console = tables.console()
     table = Table("app", "instance", title="apps alive", title_justify="left")

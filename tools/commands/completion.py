@@ -16,7 +16,7 @@ def add_parser(subparsers) -> None:
 def completion_command(args) -> int:
     import shtab
 
-    from .cli import build_parser
+    from ..cli import build_parser
 
     print(shtab.complete(build_parser(every=True), shell=args.shell))
     return 0

@@ -27,7 +27,7 @@ def lf_field_command(args) -> int:
 
     from nearsub.common.hydro import low_fidelity
 
-    from .outputs import numpy_file, output_file
+    from ..support.outputs import numpy_file, output_file
 
     out = output_file(numpy_file(args.out))  # numpy adds .npz to another name: check and name that file
     table = low_fidelity.tabulate_field()

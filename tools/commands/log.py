@@ -9,9 +9,9 @@ from collections import Counter, defaultdict
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from .errors import InputError
-from .log_input import check_log, log_paths, select_topic, vehicle_records
-from .outputs import output_file, output_folder
+from ..support.errors import InputError
+from ..support.log_input import check_log, log_paths, select_topic, vehicle_records
+from ..support.outputs import output_file, output_folder
 
 if TYPE_CHECKING:
     pass
@@ -43,7 +43,7 @@ def add_parser(subparsers) -> None:
     )
     t.set_defaults(func=export_command)
     t = lg.add_parser("play", help="republish a log onto the bus (uPlayBack, ros2 bag play)")
-    from .logplay import add_arguments, play_command
+    from ..logplay import add_arguments, play_command
 
     add_arguments(t)
     t.set_defaults(func=play_command)
@@ -102,7 +102,7 @@ def print_summary(summary: dict) -> None:
 
     from nearsub.common.runtime.messages import model_for_key
 
-    from . import tables
+    from ..support import tables
 
     outcome = summary["outcome"]
     recovered = f"  (recovered: {summary['damage']})" if summary["recovered"] else ""
@@ -180,7 +180,7 @@ def _no_match(topic: str | None) -> InputError:
 
 
 def _export_foxglove(args) -> int:
-    """An MCAP that Foxglove opens as is (tools/foxglove.py); by default beside cwd, never over the log."""
+    """An MCAP that Foxglove opens as is (tools/commands/foxglove.py); by default beside cwd, never over the log."""
     from .foxglove import export_foxglove
 
     if args.topic or args.vehicle:
@@ -238,7 +238,7 @@ def plot_command(args) -> int:
 
     if output.suffix[1:].lower() not in FigureCanvasBase.get_supported_filetypes():
         raise InputError(f"-o {output}: not an image type matplotlib writes (give NAME.png)")
-    from .plot import plot_log
+    from ..plot import plot_log
 
     try:
         out = plot_log(args.log, output, args.title)

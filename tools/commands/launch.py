@@ -7,9 +7,9 @@ import sys
 import zipfile
 from pathlib import Path
 
-from . import registry
-from .arguments import number
-from .errors import InputError
+from ..support import registry
+from ..support.arguments import number
+from ..support.errors import InputError
 from .foxglove import FOXGLOVE_PORT
 from .view import PORT
 
@@ -43,7 +43,7 @@ def companions(args) -> list:
 
     def starter(tool: str, port: int):
         def start(run_file, env):
-            from .launcher.processes import LaunchError
+            from ..launcher.processes import LaunchError
             from .view import start_server_process
 
             try:
@@ -73,8 +73,8 @@ def model_file_problem(path: str) -> str | None:
 def launch_command(args) -> int:
     from nearsub.common.mission.schema import MissionError, load_mission
 
-    from .launcher.status import exit_code
-    from .launcher.supervision import Launcher
+    from ..launcher.status import exit_code
+    from ..launcher.supervision import Launcher
 
     extra = companions(args)
     overrides = list(args.set)

@@ -24,10 +24,10 @@ import time
 from contextlib import contextmanager
 from pathlib import Path
 
-from .arguments import integer, number
-from .errors import InputError
-from .outputs import output_file, output_folder
-from .schedulers import scheduler_address
+from ..support.arguments import integer, number
+from ..support.errors import InputError
+from ..support.outputs import output_file, output_folder
+from ..support.schedulers import scheduler_address
 
 # numpy, matplotlib, rich and the envelope core are imported when a command runs, so that the
 # parser builds at once.

@@ -19,8 +19,8 @@ def maps_command(args) -> int:
     from nearsub.common.surrogate.model import load_surrogate
     from nearsub.common.surrogate.modelfile import ModelFileError
 
-    from .map_figures import plot_figure
-    from .outputs import output_folder
+    from ..map_figures import plot_figure
+    from ..support.outputs import output_folder
 
     out_dir = output_folder(args.out, "--out")
     try:

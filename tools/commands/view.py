@@ -12,9 +12,9 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from .arguments import integer
-from .errors import InputError
-from .log_input import check_log, is_log, mission_of_log
+from ..support.arguments import integer
+from ..support.errors import InputError
+from ..support.log_input import check_log, is_log, mission_of_log
 
 PORT = integer(minimum=0, maximum=65535)  # a TCP port; 0: a free one
 
@@ -112,7 +112,7 @@ def _serve(main, port: int) -> int:
 def _replay(path: Path, port: int) -> int:
     from nearsub.common.mission.schema import MissionError
 
-    from .view_server import ReplaySource, serve_viewer
+    from ..view_server import ReplaySource, serve_viewer
 
     try:
         mission = mission_of_log(path)
@@ -133,7 +133,7 @@ def mission_endpoints(community: str, connect: list[str] | None, run_file: str |
     """(endpoints, mission or None, log path or None, credentials file or None) of a running
     mission: from the launcher's run file, from --connect, or from the registry (LookupError when
     it is not running)."""
-    from . import registry
+    from ..support import registry
 
     # Credentials from the registry; None falls back to $NEARSUB_CREDENTIALS (the launcher's children).
     if run_file:
@@ -155,7 +155,7 @@ def mission_endpoints(community: str, connect: list[str] | None, run_file: str |
 def _live(community: str, connect: list[str] | None, run_file: str | None, port: int) -> int:
     from nearsub.common.runtime.bus import Bus, Endpoints
 
-    from .view_server import LiveSource, serve_viewer
+    from ..view_server import LiveSource, serve_viewer
 
     endpoints, mission, log, credentials = mission_endpoints(community, connect, run_file)
 

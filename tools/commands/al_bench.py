@@ -21,9 +21,9 @@ import os
 from pathlib import Path
 from typing import Any
 
-from .arguments import integer
-from .errors import InputError
-from .outputs import output_folder
+from ..support.arguments import integer
+from ..support.errors import InputError
+from ..support.outputs import output_folder
 
 _LABELS = {
     "nmmf": "NMMF",

@@ -21,7 +21,7 @@ def router_command(args) -> int:
     from nearsub.apps.router import serve
     from nearsub.common.runtime import credentials
 
-    from .errors import InputError
+    from ..support.errors import InputError
 
     path = Path(args.credentials) if args.credentials else None
     if path is not None and path.is_dir():

@@ -48,9 +48,9 @@ from nearsub.common.surrogate import model as sg
 from nearsub.common.surrogate import training as tr
 from nearsub.common.surrogate.validation import read_number_table
 
-from .arguments import integer
-from .outputs import output_file
-from .schedulers import scheduler_address
+from ..support.arguments import integer
+from ..support.outputs import output_file
+from ..support.schedulers import scheduler_address
 
 DEFAULT_STATE = Path("training") / "hf-samples.csv"
 

@@ -21,17 +21,17 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from . import moos_alpha
-from .arguments import integer, number
+from .. import moos_alpha
+from ..support.arguments import integer, number
+from ..support.errors import InputError
 from .envelope import grid_size
-from .errors import InputError
 
-DEFAULT_MISSION = Path(__file__).resolve().parents[1] / "missions" / "alpha.toml"
+DEFAULT_MISSION = Path(__file__).resolve().parents[2] / "missions" / "alpha.toml"
 NUV_MISSION = DEFAULT_MISSION.with_name("overtake_stern_nuv.toml")  # submarine, surrogate server, N_uv helm
 
 
 def add_parser(subparsers) -> None:
-    from .helm_bench import add_bench_parser as add_helm_bench_parser
+    from ..helm_bench import add_bench_parser as add_helm_bench_parser
     from .surrogate import add_bench_parser
 
     p = subparsers.add_parser("bench")
@@ -123,7 +123,7 @@ FLEET_SPACING = 250.0  # m between two vehicles' copies of alpha (its survey spa
 
 def launch_once(source, log_dir: str, tag: str, *overrides: str):
     """One launch at warp 0 through the multi-process launcher: its `Summary`."""
-    from .launcher.supervision import Launcher
+    from ..launcher.supervision import Launcher
 
     mission = source.load([f"name=bench{tag}_{int(time.time())}", "warp=0", *overrides])
     return Launcher(mission, source.path and str(source.path), log_dir, quiet=True).run()
@@ -346,7 +346,7 @@ def bench_envelope(args) -> int:
 
 
 def bench_hydro(args) -> int:
-    from .hydro_bench import benchmark_fidelities
+    from ..hydro_bench import benchmark_fidelities
 
     benchmark_fidelities()
     return 0
