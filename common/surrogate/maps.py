@@ -3,7 +3,7 @@
 The surrogate has six inputs; the thesis shows it as maps over two of them with the other four
 held (figures 4-4, 4-5, 4-7 to 4-11). `THESIS_MAPS` lists those panels with the thesis's fixed
 values, `slice_grid` makes the inputs of a panel and `evaluate_map` the values, NaN where the
-constraints (4.4)-(4.7) exclude the point. Plotting is in tools/maps.py.
+constraints (4.4)-(4.7) exclude the point. Plotting is in tools/map_figures.py (`nearsub maps`).
 
 One departure, forced by docs/design.md, "Thesis errata": nearsub's R_lat is centre to centre, so the thesis's
 R_lat = 0.08 violates (4.5) (the UUV more than two of its diameters off the hull) for every

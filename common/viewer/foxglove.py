@@ -1,5 +1,5 @@
 """A mission's messages as Foxglove channels, all JSON: for `nearsub log export --format foxglove`
-and the live server of `nearsub foxglove` (tools/foxglove.py moves the bytes through foxglove-sdk).
+and the live server of `nearsub foxglove` (tools/commands/foxglove.py moves the bytes through foxglove-sdk).
 
 Every nearsub topic keeps its key and its fields (simulated time `t` included) with the message
 model's JSON schema; beside them, in Foxglove's own schemas:
