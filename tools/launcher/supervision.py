@@ -27,11 +27,13 @@ EXIT_GRACE = 2.0  # wall seconds to wait for the mission end after an app left w
 
 
 class Launcher:
+    """One launch of `mission`: `run` starts its processes, supervises them until the mission ends
+    and returns the Summary. `companions` are started with the run file and the apps' environment
+    once the apps are up (`launch --view`, `--foxglove`)."""
+
     def __init__(self, mission: Mission, mission_path: str | None, log_root: str, quiet: bool = False, companions=()):
         self.mission = mission
-        # Started with the run file and the apps' environment once the apps are up (`launch
-        # --view`, `--foxglove`); each returns its process, which is stopped first.
-        self.companions = list(companions)
+        self.companions = list(companions)  # each returns its process, which is stopped first
         self.mission_path = mission_path
         self.community = mission.name
         self.console = Console(quiet)
