@@ -21,9 +21,11 @@ and N' > 0 bow turning away, for the UUV on the +y side.
 from __future__ import annotations
 
 import dataclasses
+import json
 from dataclasses import dataclass
 from functools import lru_cache
 from math import factorial
+from pathlib import Path
 
 import numpy as np
 from scipy.interpolate import BSpline, CubicSpline, RectBivariateSpline
@@ -163,13 +165,26 @@ def solve_ring_panels(profile: Profile) -> RingPanels:
 
 # --- the tabulated submarine field ---------------------------------------------------------------
 
-R_FIELD_MIN = R_SUB + 0.01  # the table starts 1 cm outside the widest section [m]
-# Outer edge of the table, from the axis and beyond either tip [m]: the interaction increment's
-# cut-off (`interaction.LF_CUT`) plus R_sub plus the longest UUV's length, so every strip of a UUV
-# within the cut-off lies in the table (docs/design.md, "Hydrodynamic fidelities").
-R_FIELD_MAX = 272.0
-_X_FINE = (SUB_STERN_X - 15.0, SUB_BOW_X + 15.0)  # 0.15 m spacing here [m]
-_X_RANGE = (SUB_STERN_X - R_FIELD_MAX, SUB_BOW_X + R_FIELD_MAX)
+# The table's grid (`_field_grid`) as the decimal numbers it is made from [m]: with LF_VERSION (the
+# hull) and the panel count, what identifies a table. The nodes computed from them differ in their
+# last bits between CPUs (numpy's power kernels), so a table is never recognised by its nodes.
+FIELD_GRID = {
+    "r_gap": 0.01,  # the table starts 1 cm outside the widest section
+    "r_first_step": 0.002,
+    "r_growth": 1.12,
+    # Outer edge of the table, from the axis and beyond either tip: the interaction increment's
+    # cut-off (`interaction.LF_CUT`) plus R_sub plus the longest UUV's length, so every strip of a
+    # UUV within the cut-off lies in the table (docs/design.md, "Hydrodynamic fidelities").
+    "r_max": 272.0,
+    "x_fine_beyond_tips": 15.0,  # 0.15 m spacing from 15 m behind the stern to 15 m ahead of the bow
+    "x_fine_step": 0.15,
+    "x_far_first_step": 1.0,
+    "x_far_growth": 1.06,
+}
+# Layout of the shipped table's file (`tabulate_field`): bump it with any change to its keys.
+FIELD_TABLE_FORMAT = 2
+R_FIELD_MIN = R_SUB + FIELD_GRID["r_gap"]
+R_FIELD_MAX = FIELD_GRID["r_max"]
 
 
 def _growing(start: float, first: float, growth: float, end: float) -> np.ndarray:
@@ -187,16 +202,19 @@ def _field_grid() -> tuple[np.ndarray, np.ndarray]:
     ring-panel field to about 1.5e-4 U, below the ring solution's own discretisation error (240
     against 960 frusta: at most 1.8e-3 U, 5 cm off the hull at the afterbody joint; median
     6e-5 U), and far out to a small fraction of the field itself."""
+    g = FIELD_GRID
+    fine = (SUB_STERN_X - g["x_fine_beyond_tips"], SUB_BOW_X + g["x_fine_beyond_tips"])
+    far = (SUB_STERN_X - R_FIELD_MAX, SUB_BOW_X + R_FIELD_MAX)
     x = np.unique(
         np.concatenate(
             [
-                _growing(_X_FINE[0], 1.0, 1.06, _X_RANGE[0]),
-                np.arange(_X_FINE[0], _X_FINE[1], 0.15),
-                _growing(_X_FINE[1], 1.0, 1.06, _X_RANGE[1]),
+                _growing(fine[0], g["x_far_first_step"], g["x_far_growth"], far[0]),
+                np.arange(fine[0], fine[1], g["x_fine_step"]),
+                _growing(fine[1], g["x_far_first_step"], g["x_far_growth"], far[1]),
             ]
         )
     )
-    return x, _growing(R_FIELD_MIN, 0.002, 1.12, R_FIELD_MAX)
+    return x, _growing(R_FIELD_MIN, g["r_first_step"], g["r_growth"], R_FIELD_MAX)
 
 
 class FieldTable:
@@ -297,8 +315,9 @@ def submarine_field(n_frusta: int = N_FRUSTA) -> SubmarineField:
 
 
 def tabulate_field(n_frusta: int = N_FRUSTA) -> dict[str, np.ndarray]:
-    """The ring-panel velocities (u_x, u_R) at every node of `_field_grid`, with what they
-    depend on: what `nearsub lf-field` writes and the package ships (`nearsub/data/lf-field.npz`)."""
+    """The ring-panel velocities (u_x, u_R) at every node of `_field_grid`, with what identifies
+    them (`field_table_identity`): what `nearsub lf-field` writes and the package ships
+    (`nearsub/data/lf-field.npz`)."""
     x, r = _field_grid()
     xx, rr = np.meshgrid(x, r, indexing="ij")
     panels = solve_ring_panels(suboff_profile(n_frusta + 1))
@@ -308,42 +327,52 @@ def tabulate_field(n_frusta: int = N_FRUSTA) -> dict[str, np.ndarray]:
     for start in range(0, xx.size, chunk):
         part = slice(start, start + chunk)
         ux[part], ur[part] = panels.velocity(xx.ravel()[part], rr.ravel()[part])
-    return {"lf_version": np.array(LF_VERSION), "n_frusta": np.array(n_frusta), "x": x, "r": r, "ux": ux, "ur": ur}
+    identity = {key: np.array(value) for key, value in field_table_identity(n_frusta).items()}
+    return {**identity, "x": x, "r": r, "ux": ux, "ur": ur}
 
 
-def _shipped_field(n_frusta: int, x: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """The shipped node velocities when they were made for this LF version, panel count and grid."""
+def field_table_identity(n_frusta: int) -> dict[str, int | str]:
+    """What a field table is, in exact values: its file format, the LF version (the hull and the
+    ring-panel solution), the panel count and the grid's parameters as decimal strings."""
+    grid = json.dumps(FIELD_GRID, sort_keys=True)  # floats as repr: the shortest exact decimal
+    return {"format": FIELD_TABLE_FORMAT, "lf_version": LF_VERSION, "n_frusta": n_frusta, "grid": grid}
+
+
+def shipped_field_path() -> Path:
+    """Where the package ships the field table (package data `data/*`)."""
     from importlib import resources
 
+    return Path(str(resources.files("nearsub.data") / "lf-field.npz"))
+
+
+def read_field_table(path: Path, n_frusta: int) -> tuple[np.ndarray, ...] | None:
+    """The nodes and node velocities (x, r, ux, ur) of the table at `path` when its identity is
+    this LF's with `n_frusta` panels, None otherwise (or when it cannot be read). The table is
+    read on its own stored nodes: they are the ones its values belong to."""
     try:
-        with resources.as_file(resources.files("nearsub.data") / "lf-field.npz") as path, np.load(path) as table:
-            same = (
-                int(table["lf_version"]) == LF_VERSION
-                and int(table["n_frusta"]) == n_frusta
-                and np.array_equal(table["x"], x)
-                and np.array_equal(table["r"], r)
-            )
-            return (table["ux"], table["ur"]) if same else None
+        with np.load(path) as table:
+            stored = {key: table[key].item() for key in ("format", "lf_version", "n_frusta", "grid")}
+            if stored != field_table_identity(n_frusta):
+                return None
+            return table["x"], table["r"], table["ux"], table["ur"]
     except (OSError, KeyError, ValueError):
         return None
 
 
 @lru_cache(maxsize=4)
 def _submarine_field(n_frusta: int) -> SubmarineField:
-    x, r = _field_grid()
-
-    def tabulate() -> tuple[np.ndarray, np.ndarray]:
+    def tabulate() -> tuple[np.ndarray, ...]:
         table = tabulate_field(n_frusta)
-        return table["ux"], table["ur"]
+        return table["x"], table["r"], table["ux"], table["ur"]
 
     # Seconds of CPU per process otherwise (a mission's server, sim and helm all need it at
     # start-up): the shipped table, else one computed once per machine (tests/test_hydro_cache.py
-    # checks the shipped one against the ring-panel solution).
-    shipped = _shipped_field(n_frusta, x, r)
-    if shipped is None:
-        key = cache_key([__file__, hull_module.__file__], str(n_frusta), x.tobytes(), r.tobytes())
-        shipped = cached_arrays("lf-field", key, tabulate)
-    ux, ur = shipped
+    # checks the shipped one is read, and is the ring-panel solution).
+    table = read_field_table(shipped_field_path(), n_frusta)
+    if table is None:
+        identity = json.dumps(field_table_identity(n_frusta), sort_keys=True)
+        table = cached_arrays("lf-field", cache_key([__file__, hull_module.__file__], identity), tabulate)
+    x, r, ux, ur = table
     shape = (x.size, r.size)
     return SubmarineField(
         RectBivariateSpline(x, r, ux.reshape(shape)),
