@@ -30,8 +30,13 @@ def test_stored_hf_is_the_earlier_sweeps_and_refuses_other_inputs():
         ]
         np.testing.assert_array_equal(sweeps.stored_hf(rows, station, kind, inputs), want)
     station, kind, inputs = sweeps.sweep_inputs()[0]
+    rounded = inputs.copy()
+    rounded[3, 1] = np.nextafter(rounded[3, 1], 1.0)  # one R_lat one ulp off: another CPU's rounding
+    np.testing.assert_array_equal(
+        sweeps.stored_hf(rows, station, kind, rounded), sweeps.stored_hf(rows, station, kind, inputs)
+    )
     moved = inputs.copy()
-    moved[3, 1] = np.nextafter(moved[3, 1], 1.0)  # one R_lat one ulp off
+    moved[3, 1] *= 1.0 + 1e-9  # beyond rounding: another sweep's input
     with pytest.raises(ValueError, match=f"{station} {kind} sweep has other inputs"):
         sweeps.stored_hf(rows, station, kind, moved)
     with pytest.raises(ValueError, match="no column"):
