@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 import time
 from collections import defaultdict
@@ -128,26 +129,78 @@ def poke_while_paused(launches, path: Path, community: str, assignment: str):
     return mission, process
 
 
-def helm_decisions(mission_path: Path) -> dict:
-    """A mission's helm decisions as tests/data/helm-decisions.json pins them: the SHA-256 of the
-    (step, u_d, psi_d) rows of its desired topic, their count, and how the run ended.
-    `python tests/pin_helm_decisions.py NAME...` writes them after a deliberate physics change."""
-    import hashlib
+# Cross-machine comparisons of a mission's messages: numpy, OpenBLAS and numba pick their SIMD kernels
+# per CPU, so the last bits differ between machines (transcendental functions, BLAS products), and a
+# closed-loop mission carries them along without growing them. Measured: with a random third of every
+# numpy transcendental result moved by one ulp, alpha's states moved by 3e-14 m over 8266 steps; numpy
+# on its baseline SSE kernels against AVX2 moved overtake_stern_nuv's forces by 6e-12 N, its states by
+# 1e-14. A real change moves them far more: alpha's heading kp 1 % higher moved its track by 1e-2 m
+# and its psi_d by 1e-3 rad, its first waypoint moved 1 cm its track by 6e-3 m. So every float of a
+# trace is compared to |a - b| <= TRACE_ATOL + TRACE_RTOL |b|, everything else (counts, events' steps
+# and text, outcome, steps) exactly.
+TRACE_RTOL = 1e-7
+TRACE_ATOL = 1e-9
+TRACE_SAMPLES = 40  # messages sampled per topic, evenly over the run, and the last one
 
-    import numpy as np
 
-    from nearsub.common.mission.cores import run_mission
-    from nearsub.common.mission.schema import load_mission
-
-    result = run_mission(load_mission(mission_path))
-    desired = np.array([[m.step, m.u_d, m.psi_d] for m in result.topic("desired")])
+def mission_trace(result, topics: tuple[str, ...] | None = None) -> dict:
+    """What tests/data pins of an in-process run (`run_inprocess`'s result) to compare across
+    machines: how it ended, each (app, topic)'s message count, every event, and TRACE_SAMPLES
+    messages of every other topic (of `topics` only, when given), sampled evenly with the last one."""
+    by_key = defaultdict(list)
+    for app, topic, message in result.messages:
+        if topics is None or topic in topics:
+            by_key[f"{app}/{topic}"].append(message)
+    samples, events = {}, {}
+    for key, messages in by_key.items():
+        if key.endswith("/events"):
+            events[key] = [message.model_dump() for message in messages]
+        else:
+            every = max(1, len(messages) // TRACE_SAMPLES)
+            samples[key] = [message.model_dump() for message in [*messages[::every], messages[-1]]]
     return {
-        "n": len(desired),
-        "sha256": hashlib.sha256(desired.tobytes()).hexdigest(),
         "outcome": result.outcome,
         "reason": result.reason,
         "steps": result.steps,
+        "counts": {key: len(messages) for key, messages in by_key.items()},
+        "events": events,
+        "samples": samples,
     }
+
+
+def trace_differences(actual, reference, where: str = "") -> list[str]:
+    """Where `actual` (a `mission_trace`) differs from `reference` (one read back from JSON): floats
+    beyond TRACE_ATOL + TRACE_RTOL |reference|, anything else at all."""
+    if isinstance(reference, dict) and isinstance(actual, dict):
+        if actual.keys() != reference.keys():
+            return [f"{where}: keys {sorted(actual)} != {sorted(reference)}"]
+        return [d for key in reference for d in trace_differences(actual[key], reference[key], f"{where}/{key}")]
+    if isinstance(reference, list | tuple) and isinstance(actual, list | tuple):
+        if len(actual) != len(reference):
+            return [f"{where}: {len(actual)} items != {len(reference)}"]
+        return [
+            d
+            for i, (a, b) in enumerate(zip(actual, reference, strict=True))
+            for d in trace_differences(a, b, f"{where}[{i}]")
+        ]
+    if isinstance(reference, float) and isinstance(actual, float | int) and not isinstance(actual, bool):
+        if actual == reference or (math.isnan(reference) and math.isnan(actual)):
+            return []
+        if abs(actual - reference) <= TRACE_ATOL + TRACE_RTOL * abs(reference):
+            return []
+    elif actual == reference and type(actual) is type(reference):
+        return []
+    return [f"{where}: {actual!r} != {reference!r}"]
+
+
+def helm_trace(mission_path: Path) -> dict:
+    """The `mission_trace` of a mission's helm decisions as tests/data/helm-decisions.json pins them:
+    its desired, helm and state topics and its events. `python tests/pin_helm_decisions.py NAME...`
+    writes them after a deliberate physics change."""
+    from nearsub.common.mission.cores import run_mission
+    from nearsub.common.mission.schema import load_mission
+
+    return mission_trace(run_mission(load_mission(mission_path)), ("desired", "helm", "state", "events"))
 
 
 def run_with_poke(mission, values: dict, at_step: int):
