@@ -211,6 +211,16 @@ def test_the_scenario_missions_keep_their_decisions(name):
     check_reference(name)
 
 
+def test_a_waypoint_moved_1_cm_fails_the_pinned_decisions(tmp_path):
+    """The tolerances of `check_reference` see a real change: alpha with its first waypoint 1 cm east."""
+    moved = tmp_path / "alpha.toml"
+    text = (MISSIONS / "alpha.toml").read_text()
+    moved.write_text(text.replace("points = [[60.0, -40.0],", "points = [[60.01, -40.0],", 1))
+    assert moved.read_text() != text
+    differences = trace_differences(helm_trace(moved), json.loads(DECISIONS.read_text())["alpha"])
+    assert any("/samples/helm/desired" in d and "psi_d" in d for d in differences), differences
+
+
 def check_reference(name):
     """The mission's helm decisions against tests/data/helm-decisions.json, pinned on another machine
     (`python tests/pin_helm_decisions.py NAME`): how it ended and its step count, the count and
