@@ -6,7 +6,7 @@ kernels) must not move the forces, states, decisions or events.
   another BLAS product, `gp._Predictor.rows`).
 - Across machines, with tolerances: the in-process run's `helpers.mission_trace` (message counts,
   every event, sampled messages of every topic) against tests/data/message-traces.json, pinned on
-  another CPU by `python tests/pin_message_digests.py NAME...` after a deliberate change of the
+  any CPU by `python tests/pin_message_digests.py NAME...` after a deliberate change of the
   physics; floats to TRACE_ATOL + TRACE_RTOL |x| (helpers: a CPU's last-bit differences stay below
   1e-11 N in the forces, a real change far above).
 """
