@@ -223,3 +223,17 @@ def wait_until(condition, timeout: float, what: str) -> None:
         if time.monotonic() > end:
             raise AssertionError(f"{what} within {timeout:g} s")
         time.sleep(0.02)
+
+
+def page_urls(line: str) -> tuple[str, str]:
+    """(control URL, read-only URL) of the viewer's line `...: http://...?token=C (read-only: http://...?token=V)`."""
+    words = line.split()
+    return next(w for w in words if w.startswith("http://")), words[-1].rstrip(")")
+
+
+def socket_url(page: str) -> str:
+    """The websocket of the viewer's page at `page`, with the page's token."""
+    from urllib.parse import urlsplit
+
+    url = urlsplit(page)
+    return f"ws://{url.netloc}/ws?{url.query}"

@@ -178,7 +178,7 @@ def test_launch_view_and_foxglove_serve_while_the_mission_runs_and_stop_with_it(
         line = lines.get(timeout=max(0.1, deadline - time.monotonic()))
         if line.startswith("nearsub launch: ") and " at " in line:
             tool, url = line.removeprefix("nearsub launch: ").strip().split(" at ")
-            urls[tool] = url
+            urls[tool] = url.split()[0]  # the viewer: its control URL first
     with urllib.request.urlopen(urls["view"], timeout=step) as page:
         assert b"viewer.js" in page.read()
     with connect(urls["foxglove"], subprotocols=["foxglove.sdk.v1"], open_timeout=step) as socket:

@@ -28,8 +28,10 @@ from helpers import (
     clock_status,
     finish,
     log_path,
+    page_urls,
     per_topic,
     process_with,
+    socket_url,
     wait_paused,
     wait_registered,
 )
@@ -291,3 +293,60 @@ def test_a_swap_longer_than_step_timeout_keeps_the_mission_and_its_trajectory(
     assert code == 0 and summary["outcome"] == "time_limit" and summary["steps"] == mission.max_steps, err
     assert summary["swaps"] == [{"old": "helm-1", "new": "helm-2", "step": 300}]
     assert_equals_inprocess(mission, summary)
+
+
+def test_the_viewer_admits_its_tokens_only_and_only_the_control_token_controls(busy_machine, launches, community):
+    import urllib.error
+    import urllib.request
+
+    from websockets.exceptions import InvalidStatus
+    from websockets.sync.client import connect
+
+    mission = load_mission(ALPHA, [f"name={community}"])
+    process = launches.start(ALPHA, "--set", f"name={community}", "--warp", "1", "--until", "300", "--view")
+    stderr = Lines(process.stderr)
+    stderr.wait_for("view at", timeout=start_budget(mission) + mission.startup_timeout)
+    control, read_only = page_urls(next(line for line in stderr.seen if "view at" in line))
+    port_url = control.split("?", 1)[0]
+    step = mission.step_timeout
+    for page in (port_url, port_url + "?token=wrong"):  # no token, a wrong one: 403, page and socket
+        with pytest.raises(urllib.error.HTTPError) as refused:
+            urllib.request.urlopen(page, timeout=step)
+        assert refused.value.code == 403
+        with pytest.raises(InvalidStatus) as refused:
+            connect(socket_url(page), open_timeout=step)
+        assert refused.value.response.status_code == 403
+    with pytest.raises(InvalidStatus) as refused:  # the right token from another site's page
+        connect(socket_url(control), origin="http://evil.example.com", open_timeout=step)
+    assert refused.value.response.status_code == 403
+    with urllib.request.urlopen(read_only, timeout=step) as page:
+        assert b"viewer.js" in page.read()
+    with connect(socket_url(read_only), open_timeout=step) as socket:
+        scene = json.loads(socket.recv(timeout=step))
+        assert scene["type"] == "scene" and scene["control"] is False
+        assert json.loads(socket.recv(timeout=step))["type"] == "frame"
+        for request in ({"cmd": "pause"}, {"cmd": "warp", "warp": 1e6}, {"cmd": "swap", "behaviour": "survey"}):
+            socket.send(json.dumps(request))
+            while (reply := json.loads(socket.recv(timeout=step)))["type"] != "reply":
+                pass
+            assert reply["ok"] is False and "read-only" in reply["text"], reply
+    assert clock_status(community)["paused"] is False
+    own_origin = port_url.rstrip("/")
+    with connect(socket_url(control), origin=own_origin, open_timeout=step) as socket:
+        assert json.loads(socket.recv(timeout=step))["control"] is True
+        socket.send(json.dumps({"cmd": "pause"}))
+        while (reply := json.loads(socket.recv(timeout=2 * step)))["type"] != "reply":
+            pass
+        assert reply["ok"] is True, reply
+    wait_paused(community, timeout=mission.startup_timeout + step)
+    # `nearsub view NAME` of the mission's owner derives the same tokens from the runtime folder.
+    viewer = subprocess.Popen(
+        [sys.executable, "-m", "nearsub", "view", community], stdout=subprocess.PIPE, text=True, process_group=0
+    )
+    try:
+        line = Lines(viewer.stdout)
+        line.wait_for("nearsub view:", timeout=mission.startup_timeout)
+        assert control.split("?", 1)[1] in line.seen[-1] and read_only.split("?", 1)[1] in line.seen[-1]
+    finally:
+        os.killpg(viewer.pid, signal.SIGTERM)
+        viewer.wait(timeout=step)

@@ -26,7 +26,7 @@ from browser import Browser, chromium_path
 from websockets.sync.client import connect
 
 from conftest import ALPHA
-from helpers import finish, wait_registered
+from helpers import finish, page_urls, socket_url, wait_registered
 from nearsub.common.mission.schema import load_mission
 from nearsub.common.runtime.logfile import LogWriter, read_log
 from nearsub.tools.commands.view import start_viewer
@@ -68,7 +68,7 @@ class Viewer:
             self.stop()
             raise AssertionError(f"nearsub view printed no URL within {STARTUP:g} s") from None
         assert line.startswith("nearsub view: http://127.0.0.1:"), line
-        self.url = line.split(": ", 1)[1].strip()
+        self.url, self.read_only = page_urls(line)
 
     def stop(self) -> None:
         if self.process.poll() is None:
@@ -217,11 +217,12 @@ def test_start_viewer_serves_the_mission_of_a_launcher_run_file(launches, commun
     """How `nearsub launch --view` starts the viewer: from the run file, before any registry lookup."""
     launches.start(ALPHA, "--set", f"name={community}", "--warp", "1", "--until", "300")
     entry = wait_registered(community, timeout=2 * STARTUP + STEP)
-    process, url = start_viewer(Path(entry["log"]).parent / "run.json", timeout=STARTUP)
+    process, urls = start_viewer(Path(entry["log"]).parent / "run.json", timeout=STARTUP)
+    url = page_urls(urls)[0]
     try:
         with urllib.request.urlopen(url, timeout=STEP) as page:
             assert b"viewer.js" in page.read()
-        with connect(url.replace("http://", "ws://") + "ws", open_timeout=STEP) as socket:
+        with connect(socket_url(url), open_timeout=STEP) as socket:
             scene = json.loads(socket.recv(timeout=STEP))
             assert scene["type"] == "scene" and scene["community"] == community
             assert [leg["name"] for leg in scene["legs"]] == ["survey", "return"]  # the mission's legs
@@ -284,7 +285,7 @@ def test_live_view_follows_every_vehicle_of_a_running_mission(runtime_dir, commu
         entry = wait_replay(community, player)
         monkeypatch.setenv("NEARSUB_CREDENTIALS", entry["credentials"])
         viewer = viewers(community, "--connect", entry["connect"][0])
-        with connect(viewer.url.replace("http://", "ws://") + "ws", open_timeout=STEP) as socket:
+        with connect(socket_url(viewer.url), open_timeout=STEP) as socket:
             assert json.loads(socket.recv(timeout=STEP))["type"] == "scene"
             deadline = time.monotonic() + STARTUP
             while True:

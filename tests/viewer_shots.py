@@ -38,7 +38,7 @@ def url_of(process: subprocess.Popen) -> str:
     line = process.stdout.readline()
     if not line.startswith("nearsub view: "):
         raise RuntimeError(f"nearsub view printed {line!r}")
-    return line.split(": ", 1)[1].strip()
+    return line.split(": ", 1)[1].split()[0]  # the control URL
 
 
 def clock_paused(community: str) -> bool:

@@ -7,17 +7,27 @@ messages into pictures through `nearsub.common.viewer.scene`; this module only m
 
 The page and its script ship as package data (`nearsub/common/viewer/static`); the server serves
 them over plain HTTP on the same port as the websocket (`/ws`), so the page fetches nothing else.
+
+Access (docs/design.md, "Transport"): the page and the websocket need a token in the URL
+(`?token=`), as Jupyter's do; the control token may pause, warp, resume and swap, the read-only
+token only watches. A websocket whose `Origin` is not the page's own is refused, so a web page
+open elsewhere in the user's browser cannot drive the mission. The page's script and style are
+the package's public files and are served to anyone.
 """
 
 from __future__ import annotations
 
 import asyncio
+import hmac
 import json
+import secrets
 import sys
 import time
 import uuid
+from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
+from urllib.parse import parse_qs, urlsplit
 
 import msgpack
 from websockets.asyncio.server import ServerConnection, broadcast, serve
@@ -25,6 +35,7 @@ from websockets.datastructures import Headers
 from websockets.exceptions import ConnectionClosed
 from websockets.http11 import Request, Response
 
+from nearsub.common.runtime import credentials as mission_credentials
 from nearsub.common.runtime import keys
 from nearsub.common.runtime.bus import Bus, Mailbox
 from nearsub.common.runtime.logfile import read_log
@@ -35,6 +46,41 @@ from .support.caller import Caller
 TICK = 0.1  # wall seconds between frames pushed to the page
 MAX_MAIL_PER_TICK = 20000  # keep the server responsive at warp 0 (the newest state is what counts)
 STATIC_TYPES = {".html": "text/html; charset=utf-8", ".js": "text/javascript", ".css": "text/css"}
+
+
+PAGES = ("/", "/index.html")  # what needs a token besides the websocket: the page itself
+READ_ONLY_COMMANDS = {"status"}  # what a read-only page may ask: nothing that changes the mission
+
+
+@dataclass(frozen=True)
+class ViewerAccess:
+    """The viewer's two tokens: `control` drives the mission, `view` only watches."""
+
+    control: str
+    view: str
+
+    @classmethod
+    def for_mission(cls, credentials_file: str | Path | None) -> ViewerAccess:
+        """Derived from the mission's credentials, so every viewer of the mission (the launcher's,
+        `nearsub view NAME` of its owner) has the same URLs and only holders of the credentials
+        can compute them; random for a mission without credentials and for a replay."""
+        if credentials_file is None:
+            return cls(secrets.token_hex(16), secrets.token_hex(16))
+        held = mission_credentials.load(credentials_file)
+        return cls(mission_credentials.derive(held, "viewer control"), mission_credentials.derive(held, "viewer view"))
+
+    def role(self, token: str) -> str | None:
+        """ "control", "view" or None (no valid token), compared in constant time."""
+        if hmac.compare_digest(token.encode(), self.control.encode()):
+            return "control"
+        if hmac.compare_digest(token.encode(), self.view.encode()):
+            return "view"
+        return None
+
+    def urls(self, port: int) -> str:
+        """The line a user opens: the control URL, then the read-only one."""
+        base = f"http://127.0.0.1:{port}/?token="
+        return f"{base}{self.control} (read-only: {base}{self.view})"
 
 
 def static_files() -> dict[str, tuple[bytes, str]]:
@@ -214,16 +260,27 @@ class ReplaySource:
         return {"type": "reply", "cmd": cmd, "ok": True, "text": f"{cmd} at t = {self.cursor:.2f} s"}
 
 
-async def serve_viewer(source, port: int, ready=None, stop: asyncio.Event | None = None) -> None:
-    """Serve the page and the websocket on 127.0.0.1:port until `stop` is set (forever if None).
-    `ready(url)` is called once the socket listens."""
+async def serve_viewer(source, port: int, access: ViewerAccess, ready=None, stop: asyncio.Event | None = None) -> None:
+    """Serve the page and the websocket on 127.0.0.1:port until `stop` is set (forever if None),
+    to holders of `access`'s tokens. `ready(urls)` is called once the socket listens."""
     files = static_files()
     clients: set[ServerConnection] = set()
+    roles: dict[ServerConnection, str] = {}
 
     def process_request(connection: ServerConnection, request: Request) -> Response | None:
-        path = request.path.split("?", 1)[0]
-        if path == "/ws":
-            return None  # the websocket handshake
+        url = urlsplit(request.path)
+        path = url.path
+        if path == "/ws" or path in PAGES:
+            role = access.role(parse_qs(url.query).get("token", [""])[0])
+            if role is None:
+                return connection.respond(403, "a token is needed: open the URL nearsub printed\n")
+            if path == "/ws":
+                origin = request.headers.get("Origin")
+                own = {f"http://{host}:{connection.local_address[1]}" for host in ("127.0.0.1", "localhost")}
+                if origin is not None and origin not in own:  # a browser page of another site
+                    return connection.respond(403, f"origin {origin} is not this viewer's\n")
+                roles[connection] = role
+                return None  # the websocket handshake
         if path not in files:
             return connection.respond(404, f"no such page: {path}\n")
         body, content_type = files[path]
@@ -233,7 +290,7 @@ async def serve_viewer(source, port: int, ready=None, stop: asyncio.Event | None
     async def handler(connection: ServerConnection) -> None:
         clients.add(connection)
         try:
-            await connection.send(json.dumps(source.scene))
+            await connection.send(json.dumps(source.scene | {"control": roles.get(connection) == "control"}))
             await connection.send(json.dumps(source.tick()))
             async for text in connection:
                 try:
@@ -242,17 +299,22 @@ async def serve_viewer(source, port: int, ready=None, stop: asyncio.Event | None
                     continue
                 if not isinstance(request, dict):
                     continue
-                reply = await source.command(request)
+                if roles.get(connection) != "control" and request.get("cmd") not in READ_ONLY_COMMANDS:
+                    cmd = request.get("cmd")
+                    reply = {"type": "reply", "cmd": cmd, "ok": False, "text": f"{cmd}: this page is read-only"}
+                else:
+                    reply = await source.command(request)
                 await connection.send(json.dumps(reply))
         except ConnectionClosed:
             pass  # the page went away (closed, reloaded) while a command ran
         finally:
             clients.discard(connection)
+            roles.pop(connection, None)
 
     async with serve(handler, "127.0.0.1", port, process_request=process_request) as server:
         bound = server.sockets[0].getsockname()[1]
         if ready is not None:
-            ready(f"http://127.0.0.1:{bound}/")
+            ready(access.urls(bound))
         last = ""
         while stop is None or not stop.is_set():
             text = json.dumps(source.tick())

@@ -9,6 +9,8 @@ into a mission.
 
 from __future__ import annotations
 
+import hashlib
+import hmac
 import os
 import secrets
 import stat
@@ -60,6 +62,12 @@ def load(path: str | Path) -> Credentials:
     if not (sep and user and password):
         raise CredentialsError(f"credentials file {path}: expected one line 'user:password'")
     return Credentials(path, user, password)
+
+
+def derive(credentials: Credentials, purpose: str) -> str:
+    """A secret for `purpose` (e.g. the viewer's control token) that only holders of the
+    credentials can compute: HMAC-SHA256 of the purpose keyed by the password, 32 hex digits."""
+    return hmac.new(credentials.password.encode(), purpose.encode(), hashlib.sha256).hexdigest()[:32]
 
 
 def from_environment() -> str | None:

@@ -2,8 +2,10 @@
 
 With a mission name it follows the running mission (found through the launcher's registry, or
 `--connect ENDPOINT`); with a log file it replays the log with a timeline to scrub. Either way it
-serves one page on http://127.0.0.1:PORT/ (a free port unless `--port` is given) and prints the
-URL. The mission (waypoints, vehicle, submarine) comes from the launcher's run file, which the
+serves one page on http://127.0.0.1:PORT/?token=TOKEN (a free port unless `--port` is given) and
+prints its URL, then the read-only one (tools/view_server.py, "Access"). A running mission's
+tokens derive from its credentials, which the registry names in the runtime folder only their
+owner can read. The mission (waypoints, vehicle, submarine) comes from the launcher's run file, which the
 registry entry points to, or from the log's metadata.
 """
 
@@ -112,7 +114,7 @@ def _serve(main, port: int) -> int:
 def _replay(path: Path, port: int) -> int:
     from nearsub.common.mission.schema import MissionError
 
-    from ..view_server import ReplaySource, serve_viewer
+    from ..view_server import ReplaySource, ViewerAccess, serve_viewer
 
     try:
         mission = mission_of_log(path)
@@ -126,7 +128,7 @@ def _replay(path: Path, port: int) -> int:
     except Exception as exc:  # not an MCAP file, or an unreadable one
         print(f"nearsub view: {path}: not a readable log ({exc})", file=sys.stderr)
         return 2
-    return _serve(serve_viewer(source, port, _ready), port)
+    return _serve(serve_viewer(source, port, ViewerAccess.for_mission(None), _ready), port)
 
 
 def mission_endpoints(community: str, connect: list[str] | None, run_file: str | None):
@@ -153,14 +155,19 @@ def mission_endpoints(community: str, connect: list[str] | None, run_file: str |
 
 
 def _live(community: str, connect: list[str] | None, run_file: str | None, port: int) -> int:
+    from nearsub.common.runtime import credentials as mission_credentials
     from nearsub.common.runtime.bus import Bus, Endpoints
 
-    from ..view_server import LiveSource, serve_viewer
+    from ..view_server import LiveSource, ViewerAccess, serve_viewer
 
     endpoints, mission, log, credentials = mission_endpoints(community, connect, run_file)
+    try:
+        access = ViewerAccess.for_mission(credentials or mission_credentials.from_environment())
+    except mission_credentials.CredentialsError as exc:
+        raise InputError(str(exc)) from None
 
     async def main() -> None:
         with Bus(Endpoints("client", endpoints, credentials=credentials)) as bus:
-            await serve_viewer(LiveSource(bus, community, mission, log), port, _ready)
+            await serve_viewer(LiveSource(bus, community, mission, log), port, access, _ready)
 
     return _serve(main(), port)

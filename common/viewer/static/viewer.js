@@ -30,7 +30,7 @@ function send(message) {
 }
 
 function connect() {
-  const socket = new WebSocket(`ws://${location.host}/ws`);
+  const socket = new WebSocket(`ws://${location.host}/ws${location.search}`);
   state.socket = socket;
   socket.onmessage = (event) => {
     const message = JSON.parse(event.data);
@@ -61,8 +61,8 @@ function onScene(scene) {
   }
   if (scene.warp !== null) $("warp-input").value = scene.warp;
   const replay = scene.mode === "replay";
-  $("live-controls").hidden = replay;
-  $("timeline").hidden = !replay;
+  $("live-controls").hidden = replay || !scene.control; // a read-only page only watches
+  $("timeline").hidden = !replay || !scene.control;
   if (replay) {
     $("scrub").min = scene.range[0];
     $("scrub").max = scene.range[1];
