@@ -144,11 +144,55 @@ def test_live_server_advertises_the_channels_and_streams_poses(launches, communi
         process.wait(timeout=step)
 
 
-def test_launch_view_and_foxglove_serve_while_the_mission_runs_and_stop_with_it(launches, community):
+def companion_urls(process, count: int, timeout: float) -> dict[str, str]:
+    """{tool: URL} of the first `count` servers a `nearsub launch` prints (`TOOL at URL`)."""
     import queue
-    import socket as sockets
     import threading
     import time
+
+    lines: queue.Queue[str] = queue.Queue()
+    threading.Thread(target=lambda: [lines.put(line) for line in process.stderr], daemon=True).start()
+    urls, deadline = {}, time.monotonic() + timeout
+    while len(urls) < count:
+        line = lines.get(timeout=max(0.1, deadline - time.monotonic()))
+        if line.startswith("nearsub launch: ") and " at " in line:
+            tool, url = line.removeprefix("nearsub launch: ").strip().split(" at ", 1)
+            urls[tool] = url.split()[0]  # the viewer: its control URL first
+    return urls
+
+
+def test_launch_foxglove_takes_a_free_loopback_port_by_default(launches, community):
+    """Foxglove's own port 8765 taken (by another mission's server, say): a launch still serves."""
+    import socket as sockets
+
+    from websockets.sync.client import connect
+
+    from conftest import ALPHA
+    from nearsub.common.mission.schema import load_mission
+
+    mission = load_mission(ALPHA)
+    holder = sockets.socket()
+    try:
+        holder.bind(("127.0.0.1", 8765))
+        holder.listen()
+    except OSError:
+        pass  # someone else holds it already: the case itself
+    try:
+        process = launches.start(ALPHA, "--set", f"name={community}", "--until", "20", "--warp", "2", "--foxglove")
+        url = companion_urls(process, 1, timeout=3 * mission.startup_timeout)["foxglove"]
+        host, port = url.removeprefix("ws://").split(":")
+        assert host == "127.0.0.1" and int(port) != 8765
+        with connect(url, subprotocols=["foxglove.sdk.v1"], open_timeout=mission.step_timeout) as socket:
+            info = json.loads(socket.recv(timeout=mission.step_timeout))
+        assert info["op"] == "serverInfo" and info["capabilities"] == []  # nothing a client could drive
+        process.wait(timeout=20 / 2 + 3 * mission.startup_timeout)
+        assert process.returncode == 0
+    finally:
+        holder.close()
+
+
+def test_launch_view_and_foxglove_serve_while_the_mission_runs_and_stop_with_it(launches, community):
+    import socket as sockets
     import urllib.request
 
     from websockets.sync.client import connect
@@ -171,14 +215,7 @@ def test_launch_view_and_foxglove_serve_while_the_mission_runs_and_stop_with_it(
         "--foxglove-port",
         "0",
     )
-    lines: queue.Queue[str] = queue.Queue()
-    threading.Thread(target=lambda: [lines.put(line) for line in process.stderr], daemon=True).start()
-    urls, deadline = {}, time.monotonic() + 3 * startup
-    while len(urls) < 2:
-        line = lines.get(timeout=max(0.1, deadline - time.monotonic()))
-        if line.startswith("nearsub launch: ") and " at " in line:
-            tool, url = line.removeprefix("nearsub launch: ").strip().split(" at ")
-            urls[tool] = url.split()[0]  # the viewer: its control URL first
+    urls = companion_urls(process, 2, timeout=3 * startup)
     with urllib.request.urlopen(urls["view"], timeout=step) as page:
         assert b"viewer.js" in page.read()
     with connect(urls["foxglove"], subprotocols=["foxglove.sdk.v1"], open_timeout=step) as socket:

@@ -6,6 +6,13 @@ Both go through foxglove-sdk: an MCAP file it writes, or its WebSocket server on
 Foxglove's schemas (`/tf`, `/scene/mission`, `/scene/uuv`, `/events`). Log times are on the
 epoch: the mission's start wall time (recorded in the log when the logger starts) plus simulated
 time; each message keeps its simulated time.
+
+Who can read the server: Foxglove's WebSocket protocol has no authentication, and foxglove-sdk
+0.30's `start_server` offers none either (host, port, TLS for encryption, a channel filter and
+listener callbacks, none of which can refuse a client), so every local user who finds the port
+can read the whole mission. It listens on loopback only, on a random free port by default, and
+advertises no capability a client could use to publish, set parameters or call services: the
+server shows the mission, it never controls it.
 """
 
 from __future__ import annotations
@@ -15,7 +22,6 @@ from pathlib import Path
 
 from .view import PORT
 
-FOXGLOVE_PORT = 8765  # Foxglove's default
 REPUBLISH = 2.0  # wall seconds between repeats of the fixed scene, for clients that join late
 
 
@@ -25,8 +31,8 @@ def add_parser(subparsers) -> None:
     p.add_argument(
         "--port",
         type=PORT,
-        default=FOXGLOVE_PORT,
-        help="TCP port on 127.0.0.1 (default 8765, Foxglove's; 0: a free one)",
+        default=0,
+        help="TCP port on 127.0.0.1 (default: a free one, printed; Foxglove's own default is 8765)",
     )
     p.add_argument("--connect", action="append", metavar="ENDPOINT", help="router endpoint instead of the registry")
     p.add_argument("--run", metavar="RUN.json", help="the launcher's run file instead of the registry")

@@ -10,7 +10,6 @@ from pathlib import Path
 from ..support import registry
 from ..support.arguments import number
 from ..support.errors import InputError
-from .foxglove import FOXGLOVE_PORT
 from .view import PORT
 
 
@@ -25,7 +24,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--view", action="store_true", help="also serve the live map in the browser (nearsub view)")
     p.add_argument("--view-port", type=PORT, metavar="N", help="its port on 127.0.0.1 (default: a free one)")
     p.add_argument("--foxglove", action="store_true", help="also serve the mission to Foxglove (nearsub foxglove)")
-    p.add_argument("--foxglove-port", type=PORT, metavar="N", help="its port on 127.0.0.1 (default 8765)")
+    p.add_argument("--foxglove-port", type=PORT, metavar="N", help="its port on 127.0.0.1 (default: a free one)")
     p.set_defaults(func=launch_command)
 
 
@@ -33,13 +32,13 @@ def companions(args) -> list:
     """The servers `--view` and `--foxglove` ask for: each starts from the launcher's run file, with
     the apps' environment, once the apps are up, and prints where it listens. A port without its server is refused
     rather than ignored: the user surely wanted the server."""
-    servers = {"view": (args.view, args.view_port, 0), "foxglove": (args.foxglove, args.foxglove_port, FOXGLOVE_PORT)}
+    servers = {"view": (args.view, args.view_port), "foxglove": (args.foxglove, args.foxglove_port)}
     wanted = []
-    for tool, (on, port, default) in servers.items():
+    for tool, (on, port) in servers.items():
         if port is not None and not on:
             raise InputError(f"--{tool}-port {port}: add --{tool}, which serves on it")
         if on:
-            wanted.append((tool, default if port is None else port))
+            wanted.append((tool, port or 0))  # 0: a free port, printed
 
     def starter(tool: str, port: int):
         def start(run_file, env):
