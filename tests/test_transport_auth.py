@@ -74,3 +74,29 @@ def test_an_unreadable_credentials_file_is_refused_in_one_line(tmp_path, runtime
     assert out.stderr.strip().splitlines() == [
         f"nearsub launch: network.credentials: credentials file {missing}: No such file or directory"
     ]
+
+
+def test_a_runtime_folder_others_can_write_is_refused_in_one_line(tmp_path, runtime_dir):
+    os.chmod(runtime_dir, 0o777)
+    out = nearsub("launch", str(ALPHA), "--log", str(tmp_path / "logs"), "--until", "1")
+    assert out.returncode == 2 and len(out.stderr.strip().splitlines()) == 1, out.stderr
+    assert f"runtime folder {runtime_dir} has mode 777" in out.stderr and f"chmod 700 {runtime_dir}" in out.stderr
+
+
+def test_links_planted_in_the_runtime_folder_are_never_written_through(tmp_path, runtime_dir, community):
+    from nearsub.tools.support import registry
+
+    targets = {suffix: tmp_path / f"target{suffix}" for suffix in (".lock", ".json", ".credentials")}
+    for suffix, target in targets.items():
+        target.write_text("precious\n")
+        (runtime_dir / f"{community}{suffix}").symlink_to(target)
+    with pytest.raises(LookupError, match=f"{community}.lock is a symbolic link"):
+        registry.claim(community)
+    out = nearsub("launch", str(ALPHA), "--set", f"name={community}", "--log", str(tmp_path / "logs"))
+    assert out.returncode == 2 and "is a symbolic link" in out.stderr and len(out.stderr.splitlines()) == 1
+    registry.register(community, ["tcp/127.0.0.1:7447"], str(tmp_path / "log.mcap"))
+    assert json.loads((runtime_dir / f"{community}.json").read_text())["community"] == community
+    assert not (runtime_dir / f"{community}.json").is_symlink()
+    credentials.create(registry.credentials_path(community))
+    assert not registry.credentials_path(community).is_symlink()
+    assert all(target.read_text() == "precious\n" for target in targets.values())

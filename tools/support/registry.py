@@ -9,6 +9,10 @@ A launcher first claims its name (`claim`): an exclusive `flock` on `<community>
 without waiting and held until the launcher exits. The kernel drops the lock when the process
 dies, however it dies, so a stale claim needs no clean-up and two launches of one name racing
 each other cannot both win (flock(2); the JSON file is written only later, once the apps are up).
+The folder must be the user's and writable by no one else, and its files are opened without
+following symbolic links: a link planted as `<community>.lock` or `<community>.json` would
+otherwise have the launcher write through it to a file of the planter's choosing.
+
 The lock file stays when released: unlocked it means nothing, and removing it would let a launch
 that opened the old file and one that creates a new file both hold "the" lock.
 """
@@ -18,6 +22,7 @@ from __future__ import annotations
 import fcntl
 import json
 import os
+import stat
 import tempfile
 from pathlib import Path
 
@@ -48,7 +53,7 @@ class Claim:
 def claim(community: str) -> Claim:
     """Claim `community` for this process, or raise NameTaken naming the launcher that holds it."""
     path = runtime_dir() / f"{community}.lock"
-    fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o600)
+    fd = open_private(path, os.O_RDWR | os.O_CREAT)
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:
@@ -68,9 +73,29 @@ def runtime_dir() -> Path:
     default = Path(tempfile.gettempdir()) / f"nearsub-{os.getuid()}"
     path = Path(os.environ.get("NEARSUB_RUNTIME_DIR", default))
     path.mkdir(mode=0o700, parents=True, exist_ok=True)
-    if path.stat().st_uid != os.getuid():
+    status = path.stat()
+    if status.st_uid != os.getuid():
         raise LookupError(f"runtime folder {path} belongs to another user; set NEARSUB_RUNTIME_DIR")
+    if status.st_mode & (stat.S_IWGRP | stat.S_IWOTH):
+        mode = stat.S_IMODE(status.st_mode)
+        raise LookupError(f"runtime folder {path} has mode {mode:o}: others can write to it; chmod 700 {path}")
     return path
+
+
+def open_private(path: Path, flags: int) -> int:
+    """`os.open` of a file of the runtime folder, never through a symbolic link (mode 0600 when
+    created); a link there is refused as a LookupError naming it."""
+    try:
+        return os.open(path, flags | os.O_NOFOLLOW | os.O_CLOEXEC, 0o600)
+    except OSError:
+        if path.is_symlink():
+            raise LookupError(f"{path} is a symbolic link, not the file nearsub made; remove it") from None
+        raise
+
+
+def _read_entry(path: Path) -> dict:
+    with os.fdopen(open_private(path, os.O_RDONLY)) as source:
+        return json.loads(source.read())
 
 
 def _pid_alive(pid: int) -> bool:
@@ -96,7 +121,13 @@ def register(
     path = runtime_dir() / f"{community}.json"
     entry = {"community": community, "connect": endpoint, "pid": os.getpid(), "log": log, "credentials": credentials}
     entry["vehicles"] = list(vehicles)
-    path.write_text(json.dumps(entry))
+    # A new file, renamed over the old entry (a rename replaces a link itself, never its target),
+    # so a reader never sees a half-written entry.
+    fresh = path.with_name(f".{path.name}.{os.getpid()}")
+    fresh.unlink(missing_ok=True)
+    with os.fdopen(open_private(fresh, os.O_WRONLY | os.O_CREAT | os.O_EXCL), "w") as out:
+        out.write(json.dumps(entry))
+    os.replace(fresh, path)
     return path
 
 
@@ -105,8 +136,8 @@ def running() -> dict[str, dict]:
     found = {}
     for path in runtime_dir().glob("*.json"):
         try:
-            entry = json.loads(path.read_text())
-        except (OSError, ValueError):
+            entry = _read_entry(path)
+        except (OSError, ValueError, LookupError):
             continue
         if _pid_alive(int(entry.get("pid", -1))):
             found[entry["community"]] = entry
