@@ -31,6 +31,7 @@ from helpers import (
     page_urls,
     per_topic,
     process_with,
+    processes_under,
     socket_url,
     wait_paused,
     wait_registered,
@@ -350,3 +351,56 @@ def test_the_viewer_admits_its_tokens_only_and_only_the_control_token_controls(b
     finally:
         os.killpg(viewer.pid, signal.SIGTERM)
         viewer.wait(timeout=step)
+
+
+def free_port() -> int:
+    import socket
+
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def listening(url: str) -> bool:
+    import socket
+
+    host, port = url.split("//")[1].split("/")[0].split("?")[0].split(":")
+    try:
+        socket.create_connection((host, int(port)), timeout=1.0).close()
+    except OSError:
+        return False
+    return True
+
+
+def test_a_killed_launcher_leaves_nothing_running_and_the_next_launch_cleans_up(
+    busy_machine, launches, community, runtime_dir
+):
+    """SIGKILL gives the launcher no chance to stop anything: every process it started must end by
+    itself (parent-death signal), and the next launch removes the files it left."""
+    from test_foxglove import companion_urls
+
+    mission = load_mission(ALPHA, [f"name={community}"])
+    port = free_port()  # the same fixed Foxglove port for both launches: the second needs it free
+    args = ["--warp", "1", "--until", "300", "--view", "--foxglove", "--foxglove-port", str(port)]
+    process = launches.start(ALPHA, "--set", f"name={community}", *args)
+    urls = companion_urls(process, 2, timeout=start_budget(mission) + mission.startup_timeout)
+    assert all(listening(url) for url in urls.values())
+    assert (runtime_dir / f"{community}.credentials").exists()
+    process.kill()
+    killed = time.monotonic()
+    budget = mission.startup_timeout + mission.step_timeout
+    while processes_under(launches.log_dir) or any(listening(url) for url in urls.values()):
+        left = {pid: " ".join(argv[:4]) for pid, argv in processes_under(launches.log_dir).items()}
+        assert time.monotonic() - killed < budget, f"still running {budget:g} s after the launcher died: {left}"
+        time.sleep(0.1)
+    print(f"\nlauncher killed: every process it started gone after {time.monotonic() - killed:.2f} s")
+    second = launches.start(
+        ALPHA, "--set", f"name={community}-2", "--until", "5", "--foxglove", "--foxglove-port", str(port)
+    )
+    assert companion_urls(second, 1, timeout=start_budget(mission) + mission.startup_timeout)["foxglove"].endswith(
+        f":{port}"
+    )
+    assert not (runtime_dir / f"{community}.credentials").exists()  # the dead launcher's, swept
+    assert not (runtime_dir / f"{community}.json").exists()
+    out, err = second.communicate(timeout=run_budget(mission))
+    assert second.returncode == 0, err

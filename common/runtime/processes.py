@@ -67,10 +67,16 @@ def prepare_process() -> None:
 
     signal.signal(signal.SIGTERM, handler)
     signal.signal(signal.SIGINT, signal.default_int_handler)
+    die_with_parent()
+
+
+def die_with_parent() -> None:
+    """Ask Linux to send this process SIGTERM when the thread that started it dies
+    (PR_SET_PDEATHSIG; kept across exec, so it also serves as a `preexec_fn`)."""
     try:
         ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
     except (OSError, AttributeError):
-        pass  # not Linux: the launcher's liveliness token still stops the app
+        pass  # not Linux: the launcher's liveliness token still stops the apps
 
 
 def leave(code: int) -> NoReturn:

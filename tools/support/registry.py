@@ -24,6 +24,7 @@ import json
 import os
 import stat
 import tempfile
+import time
 from pathlib import Path
 
 
@@ -51,13 +52,13 @@ class Claim:
 
 
 def claim(community: str) -> Claim:
-    """Claim `community` for this process, or raise NameTaken naming the launcher that holds it."""
+    """Claim `community` for this process, or raise NameTaken naming the launcher that holds it.
+    First clear what dead launchers left (`sweep`)."""
+    sweep()
     path = runtime_dir() / f"{community}.lock"
     fd = open_private(path, os.O_RDWR | os.O_CREAT)
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        holder = os.pread(fd, 32, 0).decode(errors="replace").strip() or "unknown"
+    if not _lock(fd, patience=SWEEP_PATIENCE):
+        holder = _holder(fd) or "unknown"
         os.close(fd)
         raise NameTaken(
             f"a mission named {community!r} is already running (launcher pid {holder}); use --set name=OTHER"
@@ -65,6 +66,50 @@ def claim(community: str) -> Claim:
     os.ftruncate(fd, 0)
     os.pwrite(fd, str(os.getpid()).encode(), 0)
     return Claim(community, fd)
+
+
+SWEEP_PATIENCE = 1.0  # seconds a claim waits for another launch's sweep of the name (microseconds)
+
+
+def _holder(fd: int) -> str:
+    return os.pread(fd, 32, 0).decode(errors="replace").strip()
+
+
+def _lock(fd: int, patience: float = 0.0) -> bool:
+    """Take the name's flock without waiting; a lock whose recorded launcher is dead is another
+    launch's `sweep`, so that one is waited for, up to `patience` seconds."""
+    deadline = time.monotonic() + patience
+    while True:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            return True
+        except BlockingIOError:
+            holder = _holder(fd)
+            if time.monotonic() > deadline or (holder.isdigit() and _pid_alive(int(holder))):
+                return False
+            time.sleep(0.01)
+
+
+def sweep() -> None:
+    """Remove the credentials and registry entries of launchers that died without cleaning up
+    (SIGKILL, a crash): a name whose lock no live process holds, checked by taking the lock itself,
+    so a live launcher's files are never touched. The lock files stay (see above)."""
+    folder = runtime_dir()
+    for lock in folder.glob("*.lock"):
+        community = lock.name.removesuffix(".lock")
+        leftovers = [folder / f"{community}.json", credentials_path(community)]
+        if not any(path.exists() or path.is_symlink() for path in leftovers):
+            continue
+        try:
+            fd = open_private(lock, os.O_RDWR)
+        except (OSError, LookupError):
+            continue
+        try:
+            if _lock(fd):  # nobody holds the name: its launcher is gone
+                for path in leftovers:
+                    path.unlink(missing_ok=True)
+        finally:
+            os.close(fd)
 
 
 def runtime_dir() -> Path:
