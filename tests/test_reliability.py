@@ -404,3 +404,34 @@ def test_a_killed_launcher_leaves_nothing_running_and_the_next_launch_cleans_up(
     assert not (runtime_dir / f"{community}.json").exists()
     out, err = second.communicate(timeout=run_budget(mission))
     assert second.returncode == 0, err
+
+
+@pytest.fixture
+def small_disk(tmp_path):
+    """A 1 MiB tmpfs (root only: mount(2) needs CAP_SYS_ADMIN), unmounted after the test."""
+    if os.geteuid() != 0:
+        pytest.skip("mounting a small tmpfs needs root; the full-disk case runs as root only")
+    folder = tmp_path / "small"
+    folder.mkdir()
+    done = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=1m", "tmpfs", str(folder)], capture_output=True)
+    if done.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here: {done.stderr.decode().strip()}")
+    yield folder
+    subprocess.run(["umount", "-l", str(folder)], check=False)
+
+
+def test_a_full_disk_is_named_in_the_summary_and_refused_at_start(busy_machine, launches, community, small_disk):
+    """1 MiB holds the first minute of missions/alpha.toml but not its 900 s: the mission starts,
+    fills the disk, and its summary says so; what was logged stays readable. A second launch on the
+    full disk is refused before anything starts."""
+    mission = load_mission(ALPHA, [f"name={community}"])
+    launches.log_dir = small_disk
+    code, summary, err = launches.run(ALPHA, "--set", f"name={community}", timeout=run_budget(mission))
+    assert code == 1 and summary["outcome"] == "error", (summary, err)
+    assert f"no space left on {small_disk}" in summary["reason"], summary["reason"]
+    contents = read_log(summary["log"])
+    print(f"\nfull disk: {summary['reason']!r}; {len(contents.records)} messages kept, to step {summary['steps']}")
+    assert len(contents.records) > 1000 and contents.records[-1].sim_time > 30.0  # more than the first half-minute
+    code, summary, err = launches.run(ALPHA, "--set", f"name={community}-2", timeout=start_budget(mission))
+    assert code == 2 and len(err.strip().splitlines()) == 1, err
+    assert f"--log {small_disk}: no space left on it" in err

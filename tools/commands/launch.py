@@ -69,6 +69,25 @@ def model_file_problem(path: str) -> str | None:
     return None
 
 
+ROOM_SECONDS = 60.0  # simulated seconds of log a launch wants room for before it starts
+
+
+def check_room(folder: str, mission) -> None:
+    """Refuse a log folder without room for the mission's first ROOM_SECONDS (a full disk would
+    otherwise stop the mission a few steps in, or its router before it listens)."""
+    import shutil
+
+    from nearsub.common.runtime.logfile import room_needed
+
+    steps = min(mission.max_steps, round(ROOM_SECONDS / mission.dt))
+    needed, free = room_needed(steps, len(mission.vehicle_names)), shutil.disk_usage(folder).free
+    if free < needed:
+        raise InputError(
+            f"--log {folder}: no space left on it for the mission's first {steps * mission.dt:g} s "
+            f"({free // 1024} kB free, about {needed // 1024} kB needed)"
+        )
+
+
 def launch_command(args) -> int:
     from nearsub.common.mission.schema import MissionError, load_mission
 
@@ -105,6 +124,7 @@ def launch_command(args) -> int:
         Path(args.log).mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise InputError(f"--log {args.log}: cannot make a folder there ({exc.strerror})") from None
+    check_room(args.log, mission)
     # The claim is held until this process exits; a second launch of the name refuses at once.
     try:
         with registry.claim(mission.name):

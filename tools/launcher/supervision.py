@@ -16,6 +16,7 @@ from nearsub.common.mission.schema import Mission, RunConfig
 from nearsub.common.runtime import forkserver, keys
 from nearsub.common.runtime.bus import Bus, BusError, Endpoints, Mailbox, app_environment
 from nearsub.common.runtime.lifecycle import ORDER
+from nearsub.common.runtime.logfile import no_space_left
 from nearsub.common.runtime.messages import Event, MessageError, MissionEnd, decode, encode, model_for_key
 
 from ..support.caller import Caller
@@ -107,7 +108,7 @@ class Launcher:
                 processes.stop_all()
                 self.drain_mailbox()
         except (BusError, LaunchError) as exc:  # before any app started: there is no mission to end
-            self.summary.outcome, self.summary.reason = "error", str(exc).splitlines()[0]
+            self.summary.outcome, self.summary.reason = "error", self.with_disk(str(exc)).splitlines()[0]
             self.summary.failed_app = getattr(exc, "app", None)
             print(f"nearsub launch: {exc}", file=sys.stderr, flush=True)
         except KeyboardInterrupt:
@@ -209,10 +210,18 @@ class Launcher:
             if not dead:
                 return
             culprit, code = dead[0].instance, dead[0].process.returncode
-        line = f"app {culprit} exited with code {code} at step {self.summary.steps}"
+        line = self.with_disk(f"app {culprit} exited with code {code} at step {self.summary.steps}")
         print(f"nearsub launch: {line}", file=sys.stderr, flush=True)
         self.summary.failed_app = culprit
         self.summary.reason = f"{line}; {self.summary.reason}" if self.summary.reason else line
+
+    def with_disk(self, text: str) -> str:
+        """`text`, its first line saying so when the log folder's disk is full: the likely cause
+        of a process's exit, which its own output file (on that disk) cannot tell."""
+        if not no_space_left(self.run_dir):
+            return text
+        first, _, rest = text.partition("\n")
+        return f"{first}: no space left on {self.run_dir}" + (f"\n{rest}" if rest else "")
 
     def check_processes(self) -> bool:
         """Raise LaunchError naming a process that left before the mission end (the router
@@ -311,7 +320,7 @@ class Launcher:
         )
 
     def fail(self, exc: LaunchError) -> None:
-        text = str(exc)
+        text = self.with_disk(str(exc))
         print(f"nearsub launch: {text}", file=sys.stderr, flush=True)
         self.summary.failed_app = exc.app
         self.abort("error", text.splitlines()[0])
