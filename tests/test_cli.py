@@ -1,6 +1,7 @@
 """The `nearsub` command line: every subcommand registers from its module, the listing and the light
 tools' parsers load no numerical or transport library, and bad input gets one line and exit 2."""
 
+import os
 import subprocess
 import sys
 
@@ -192,3 +193,13 @@ def test_bash_completion_completes_subcommands_and_choices():
     assert set(TOOLS) <= set(complete("nearsub", ""))
     assert complete("nearsub", "log", "export", "a.mcap", "--format", "") == ["csv", "json", "alog", "foxglove"]
     assert complete("nearsub", "log", "") == ["info", "export", "play", "plot"]
+
+
+def test_a_mission_file_that_is_no_regular_file_or_nests_too_deeply_is_one_line_and_exit_2(runtime_dir, tmp_path):
+    fifo, nested = tmp_path / "mission.fifo", tmp_path / "nested.toml"
+    os.mkfifo(fifo)  # opened for reading, a FIFO blocks until a writer comes: none will
+    nested.write_text("x = " + "[" * 1000 + "\n")
+    for path, words in ((fifo, "not a regular file"), (nested, "nested too deeply"), (tmp_path, "not a regular file")):
+        done = nearsub("launch", str(path), "--log", str(tmp_path / "logs"), timeout=30.0)
+        assert done.returncode == 2 and len(done.stderr.strip().splitlines()) == 1, done.stderr[-300:]
+        assert done.stderr.startswith(f"nearsub launch: {path}: ") and words in done.stderr, done.stderr

@@ -8,7 +8,9 @@ Headings in mission files are the psi of docs/design.md, "Frames, units and sign
 from __future__ import annotations
 
 import math
+import os
 import re
+import stat
 import tomllib
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -482,6 +484,8 @@ def parse_override(text: str) -> tuple[list[str], Any]:
         value = tomllib.loads(f"v = {raw}")["v"]
     except tomllib.TOMLDecodeError:
         value = raw
+    except RecursionError:
+        raise MissionError(f"--set {key}: value nested too deeply") from None
     return key.split("."), value
 
 
@@ -521,19 +525,30 @@ def vehicle_entry(data: dict, name: str, text: str) -> dict:
 
 
 def read_toml(path: Path) -> dict:
-    """One TOML file as a dict; MissionError naming the file."""
+    """One TOML file as a dict; MissionError naming the file. Only a regular file is read: a
+    FIFO or a device would block or never end (opened without blocking, then checked)."""
     try:
-        text = path.read_text(encoding="utf-8")
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
     except OSError as exc:
         raise MissionError(f"{path}: cannot read mission file ({exc.strerror})") from None
-    except UnicodeDecodeError as exc:
-        raise MissionError(
-            f"{path}: not UTF-8 text (byte 0x{exc.object[exc.start]:02x} at offset {exc.start})"
-        ) from None
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        raise MissionError(f"{path}: not a regular file (a mission file is a TOML text file)")
+    with os.fdopen(fd, "rb") as source:
+        try:
+            text = source.read().decode("utf-8")
+        except OSError as exc:
+            raise MissionError(f"{path}: cannot read mission file ({exc.strerror})") from None
+        except UnicodeDecodeError as exc:
+            raise MissionError(
+                f"{path}: not UTF-8 text (byte 0x{exc.object[exc.start]:02x} at offset {exc.start})"
+            ) from None
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise MissionError(f"{path}: not valid TOML ({exc})") from None
+    except RecursionError:
+        raise MissionError(f"{path}: not valid TOML (arrays or tables nested too deeply)") from None
 
 
 def merge(base: dict, top: dict) -> dict:
