@@ -203,3 +203,14 @@ def test_a_mission_file_that_is_no_regular_file_or_nests_too_deeply_is_one_line_
         done = nearsub("launch", str(path), "--log", str(tmp_path / "logs"), timeout=30.0)
         assert done.returncode == 2 and len(done.stderr.strip().splitlines()) == 1, done.stderr[-300:]
         assert done.stderr.startswith(f"nearsub launch: {path}: ") and words in done.stderr, done.stderr
+
+
+@pytest.mark.parametrize("no_validate", [[], ["--no-validate"]])
+def test_tap_pub_of_a_huge_integer_or_deeply_nested_json_is_one_line_and_exit_2(runtime_dir, no_validate):
+    key = "nearsub/alpha/remus100/desired"
+    cases = (('{"step": ' + "1" + "0" * 30 + "}", "an integer beyond 64 bits"),
+             ('{"a": ' * 3000 + "1" + "}" * 3000, "JSON nested too deeply"))  # fmt: skip
+    for value, words in cases:
+        done = nearsub("tap", "pub", key, value, *no_validate)
+        assert done.returncode == 2 and len(done.stderr.strip().splitlines()) == 1, done.stderr[-300:]
+        assert done.stderr.startswith("nearsub tap pub: value") and words in done.stderr, done.stderr

@@ -294,11 +294,16 @@ def tap_pub(args) -> int:
     else:
         try:
             fields = json.loads(args.value)
+            packed = msgpack.packb(fields)  # what a message can carry: integers of 64 bits at most
         except json.JSONDecodeError as exc:
             print(f"nearsub tap pub: value is not JSON ({exc})", file=sys.stderr)
             return 2
+        except RecursionError:
+            raise InputError("value: JSON nested too deeply") from None
+        except OverflowError:
+            raise InputError(f"value {args.value[:60]!r}: an integer beyond 64 bits") from None
         if args.no_validate:
-            payload = msgpack.packb(fields)
+            payload = packed
         else:
             model = model_for_key(args.key)
             if model is None:
