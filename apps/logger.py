@@ -3,8 +3,10 @@
 It stores the bytes exactly as received, timestamped by simulated time (control requests and
 operator overrides, sent with t = 0, at the simulated time they arrived: `Recorder.log_time`). A payload that fails
 validation is kept on a `<key>#invalid` channel and an error event is recorded, so nothing is
-lost and the typed channels stay clean. It finishes the file on every way out: the mission end,
-SIGINT/SIGTERM, or the launcher disappearing.
+lost and the typed channels stay clean. A flood of invalid messages cannot grow the log without
+bound: the first INVALID_KEPT of each key are kept, the rest only counted, and the counts go into
+the log's `invalid_dropped` metadata (`nearsub log info` shows them). It finishes the file on
+every way out: the mission end, SIGINT/SIGTERM, or the launcher disappearing.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ import argparse
 import queue
 import sys
 import time
+from collections import Counter
 from pathlib import Path
 
 from nearsub import __version__
@@ -37,6 +40,7 @@ DRAIN_SECONDS = 0.3  # after the last app has left, keep what is still in flight
 # Wall seconds between two reads of an empty stream: about 50 messages at 1000 steps/s, far below
 # the stream's capacity (bus.stream), so the publishers never wait on the logger.
 NAP = 0.02
+INVALID_KEPT = 100  # invalid messages kept per key (each with its error event); the rest are counted
 
 
 class Recorder:
@@ -46,6 +50,7 @@ class Recorder:
         self.sim_time = 0.0
         self.end: MissionEnd | None = None
         self.running: set[str] = set()  # liveliness keys of the apps that said "running", not yet "stopping"
+        self.invalid: Counter[str] = Counter()  # invalid messages seen per key, kept or not
 
     def log_time(self, message) -> float:
         """The simulated time a message is logged at: its own t, except for requests from outside
@@ -56,6 +61,10 @@ class Recorder:
             return max(message.t, self.sim_time)
         return message.t
 
+    def dropped(self) -> dict[str, str]:
+        """Invalid messages counted but not kept, per key (metadata values are strings)."""
+        return {key: str(n - INVALID_KEPT) for key, n in sorted(self.invalid.items()) if n > INVALID_KEPT}
+
     def record(self, key: str, payload: bytes) -> None:
         model = model_for_key(key)
         if model is None:
@@ -64,14 +73,14 @@ class Recorder:
         try:
             message = decode(payload, model, key)
         except MessageError as exc:
+            self.invalid[key] += 1
+            if self.invalid[key] > INVALID_KEPT:
+                return
             self.writer.write(key, payload, self.sim_time, valid=False)
-            error = Event(
-                step=0,
-                t=self.sim_time,
-                source="logger",
-                kind="error",
-                detail=f"logger received an invalid message: {exc}",
-            )
+            detail = f"logger received an invalid message: {exc}"
+            if self.invalid[key] == INVALID_KEPT:
+                detail += f" (the last kept of {key}: further invalid messages are only counted)"
+            error = Event(step=0, t=self.sim_time, source="logger", kind="error", detail=detail)
             self.writer.write(keys.events(self.community, "logger"), encode(error), self.sim_time)
             return
         self.sim_time = max(self.sim_time, message.t)
@@ -140,6 +149,8 @@ def record(args) -> int:
             writer.metadata(
                 "outcome", {"outcome": end.outcome, "reason": end.reason, "steps": str(end.step), "t": f"{end.t:g}"}
             )
+        if dropped := recorder.dropped():
+            writer.metadata("invalid_dropped", dropped)
         writer.finish()
         print(f"[logger] wrote {writer.count} messages to {writer.path}", file=sys.stderr)
     return 0

@@ -176,3 +176,27 @@ def test_a_damaged_chunk_of_a_finished_log_is_skipped_and_the_rest_kept(tmp_path
     assert steps == sorted(steps) and steps[-1] == 19999  # the chunks after it are kept
     info = nearsub("log", "info", str(path), "--json")
     assert info.returncode == 0 and json.loads(info.stdout)["damage"] == contents.damage
+
+
+def test_a_flood_of_invalid_messages_keeps_the_first_of_each_key_and_counts_the_rest(launches, community):
+    from nearsub.apps.logger import INVALID_KEPT
+    from nearsub.common.runtime.bus import Bus, Endpoints
+
+    process = launches.start(ALPHA, "--set", f"name={community}", "--set", "pause_at_step=100", "--until", "30")
+    entry = wait_registered(community)
+    key, sent = f"nearsub/{community}/remus100/state", 50 * INVALID_KEPT
+    with Bus(Endpoints("client", tuple(entry["connect"]), credentials=entry["credentials"])) as bus:
+        flood = bus.publisher(key)  # lossless: every one reaches the logger
+        for _ in range(sent):
+            flood.put(b"\xc1")  # never valid msgpack
+    assert nearsub("clock", community, "resume").returncode == 0
+    code, summary, err = finish(process)
+    assert code == 0 and summary["outcome"] == "time_limit", err
+    records = read_log(log_path(summary)).records
+    errors = [r for r in records if "/events/logger" in r.topic and r.value()["kind"] == "error"]
+    assert len([r for r in records if r.topic == key + "#invalid"]) == INVALID_KEPT and len(errors) == INVALID_KEPT
+    assert "further invalid messages are only counted" in errors[-1].value()["detail"]
+    info = nearsub("log", "info", str(log_path(summary)), "--json")
+    assert json.loads(info.stdout)["invalid_dropped"] == {key: sent - INVALID_KEPT}, info.stdout[-500:]
+    text = nearsub("log", "info", str(log_path(summary))).stdout
+    assert f"{sent - INVALID_KEPT} more invalid messages on {key} counted, not kept" in " ".join(text.split())

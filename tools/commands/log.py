@@ -83,6 +83,7 @@ def log_summary(path: Path) -> dict:
         "sim_start": min((r.sim_time for r in contents.records), default=0.0),
         "sim_end": max((r.sim_time for r in contents.records), default=0.0),
         "outcome": contents.metadata.get("outcome", {}),
+        "invalid_dropped": {key: int(n) for key, n in contents.metadata.get("invalid_dropped", {}).items()},
         "vehicles": contents.vehicles(),
         "topics": {
             topic: {
@@ -109,6 +110,8 @@ def print_summary(summary: dict) -> None:
     caption = f"{summary['messages']} messages, simulated {summary['sim_start']:.2f} .. {summary['sim_end']:.2f} s"
     if outcome:
         caption += f"; {outcome.get('outcome')} after {outcome.get('steps')} steps: {outcome.get('reason', '')}"
+    for key, count in summary["invalid_dropped"].items():  # a flood the logger counted but did not keep
+        caption += f"; {count} more invalid messages on {key} counted, not kept"
     table = Table(title=f"{summary['file']}{recovered}", caption=caption, title_justify="left", caption_justify="left")
     for name in ("topic", "message"):
         table.add_column(name)
