@@ -67,16 +67,18 @@ def prepare_process() -> None:
 
     signal.signal(signal.SIGTERM, handler)
     signal.signal(signal.SIGINT, signal.default_int_handler)
-    die_with_parent()
+    parent_death_signal()()
 
 
-def die_with_parent() -> None:
-    """Ask Linux to send this process SIGTERM when the thread that started it dies
-    (PR_SET_PDEATHSIG; kept across exec, so it also serves as a `preexec_fn`)."""
+def parent_death_signal() -> Callable[[], None]:
+    """A function asking Linux to send its caller SIGTERM when the thread that started the caller
+    dies (PR_SET_PDEATHSIG, kept across exec): for `prepare_process`, and as a `preexec_fn`
+    (libc is looked up here, before a fork, so that the child only makes the call)."""
     try:
-        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+        prctl = ctypes.CDLL("libc.so.6", use_errno=True).prctl
     except (OSError, AttributeError):
-        pass  # not Linux: the launcher's liveliness token still stops the apps
+        return lambda: None  # not Linux: the launcher's liveliness token still stops the apps
+    return lambda: prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
 
 
 def leave(code: int) -> NoReturn:

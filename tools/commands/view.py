@@ -54,7 +54,7 @@ def start_server_process(tool: str, run_file: str | Path, port: int, timeout: fl
     mission = RunConfig.load(run_file).mission
     community, timeout = mission.name, mission.startup_timeout if timeout is None else timeout
     argv = [sys.executable, "-m", "nearsub", tool, community, "--run", str(run_file), "--port", str(port)]
-    from nearsub.common.runtime.processes import die_with_parent
+    from nearsub.common.runtime.processes import parent_death_signal
 
     # It ends with the launcher however the launcher ends (SIGKILL included), as the apps do.
     process = subprocess.Popen(
@@ -64,7 +64,7 @@ def start_server_process(tool: str, run_file: str | Path, port: int, timeout: fl
         stdin=subprocess.DEVNULL,
         process_group=0,
         env=env,
-        preexec_fn=die_with_parent,
+        preexec_fn=parent_death_signal(),
     )
     lines: queue.Queue = queue.Queue()
     # Every line, then None when its output closes (it exited: its stderr has said why).
