@@ -22,7 +22,7 @@ from nearsub.common.mission.schema import mission_from_dict  # noqa: E402
 from nearsub.common.physics.hull import submarine_outline  # noqa: E402
 from nearsub.common.runtime.keys import vehicle_of  # noqa: E402
 from nearsub.common.runtime.logfile import read_log  # noqa: E402
-from nearsub.common.viewer.scene import frame_description  # noqa: E402
+from nearsub.common.viewer.scene import frame_description, mission_legs  # noqa: E402
 
 EVENT_STYLE = {  # marker, colour, z-order: a waypoint reached on top of the stray its new leg starts with
     "collision": ("X", "red", 5),
@@ -73,14 +73,11 @@ def draw_plan(ax, mission, tracks: list[tuple[str, str, dict[str, np.ndarray]]],
     if mission is None or mission.environment.submarine:
         sx, sy = submarine_outline()
         ax.fill(sx, sy, color="0.8", label="submarine")
-    if mission is not None:
-        previous = (mission.start.x, mission.start.y)
-        for number, leg in enumerate(mission.apps.helm.legs):
-            points = np.array(leg.points)
-            track = np.vstack([previous, points])
-            ax.plot(track[:, 0], track[:, 1], "b--", lw=1, label=None if number else "track-lines")
-            ax.plot(points[:, 0], points[:, 1], "bs", ms=5, label=None if number else "waypoints")
-            previous = tuple(points[-1])
+    legs = [] if mission is None else [leg for member in mission.members() for leg in mission_legs(member)]
+    for number, leg in enumerate(legs):
+        points, track = np.array(leg["points"]), np.array(leg["track"])
+        ax.plot(track[:, 0], track[:, 1], "b--", lw=1, label=None if number else "track-lines")
+        ax.plot(points[:, 0], points[:, 1], "bs", ms=5, label=None if number else "waypoints")
     for label, colour, state in tracks:
         ax.plot(state["x"], state["y"], "-", color=colour, lw=1.5, label=label)
     marked = set()

@@ -228,8 +228,7 @@ class FoxgloveScene:
     def size(self, vehicle: str) -> dict:
         """Length and diameter of a vehicle: the mission's own, or its fleet entry's type."""
         if vehicle not in self.sizes:
-            single = self.mission is None or vehicle == getattr(self.mission, "vehicle_name", None)
-            self.sizes[vehicle] = self.vehicle if single else vehicle_size(self.mission, vehicle)
+            self.sizes[vehicle] = self.vehicle if self.mission is None else vehicle_size(self.mission, vehicle)
         return self.sizes[vehicle]
 
     def uuv_update(self, vehicle: str, ns: int) -> dict:

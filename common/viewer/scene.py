@@ -51,14 +51,31 @@ def acting_band(mission) -> dict:
     bounds of table 4.2 and the constraints (4.4)/(4.5) for the mission's vehicle, over the
     R_long range, on both sides of the submarine (the -y side is the mirror image, thesis section
     4.2.1). Returns {"rects": [...], "note": why there is none} ; the blend ramp inside the band's
-    edges is not drawn (it is a few centimetres wide)."""
-    from nearsub.common.surrogate import domain
-    from nearsub.common.surrogate.interaction import geometry_outside
-
+    edges is not drawn (it is a few centimetres wide). With several vehicles, each vehicle type's
+    band (its rects after the others', its note named after its vehicles)."""
     if mission is None:
         return {"rects": [], "note": "no mission: band unknown"}
     if not mission.environment.submarine:
         return {"rects": [], "note": "no submarine in this mission"}
+    members = mission.members()
+    if len(members) == 1:
+        return _vehicle_band(members[0])
+    by_type: dict[str, list] = {}
+    for member in members:
+        by_type.setdefault(member.vehicle_model.name, []).append(member)
+    rects, notes = [], []
+    for same in by_type.values():
+        band = _vehicle_band(same[0])
+        rects += [rect for rect in band["rects"] if rect not in rects]
+        notes.append(f"{', '.join(m.vehicle_name for m in same)}: {band['note']}")
+    return {"rects": rects, "note": "; ".join(notes)}
+
+
+def _vehicle_band(mission) -> dict:
+    """`acting_band` of a mission of one vehicle near a submarine."""
+    from nearsub.common.surrogate import domain
+    from nearsub.common.surrogate.interaction import geometry_outside
+
     if mission.apps.sim.interaction == "off":
         return {"rects": [], "note": "interaction off (apps.sim.interaction)"}
     vehicle = mission.vehicle_model
@@ -89,9 +106,14 @@ def force_reference(mission) -> float:
     (coefficients scale with 0.5 rho u^2 L_uuv^2, thesis section 5.2)."""
     if mission is None:
         return 100.0
-    vehicle = mission.vehicle_model
-    speed = max([leg.speed for leg in mission.apps.helm.legs] + [mission.start.speed, 0.5])
-    return ARROW_COEFFICIENT * 0.5 * mission.environment.rho * speed**2 * vehicle.length**2
+    members = mission.members()  # several vehicles: the largest of their references
+    return max(
+        ARROW_COEFFICIENT * 0.5 * m.environment.rho * _fastest(m) ** 2 * m.vehicle_model.length**2 for m in members
+    )
+
+
+def _fastest(mission) -> float:
+    return max([leg.speed for leg in mission.apps.helm.legs] + [mission.start.speed, 0.5])
 
 
 def frame_description(mission) -> str:
@@ -109,15 +131,10 @@ def static_scene(mission, source: str = "") -> dict:
     if submarine:
         hx, hy = submarine_outline(HULL_POINTS)
         hull = _points(hx, hy)
-    legs = []
-    if mission is not None:
-        previous = [mission.start.x, mission.start.y]
-        for leg in mission.apps.helm.legs:
-            points = [[float(px), float(py)] for px, py in leg.points]
-            legs.append({"name": leg.name, "points": points, "track": [previous, *points], "speed": leg.speed})
-            previous = points[-1]
-    if mission is not None:
-        vehicle = mission.vehicle_model
+    members = [] if mission is None else mission.members()
+    legs = [leg for member in members for leg in mission_legs(member)]
+    if members:
+        vehicle = members[0].vehicle_model
         size = {"name": vehicle.name, "length": vehicle.length, "diameter": vehicle.diameter}
     else:
         size = {"name": "uuv", "length": 2.0, "diameter": 0.3}
@@ -129,7 +146,8 @@ def static_scene(mission, source: str = "") -> dict:
         "frame": frame_description(mission),
         "hull": hull,
         "legs": legs,
-        "start": None if mission is None else [mission.start.x, mission.start.y],
+        "start": None if not members else [members[0].start.x, members[0].start.y],
+        "starts": {m.vehicle_name: [m.start.x, m.start.y] for m in members},
         "band": acting_band(mission),
         "vehicle": size,
         "force_reference": force_reference(mission),
@@ -138,6 +156,19 @@ def static_scene(mission, source: str = "") -> dict:
         "behaviours": list(_behaviours()),
         "behaviour": None if mission is None else mission.apps.helm.behaviour,
     }
+
+
+def mission_legs(mission) -> list[dict]:
+    """The waypoints and track-lines of one vehicle's mission (a member of a fleet), each leg
+    from the end of the one before, the first from the vehicle's start."""
+    legs = []
+    previous = [mission.start.x, mission.start.y]
+    for leg in mission.apps.helm.legs:
+        points = [[float(px), float(py)] for px, py in leg.points]
+        item = {"name": leg.name, "points": points, "track": [previous, *points], "speed": leg.speed}
+        legs.append(item | {"vehicle": mission.vehicle_name} if mission.fleet else item)
+        previous = points[-1]
+    return legs
 
 
 def _behaviours() -> tuple[str, ...]:
@@ -220,14 +251,14 @@ class SceneModel:
     def for_mission(cls, mission) -> SceneModel:
         if mission is None:
             return cls()
-        vehicle = mission.vehicle_model
+        first = mission.members()[0]  # the vehicle a message without a vehicle in its key belongs to
         return cls(
-            length=vehicle.length,
-            diameter=vehicle.diameter,
+            length=first.vehicle_model.length,
+            diameter=first.vehicle_model.diameter,
             force_reference=force_reference(mission),
             requested_warp=mission.warp,
             mission=mission,
-            default_vehicle=mission.vehicle_name,
+            default_vehicle=first.vehicle_name,
         )
 
     def track(self, name: str | None) -> Track:
