@@ -24,6 +24,7 @@ dies, the server dies with it (PR_SET_PDEATHSIG) and its apps get SIGTERM (their
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import json
 import os
@@ -122,17 +123,27 @@ class ForkServer:
         except OSError as exc:
             raise ForkServerError(f"the fork server is gone ({exc}; exit code {self.process.poll()})") from None
         end = time.monotonic() + timeout
-        while not self.replies:
-            if time.monotonic() > end:
-                self.process.kill()
-                raise ForkServerError(f"the fork server did not fork {module} within {timeout:g} s")
-            self.collect(wait=0.05)
+        try:
+            self._await_reply(module, timeout, end)
+        except KeyboardInterrupt:  # the app is being forked: stop it, or nobody would (the caller never sees it)
+            self._await_reply(module, timeout, end)
+            if pid := self.replies.pop(0).get("pid"):
+                with contextlib.suppress(ProcessLookupError):
+                    os.killpg(pid, signal.SIGTERM)
+            raise
         reply = self.replies.pop(0)
         if "error" in reply:
             raise ForkServerError(f"the fork server could not start {module}: {reply['error']}")
         forked = self.apps[reply["pid"]] = ForkedApp(self, reply["pid"])
         self._settle()
         return forked
+
+    def _await_reply(self, module: str, timeout: float, end: float) -> None:
+        while not self.replies:
+            if time.monotonic() > end:
+                self.process.kill()
+                raise ForkServerError(f"the fork server did not fork {module} within {timeout:g} s")
+            self.collect(wait=0.05)
 
     def _settle(self) -> None:
         for pid in [pid for pid in self.exits if pid in self.apps]:
@@ -273,7 +284,10 @@ def serve(conn: socket.socket, preload: Sequence[str]) -> int:
                 _, status, usage = os.wait4(pid, 0)
                 send({"exited": pid, "code": os.waitstatus_to_exitcode(status), "cpu": usage.ru_utime + usage.ru_stime})
                 continue
-            data, received, _, _ = socket.recv_fds(conn, MAX_MESSAGE, 16)
+            try:
+                data, received, _, _ = socket.recv_fds(conn, MAX_MESSAGE, 16)
+            except ConnectionResetError:  # the launcher closed before reading our last reply
+                data, received = b"", []
             fds += received
             if not data:
                 listening = False

@@ -89,6 +89,18 @@ def check_room(folder: str, mission) -> None:
 
 
 def launch_command(args) -> int:
+    from ..launcher.status import Summary, exit_code, interrupted_reason
+
+    try:
+        return _launch(args)
+    except KeyboardInterrupt:  # before the launcher takes Ctrl-C over (reading the mission, importing)
+        summary = Summary(Path(args.mission).stem, "interrupted")
+        summary.reason = interrupted_reason(summary)
+        print(json.dumps(summary.as_dict()) if args.json else summary.text())
+        return exit_code(summary)
+
+
+def _launch(args) -> int:
     from nearsub.common.mission.schema import MissionError, load_mission
 
     from ..launcher.status import exit_code

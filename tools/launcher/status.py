@@ -80,6 +80,9 @@ class Summary:
         }
 
     def text(self) -> str:
+        """The summary for people; a mission stopped before it ran is its first line only."""
+        if self.outcome == "interrupted" and not self.startup_time:
+            return f"mission {self.community}: interrupted ({self.reason})"
         events = ", ".join(f"{k} {v}" for k, v in sorted(self.events.items())) or "none"
         lines = [
             f"mission {self.community}: {self.outcome}" + (f" ({self.reason})" if self.reason else ""),
@@ -97,6 +100,11 @@ class Summary:
         if self.log:
             lines.append(f"  log {self.log}")
         return "\n".join(lines)
+
+
+def interrupted_reason(summary: Summary) -> str:
+    """Why a mission stopped on Ctrl-C (or SIGTERM): before every app was up, or while it ran."""
+    return "stopped by the user" + ("" if summary.startup_time else " during start-up")
 
 
 def exit_code(summary: Summary) -> int:

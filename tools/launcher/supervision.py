@@ -22,7 +22,7 @@ from nearsub.common.runtime.messages import Event, MessageError, MissionEnd, dec
 from ..support.caller import Caller
 from . import registration, swap
 from .processes import LaunchError, Processes, fork_preload, spawn_router
-from .status import NORMAL_OUTCOMES, Console, Summary
+from .status import NORMAL_OUTCOMES, Console, Summary, interrupted_reason
 
 EXIT_GRACE = 2.0  # wall seconds to wait for the mission end after an app left with code 0
 
@@ -103,7 +103,7 @@ class Launcher:
                 except LaunchError as exc:
                     self.fail(exc)
                 except KeyboardInterrupt:
-                    self.abort("interrupted", "stopped by the user")
+                    self.abort("interrupted", interrupted_reason(self.summary))
                 self.stopping = True
                 processes.stop_all()
                 self.drain_mailbox()
@@ -112,7 +112,7 @@ class Launcher:
             self.summary.failed_app = getattr(exc, "app", None)
             print(f"nearsub launch: {exc}", file=sys.stderr, flush=True)
         except KeyboardInterrupt:
-            self.summary.outcome, self.summary.reason = "interrupted", "stopped by the user"
+            self.summary.outcome, self.summary.reason = "interrupted", interrupted_reason(self.summary)
         finally:
             self.stopping = True
             for signum, handler in previous_handlers.items():
@@ -310,8 +310,8 @@ class Launcher:
     def abort(self, outcome: str, reason: str) -> None:
         """End the mission from outside the clock, so every app and the logger wind down."""
         self.summary.outcome, self.summary.reason = outcome, reason
-        try:
-            step = 0 if self.processes.router_lost() else int(self.current_step())
+        try:  # the clock grants nothing before every app is up: no need to ask it then
+            step = 0 if self.processes.router_lost() or not self.summary.startup_time else int(self.current_step())
         except ValueError:
             step = 0
         self.summary.steps, self.summary.sim_time = step, step * self.mission.dt
