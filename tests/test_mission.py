@@ -61,3 +61,17 @@ def test_invalid_toml_is_reported(tmp_path):
     path = write(tmp_path, "name = \n")
     with pytest.raises(MissionError, match="not valid TOML"):
         load_mission(path)
+
+
+def test_a_check_of_the_whole_mission_says_its_reason_alone():
+    """A swap's `--with` that breaks a check across fields (a modified waypoints helm with no
+    submarine speed) names the reason in one short line, not the resolved mission it checked."""
+    from nearsub.common.mission.schema import apply_overrides, mission_from_dict
+
+    resolved = load_mission(ALPHA).model_dump(mode="json")
+    with pytest.raises(MissionError) as caught:
+        mission_from_dict(apply_overrides(resolved, ["apps.helm.behaviour=modified_waypoints"]), "--with")
+    text = str(caught.value)
+    assert text.startswith("--with: apps.helm.behaviour = 'modified_waypoints'")
+    assert "needs environment.u_sub > 0 (got 0.0)" in text
+    assert "\n" not in text and resolved["description"] not in text and len(text) < 200

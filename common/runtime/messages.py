@@ -235,7 +235,10 @@ def describe_validation_error(error: ValidationError, where: str, name=None) -> 
         loc, value = tuple(item["loc"]), item.get("input")
         if name is not None:
             loc, value = name(loc, value)
-        field = ".".join(str(p) for p in loc) or "<message>"
+        if not loc:  # a check of the whole message or mission: its reason alone, not the whole input
+            parts.append(str(item.get("ctx", {}).get("error", item["msg"])))
+            continue
+        field = ".".join(str(p) for p in loc)
         # A missing field's input is its parent: the whole message or mission, which says nothing.
         parts.append(
             f"field '{field}': {item['msg']}"
