@@ -91,3 +91,32 @@ def played_count(player) -> int:
         if line.startswith("playing "):
             return int(line.split()[1])
     raise AssertionError(f"the player ended without a playing line: {player.communicate()}")
+
+
+def test_a_short_key_stands_for_that_topic_of_every_vehicle(fleet_log, runtime_dir, community, capsys):
+    """`tap echo state` (a new user's first try) follows every vehicle's state of the running
+    mission; `log export --topic state` selects them in a log; a word that is no short key is
+    one line naming those there are."""
+    from nearsub.tools.cli import main
+
+    player = start_player(fleet_log, "--warp", 1, "--community", community, "--wait", STARTUP)
+    try:
+        wait_registered(community, player)
+        echo = nearsub("tap", "echo", "state", "--count", "20", "--timeout", str(STARTUP), "--json",
+                       "--community", community, timeout=2 * STARTUP + STEP)  # fmt: skip
+        quiet = nearsub("tap", "echo", "poke", "--count", "1", "--timeout", "1", "--community", community,
+                        timeout=STARTUP + STEP)  # fmt: skip
+    finally:
+        stop([player])
+    assert echo.returncode == 0, echo.stderr
+    keys = {json.loads(line)["key"] for line in echo.stdout.splitlines()}
+    assert keys == {f"nearsub/{community}/alfa/state", f"nearsub/{community}/bravo/state"}
+    assert quiet.returncode == 1  # nobody pokes: it says so instead of leaving silently
+    assert quiet.stderr == f"nearsub tap echo: 0 of 1 messages on nearsub/{community}/*/poke within 1 s\n"
+    assert main(["log", "export", str(fleet_log), "--topic", "state"]) == 0
+    exported = {json.loads(line)["topic"] for line in capsys.readouterr().out.splitlines()}
+    assert exported == {"nearsub/alpha/alfa/state", "nearsub/alpha/bravo/state"}
+    for argv in (("tap", "echo", "stat", "--count", "1"), ("log", "export", str(fleet_log), "--topic", "stat")):
+        refused = nearsub(*argv, timeout=STARTUP)
+        assert refused.returncode == 2 and len(refused.stderr.splitlines()) == 1, refused.stderr
+        assert "stat: not a short key (state, desired, input, helm, forces, poke, events, end)" in refused.stderr

@@ -300,6 +300,22 @@ def model_for_key(key: str) -> type[Message] | None:
     return None
 
 
+# Short keys a person types for a mission's topics (`tap echo state`, `log export --topic state`):
+# each vehicle topic leaf stands for that topic of every vehicle, `events` for every event, `end`
+# for the clock's end; {c} is the community.
+SHORT_KEYS = {leaf: "nearsub/{c}/*/" + leaf for leaf in VEHICLE_TOPICS} | {
+    "events": "nearsub/{c}/events/**",
+    "end": "nearsub/{c}/clock/end",
+}
+
+
+def short_key(name: str, community: str | None = None) -> str | None:
+    """The key expression a short key stands for in `community` (None: in every one), or None
+    when `name` is not a short key."""
+    pattern = SHORT_KEYS.get(name)
+    return None if pattern is None else pattern.format(c=community or "*")
+
+
 ALL_MODELS: tuple[type[Message], ...] = (
     State,
     Desired,

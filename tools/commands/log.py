@@ -29,7 +29,7 @@ def add_parser(subparsers) -> None:
     )
     t.add_argument("log")
     t.add_argument("--format", choices=("csv", "json", "alog", "foxglove"), default="json")
-    t.add_argument("--topic", help="key expression to select (wildcards allowed)")
+    t.add_argument("--topic", help="key expression to select (wildcards allowed), or a short key such as state")
     t.add_argument(
         "--vehicle",
         metavar="NAME",

@@ -10,6 +10,9 @@ from collections import defaultdict, deque
 from ..support.arguments import integer, number
 from ..support.connect import add_connect_arguments, open_bus
 from ..support.errors import InputError
+from ..support.topics import topic_key
+
+KEY_HELP = "a key expression (wildcards * and **), or a short key: state, desired, input, forces, ... (every vehicle's)"
 
 
 def add_parser(subparsers) -> None:
@@ -24,7 +27,7 @@ def add_parser(subparsers) -> None:
     t.add_argument("--vehicle", metavar="NAME", help="only this vehicle's topics (and the apps)")
     t.set_defaults(func=tap_list)
     t = tap.add_parser("echo", help="print messages of a key expression (wildcards * and **)")
-    t.add_argument("key")
+    t.add_argument("key", help=KEY_HELP)
     t.add_argument("--field", help="print only this field (dotted path)")
     t.add_argument("--count", type=integer(minimum=1), help="stop after N messages")
     t.add_argument("--timeout", type=number(above=0.0), help="stop after S wall seconds")
@@ -33,7 +36,7 @@ def add_parser(subparsers) -> None:
     add_connect_arguments(t)
     t.set_defaults(func=tap_echo)
     t = tap.add_parser("hz", help="message rates per key, in simulated time")
-    t.add_argument("key")
+    t.add_argument("key", help=KEY_HELP)
     t.add_argument("--window", type=integer(minimum=2), default=100, help="samples per rate estimate")
     t.add_argument("--vehicle", metavar="NAME", help="only the keys of this vehicle (nearsub/<c>/NAME/...)")
     t.add_argument("--duration", type=number(above=0.0), default=5.0, help="wall seconds to listen")
@@ -183,8 +186,9 @@ def rate(stamps) -> float:
 
 def tap_echo(args) -> int:
     as_json = args.json or not sys.stdout.isatty()
-    check_key(args.key)
+    check_key(topic_key(args.key))  # a bare word that is no short key: said before the bus opens
     bus, community = open_bus(args, args.key)
+    key = topic_key(args.key, community)
     from nearsub.common.runtime.bus import Mailbox
 
     printed = 0
@@ -193,7 +197,7 @@ def tap_echo(args) -> int:
         if args.vehicle is not None:
             check_vehicle(args, publishing_vehicles(bus, community))
         mailbox = Mailbox()
-        bus.subscribe(args.key, mailbox)
+        bus.subscribe(key, mailbox)
         while args.count is None or printed < args.count:
             remaining = None if deadline is None else deadline - time.monotonic()
             if remaining is not None and remaining <= 0:
@@ -220,13 +224,17 @@ def tap_echo(args) -> int:
             else:
                 print(f"{line['key']}  t={line.get('t')}  {line.get('value', line.get('error'))}", flush=True)
             printed += 1
+    if args.count is not None and printed < args.count:
+        got = f"{printed} of {args.count} messages"
+        print(f"nearsub tap echo: {got} on {key} within {args.timeout:g} s", file=sys.stderr)
     return 0 if printed or args.count is None else 1
 
 
 def tap_hz(args) -> int:
     """Message rates per key, in simulated time (the message's t), like `ros2 topic hz`."""
-    check_key(args.key)
+    check_key(topic_key(args.key))
     bus, community = open_bus(args, args.key)
+    key = topic_key(args.key, community)
     from nearsub.common.runtime.bus import Mailbox
 
     times: dict[str, deque] = defaultdict(lambda: deque(maxlen=args.window))
@@ -236,7 +244,7 @@ def tap_hz(args) -> int:
         deadline = time.monotonic() + args.duration
         next_report = time.monotonic() + 1.0
         mailbox = Mailbox()
-        bus.subscribe(args.key, mailbox)
+        bus.subscribe(key, mailbox)
         while time.monotonic() < deadline:
             mail = mailbox.get(timeout=0.1)
             if mail is not None and not other_vehicle(args, mail.key):
@@ -247,7 +255,7 @@ def tap_hz(args) -> int:
                 next_report = time.monotonic() + 1.0
                 _print_rates(times, args.json or not sys.stdout.isatty())
     if not times:
-        print(f"nearsub tap hz: no message on {args.key} within {args.duration:g} s", file=sys.stderr)
+        print(f"nearsub tap hz: no message on {key} within {args.duration:g} s", file=sys.stderr)
         return 1
     return 0
 

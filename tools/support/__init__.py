@@ -8,5 +8,6 @@
 - connect: a bus to a running mission, by endpoint or by name (through the registry).
 - caller: request/reply to the clock or an app of a running mission.
 - schedulers: the `--scheduler ADDRESS` check of the commands that run Dask tasks.
+- topics: the topic a command is given (a key expression, or a short key such as `state`).
 - log_input: the mission logs a command is given (checked paths, `--topic`, `--vehicle`, a log's mission).
 """

@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from .errors import InputError
+from .topics import topic_key
 
 if TYPE_CHECKING:
     from nearsub.common.runtime.logfile import LogContents
@@ -71,11 +72,12 @@ def vehicle_records(contents: LogContents, args, records=None, error=InputError)
 
 
 def topic_filter(pattern: str | None):
-    """`nearsub.logs.topic_filter` for a `--topic` option: a bad pattern is bad input."""
+    """`nearsub.logs.topic_filter` for a `--topic` option (a key expression or a short key such
+    as `state`, `topics.topic_key`): a bad pattern is bad input."""
     from nearsub.logs import topic_filter as logs_topic_filter
 
     try:
-        return logs_topic_filter(pattern, "--topic")
+        return logs_topic_filter(None if pattern is None else topic_key(pattern, option="--topic"), "--topic")
     except ValueError as exc:
         raise InputError(str(exc)) from None
 
