@@ -214,3 +214,23 @@ def test_tap_pub_of_a_huge_integer_or_deeply_nested_json_is_one_line_and_exit_2(
         done = nearsub("tap", "pub", key, value, *no_validate)
         assert done.returncode == 2 and len(done.stderr.strip().splitlines()) == 1, done.stderr[-300:]
         assert done.stderr.startswith("nearsub tap pub: value") and words in done.stderr, done.stderr
+
+
+def test_tap_echo_on_a_terminal_prints_json_that_tap_pub_takes():
+    """A person copies the value `tap echo` shows into `tap pub`: JSON, not a Python dict, with
+    the simulated time to the millisecond (it printed t=23.450000000000003 and {'x': ...})."""
+    import json
+
+    import msgpack
+
+    from nearsub.common.runtime.messages import Desired, decode
+    from nearsub.tools.commands.tap import terminal_line
+
+    desired = Desired(step=469, t=469 * 0.05, source="helm", u_d=1.2, psi_d=0.5)
+    key = "nearsub/alpha/remus100/desired"
+    line = terminal_line({"key": key, "vehicle": "remus100", "t": desired.t, "value": desired.model_dump(mode="json")})
+    shown_key, when, value = line.split("  ", 2)
+    assert (shown_key, when) == (key, "t=23.450")
+    assert decode(msgpack.packb(json.loads(value)), Desired, key) == desired
+    unreadable = {"key": key, "vehicle": None, "error": "not valid msgpack"}
+    assert terminal_line(unreadable) == f"{key}  t=-  not valid msgpack"

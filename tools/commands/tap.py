@@ -219,15 +219,20 @@ def tap_echo(args) -> int:
                 except KeyError as exc:
                     print(f"nearsub tap echo: {exc.args[0]} in {mail.key}", file=sys.stderr)
                     return 2
-            if as_json:
-                print(json.dumps(line), flush=True)
-            else:
-                print(f"{line['key']}  t={line.get('t')}  {line.get('value', line.get('error'))}", flush=True)
+            print(json.dumps(line) if as_json else terminal_line(line), flush=True)
             printed += 1
     if args.count is not None and printed < args.count:
         got = f"{printed} of {args.count} messages"
         print(f"nearsub tap echo: {got} on {key} within {args.timeout:g} s", file=sys.stderr)
     return 0 if printed or args.count is None else 1
+
+
+def terminal_line(line: dict) -> str:
+    """One echoed message for people: its key, its simulated time to the millisecond, and its
+    value as JSON (what `tap pub` takes), or the reason it could not be read."""
+    t = line.get("t")
+    when = f"t={t:.3f}" if isinstance(t, int | float) else "t=-"
+    return f"{line['key']}  {when}  {json.dumps(line['value']) if 'value' in line else line['error']}"
 
 
 def tap_hz(args) -> int:
