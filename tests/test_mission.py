@@ -75,3 +75,29 @@ def test_a_check_of_the_whole_mission_says_its_reason_alone():
     assert text.startswith("--with: apps.helm.behaviour = 'modified_waypoints'")
     assert "needs environment.u_sub > 0 (got 0.0)" in text
     assert "\n" not in text and resolved["description"] not in text and len(text) < 200
+
+
+def test_validate_checks_mission_files_without_running_them(tmp_path, capsys):
+    """`nearsub validate FILE` (and a shipped mission's name) reads and validates as `launch`
+    would, one line each; a misspelt field gets the names it may stand for (difflib over the
+    schema's fields at its place), and a bad file is exit 2."""
+    from nearsub.tools.cli import main
+
+    typo = write(tmp_path, ALPHA.read_text().replace("time_limit =", "time_limt =").replace("period = ", "periodd = "))
+    assert main(["validate", str(ALPHA), "launch_two"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0] == f"{ALPHA}: ok: mission alpha, remus100, no submarine, 900 s in steps of 0.05 s"
+    assert out[1].endswith("launch_two, auv1 (remus100), auv2 (nps_auv_ii), near a submarine, 160 s in steps of 0.05 s")
+    assert main(["validate", str(typo)]) == 2
+    (line,) = capsys.readouterr().err.splitlines()
+    assert line.startswith(f"nearsub validate: {typo}: ")
+    assert "field 'time_limt' = 900.0: Extra inputs are not permitted (did you mean 'time_limit'?)" in line
+    assert "(did you mean 'period'?)" in line
+    assert main(["validate", "alph"]) == 2
+    assert "alph: no such mission file, nor a shipped mission (shipped: alpha, " in capsys.readouterr().err
+
+
+def test_launch_takes_a_shipped_mission_by_name(tmp_path, runtime_dir, community):
+    result = nearsub("launch", "alpha", "--until", "1", "--set", f"name={community}", "--log", str(tmp_path), "--json")
+    assert result.returncode == 0, result.stderr
+    assert '"outcome": "time_limit"' in result.stdout

@@ -7,6 +7,8 @@ Headings in mission files are the psi of docs/design.md, "Frames, units and sign
 
 from __future__ import annotations
 
+import difflib
+import functools
 import math
 import os
 import re
@@ -609,6 +611,24 @@ def file_setting(path: Path, loc: list[str]) -> Path | None:
     return None
 
 
+# The missions that ship with nearsub (missions/ of the source tree), by name.
+SHIPPED_MISSIONS = Path(__file__).resolve().parents[2] / "missions"
+
+
+def mission_path(target: str | Path) -> Path:
+    """A mission file by its path, or a shipped mission by its name (`alpha`: missions/alpha.toml)
+    when no file of that name is here. MissionError for a bare name that is neither, naming the
+    shipped ones."""
+    path = Path(target)
+    if path.exists() or path.suffix or len(path.parts) > 1:
+        return path
+    shipped = SHIPPED_MISSIONS / f"{path}.toml"
+    if shipped.is_file():
+        return shipped
+    names = ", ".join(sorted(p.stem for p in SHIPPED_MISSIONS.glob("*.toml"))) or "none"
+    raise MissionError(f"{target}: no such mission file, nor a shipped mission (shipped: {names})")
+
+
 def load_mission(path: str | Path, overrides: list[str] = ()) -> Mission:
     """Read (with its includes), override and validate a mission file."""
     path = Path(path)
@@ -630,8 +650,45 @@ def mission_from_dict(data: dict, where: str = "mission", overrides: list[str] =
         source = _source_of(exc, where, overrides, name)
         if source == where and file_of is not None:
             source = file_of([str(p) for p in exc.errors()[0]["loc"]])
-        text = describe_validation_error(exc, source, name)
+        text = describe_validation_error(exc, source, name, _did_you_mean)
         raise MissionError(text) from None
+
+
+def _did_you_mean(item: dict) -> str:
+    """For a field the schema does not have: the closest field names at its place (difflib)."""
+    if item["type"] != "extra_forbidden":
+        return ""
+    close = difflib.get_close_matches(str(item["loc"][-1]), _field_names(tuple(item["loc"][:-1])), n=2, cutoff=0.7)
+    return f" (did you mean {' or '.join(repr(c) for c in close)}?)" if close else ""
+
+
+@functools.cache
+def _field_names(loc: tuple) -> list[str]:
+    """The field names the mission schema allows inside `loc` (its JSON schema walked along the
+    path, through references, lists and every branch of a union); all its field names where the
+    walk loses its way."""
+    schema = Mission.model_json_schema()
+    definitions = schema.get("$defs", {})
+
+    def expand(node: dict) -> list[dict]:
+        if "$ref" in node:
+            return expand(definitions[node["$ref"].rsplit("/", 1)[-1]])
+        branches = node.get("anyOf") or node.get("oneOf")
+        return [leaf for branch in branches for leaf in expand(branch)] if branches else [node]
+
+    nodes = expand(schema)
+    for part in loc:
+        inner = []
+        for node in nodes:
+            if isinstance(part, int) and "items" in node:
+                inner += expand(node["items"])
+            elif part in node.get("properties", {}):
+                inner += expand(node["properties"][part])
+            elif node.get("properties", {}).get("type", {}).get("const") == part:  # a union's tag
+                inner.append(node)
+        nodes = inner
+    names = sorted({name for node in nodes for name in node.get("properties", {})})
+    return names or sorted({name for node in (schema, *definitions.values()) for name in node.get("properties", {})})
 
 
 def _vehicle_names(data: dict):

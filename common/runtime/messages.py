@@ -227,11 +227,13 @@ def encode(message: Message) -> bytes:
     return msgpack.packb(message.__dict__, use_bin_type=True)
 
 
-def describe_validation_error(error: ValidationError, where: str, name=None) -> str:
+def describe_validation_error(error: ValidationError, where: str, name=None, hint=None) -> str:
     """One line naming each bad field and its value; `name(loc, value) -> (loc, value)` may
-    rename them (a mission names its vehicles by name, not by index)."""
+    rename them (a mission names its vehicles by name, not by index); `hint(item)` may add to an
+    error (a field name it may stand for)."""
     parts = []
     for item in error.errors():
+        extra = "" if hint is None else hint(item)
         loc, value = tuple(item["loc"]), item.get("input")
         if name is not None:
             loc, value = name(loc, value)
@@ -241,9 +243,9 @@ def describe_validation_error(error: ValidationError, where: str, name=None) -> 
         field = ".".join(str(p) for p in loc)
         # A missing field's input is its parent: the whole message or mission, which says nothing.
         parts.append(
-            f"field '{field}': {item['msg']}"
+            f"field '{field}': {item['msg']}{extra}"
             if item["type"] == "missing"
-            else f"field '{field}' = {value!r}: {item['msg']}"
+            else f"field '{field}' = {value!r}: {item['msg']}{extra}"
         )
     return f"{where}: " + "; ".join(parts)
 

@@ -15,7 +15,7 @@ from .view import PORT
 
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("launch")
-    p.add_argument("mission", help="mission file (TOML)")
+    p.add_argument("mission", help="mission file (TOML), or a shipped mission's name (alpha: missions/alpha.toml)")
     p.add_argument("--warp", type=number(minimum=0.0), help="time warp: 0 = as fast as possible, 1 = real time")
     p.add_argument("--until", type=number(above=0.0), metavar="T", help="stop after T simulated seconds")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a mission setting")
@@ -101,7 +101,7 @@ def launch_command(args) -> int:
 
 
 def _launch(args) -> int:
-    from nearsub.common.mission.schema import MissionError, load_mission
+    from nearsub.common.mission.schema import MissionError, load_mission, mission_path
 
     from ..launcher.status import exit_code
     from ..launcher.supervision import Launcher
@@ -114,6 +114,7 @@ def _launch(args) -> int:
             overrides.append(f"{key}={value}")
             typed[f"--set {key}={value}:"] = f"{option} {value:g}:"
     try:
+        args.mission = str(mission_path(args.mission))  # a shipped mission by name: its file
         mission = load_mission(args.mission, overrides)
     except MissionError as exc:
         text = str(exc)

@@ -1,24 +1,75 @@
-"""`nearsub validate`: the physics validation cases and scenario checks, run in-process.
+"""`nearsub validate [MISSION ...]`: check mission files without running them, or, with none, the
+physics validation cases and scenario checks, run in-process.
 
-Prints measured value, target, tolerance and PASS/FAIL per case; `--json` for machines. Exits 1
-if any case fails.
+A mission (a file, or a shipped mission's name) is read with its includes and `--set` overrides
+and validated as `launch` would: one line per mission, `ok` and what it holds, or the error
+naming the file, field and value (with the field names a misspelt one may stand for); exit 2 if
+any is bad. The physics suite prints measured value, target, tolerance and PASS/FAIL per case;
+`--json` for machines. Exits 1 if any case fails.
 """
 
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
+
+from ..support.errors import InputError
 
 MISSIONS = Path(__file__).resolve().parents[2] / "missions"
 
 
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("validate")
+    p.add_argument(
+        "missions",
+        nargs="*",
+        metavar="MISSION",
+        help="mission files (or shipped missions' names) to check without running them; none: the physics suite",
+    )
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a mission setting")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=validate_command)
 
 
 def validate_command(args) -> int:
+    if args.missions:
+        return check_missions(args.missions, args.set, args.json)
+    if args.set:
+        raise InputError("--set: give the MISSION files it overrides (the physics suite takes none)")
+    return physics_suite(args)
+
+
+def check_missions(targets: list[str], overrides: list[str], as_json: bool) -> int:
+    """One line per mission: what it holds, or why it cannot be launched; 2 if any cannot."""
+    from nearsub.common.mission.schema import MissionError, load_mission, mission_path
+
+    bad = 0
+    for target in targets:
+        try:
+            path = mission_path(target)
+            mission = load_mission(path, overrides)
+        except MissionError as exc:
+            bad += 1
+            print(
+                json.dumps({"mission": target, "ok": False, "error": str(exc)})
+                if as_json
+                else f"nearsub validate: {exc}",
+                file=sys.stderr,
+            )
+            continue
+        vehicles = ", ".join(
+            f"{m.vehicle_name} ({m.vehicle_model.name})" if mission.fleet else m.vehicle_model.name
+            for m in mission.members()
+        )
+        near = "near a submarine" if mission.environment.submarine else "no submarine"
+        steps = f"{mission.time_limit:g} s in steps of {mission.dt:g} s"
+        text = f"{path}: ok: mission {mission.name}, {vehicles}, {near}, {steps}"
+        print(json.dumps({"mission": target, "file": str(path), "ok": True, "name": mission.name}) if as_json else text)
+    return 2 if bad else 0
+
+
+def physics_suite(args) -> int:
     from rich.console import Console
     from rich.table import Table
 
