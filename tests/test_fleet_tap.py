@@ -120,3 +120,31 @@ def test_a_short_key_stands_for_that_topic_of_every_vehicle(fleet_log, runtime_d
         refused = nearsub(*argv, timeout=STARTUP)
         assert refused.returncode == 2 and len(refused.stderr.splitlines()) == 1, refused.stderr
         assert "stat: not a short key (state, desired, input, helm, forces, poke, events, end)" in refused.stderr
+
+
+def test_tap_watch_keeps_the_newest_value_of_each_key_in_columns(fleet_log, runtime_dir, community):
+    """uXMS: several keys and several fields; each key's newest message, a field another topic
+    lacks left empty; `tap echo` keeps every --field too (it kept only the last)."""
+    player = start_player(fleet_log, "--warp", 1, "--community", community, "--wait", STARTUP)
+    try:
+        wait_registered(community, player)
+        calls = [
+            ("tap", "watch", "state", "desired", "--field", "x", "--field", "u_d", "--timeout", "2",
+             "--community", community),
+            ("tap", "echo", "state", "--field", "x", "--field", "y", "--count", "2", "--community", community),
+        ]  # fmt: skip
+        with ThreadPoolExecutor(len(calls)) as pool:
+            watch, echo = pool.map(lambda call: nearsub(*call, timeout=len(calls) * STARTUP + STEP), calls)
+    finally:
+        stop([player])
+    assert watch.returncode == 0, watch.stderr
+    rows = {row["key"]: row for row in map(json.loads, watch.stdout.splitlines())}
+    expected = [f"nearsub/{community}/{v}/{leaf}" for v in ("alfa", "bravo") for leaf in ("desired", "state")]
+    assert sorted(rows) == expected
+    for vehicle in ("alfa", "bravo"):
+        state, desired = rows[f"nearsub/{community}/{vehicle}/state"], rows[f"nearsub/{community}/{vehicle}/desired"]
+        assert isinstance(state["fields"]["x"], float) and state["fields"]["u_d"] is None
+        assert isinstance(desired["fields"]["u_d"], float) and desired["fields"]["x"] is None
+        assert state["vehicle"] == vehicle and state["t"] > 0
+    assert echo.returncode == 0, echo.stderr
+    assert all(set(json.loads(line)["value"]) == {"x", "y"} for line in echo.stdout.splitlines())

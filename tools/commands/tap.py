@@ -28,7 +28,9 @@ def add_parser(subparsers) -> None:
     t.set_defaults(func=tap_list)
     t = tap.add_parser("echo", help="print messages of a key expression (wildcards * and **)")
     t.add_argument("key", help=KEY_HELP)
-    t.add_argument("--field", help="print only this field (dotted path)")
+    t.add_argument(
+        "--field", action="append", help="print only this field (dotted path); given again, a map of the fields"
+    )
     t.add_argument("--count", type=integer(minimum=1), help="stop after N messages")
     t.add_argument("--timeout", type=number(above=0.0), help="stop after S wall seconds")
     t.add_argument("--json", action="store_true", help="JSON lines (the default when piped)")
@@ -43,6 +45,14 @@ def add_parser(subparsers) -> None:
     t.add_argument("--json", action="store_true")
     add_connect_arguments(t)
     t.set_defaults(func=tap_hz)
+    t = tap.add_parser("watch", help="a table of the newest value on each key, refreshed as they come (uXMS)")
+    t.add_argument("keys", nargs="+", metavar="KEY", help=KEY_HELP)
+    t.add_argument("--field", action="append", help="a column: this field (dotted path); default: the whole value")
+    t.add_argument("--vehicle", metavar="NAME", help="only the keys of this vehicle (nearsub/<c>/NAME/...)")
+    t.add_argument("--timeout", type=number(above=0.0), help="stop after S wall seconds (default: at Ctrl-C)")
+    t.add_argument("--json", action="store_true", help="at the end, one JSON line per key (the default when piped)")
+    add_connect_arguments(t)
+    t.set_defaults(func=tap_watch)
     t = tap.add_parser("pub", help="publish one message by hand, validated against its schema")
     t.add_argument("key")
     t.add_argument("value", nargs="?", default="{}", help="JSON object of fields")
@@ -52,9 +62,16 @@ def add_parser(subparsers) -> None:
     t.set_defaults(func=tap_pub)
 
 
-def _project(value: dict, field: str | None):
-    if not field:
+def _project(value: dict, fields: list[str] | None):
+    """The value, one field of it, or a map of several (`--field`, dotted paths)."""
+    if not fields:
         return value
+    if len(fields) > 1:
+        return {field: _field(value, field) for field in fields}
+    return _field(value, fields[0])
+
+
+def _field(value: dict, field: str):
     for part in field.split("."):
         if isinstance(value, dict) and part in value:
             value = value[part]
@@ -233,6 +250,92 @@ def terminal_line(line: dict) -> str:
     t = line.get("t")
     when = f"t={t:.3f}" if isinstance(t, int | float) else "t=-"
     return f"{line['key']}  {when}  {json.dumps(line['value']) if 'value' in line else line['error']}"
+
+
+def tap_watch(args) -> int:
+    """The newest message on each key the key expressions match (uXMS): on a terminal a table
+    refreshed four times a second, its columns the `--field`s (a field a message lacks is "-");
+    piped or with --json, one JSON line per key at the end. Ctrl-C is the way to stop it."""
+    for pattern in args.keys:
+        check_key(topic_key(pattern))
+    bus, community = open_bus(args, args.keys[0])
+    patterns = [topic_key(pattern, community) for pattern in args.keys]
+    from nearsub.common.runtime.bus import Mailbox
+
+    live = not args.json and sys.stdout.isatty()
+    latest: dict[str, dict] = {}  # key -> its row
+    deadline = time.monotonic() + args.timeout if args.timeout else None
+    with bus:
+        if args.vehicle is not None:
+            check_vehicle(args, publishing_vehicles(bus, community))
+        mailbox = Mailbox()
+        for pattern in patterns:
+            bus.subscribe(pattern, mailbox)
+        screen = _watch_screen(args.field, latest) if live else None
+        try:
+            while deadline is None or time.monotonic() < deadline:
+                mail = mailbox.get(timeout=0.25)
+                while mail is not None:
+                    if not other_vehicle(args, mail.key):
+                        latest[mail.key] = _watch_row(mail.key, mail.payload, args.field)
+                    mail = mailbox.get(timeout=0)
+                if screen is not None:
+                    screen.update(_watch_table(args.field, latest))
+        except KeyboardInterrupt:
+            pass
+        finally:
+            if screen is not None:
+                screen.stop()
+    if not live:
+        for key in sorted(latest):
+            print(json.dumps(latest[key]))
+    if not latest:
+        print(f"nearsub tap watch: no message on {', '.join(patterns)}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _watch_row(key: str, payload: bytes, fields: list[str] | None) -> dict:
+    value, error = _decode_any(key, payload)
+    row = {"key": key, "vehicle": vehicle_name(key), "t": value.get("t") if isinstance(value, dict) else None}
+    if error:
+        return row | {"error": error}
+    if not fields:
+        return row | {"value": value}
+    found = {}
+    for field in fields:
+        try:
+            found[field] = _field(value, field)
+        except KeyError:
+            found[field] = None  # another topic's field
+    return row | {"fields": found}
+
+
+def _watch_table(fields: list[str] | None, latest: dict[str, dict]):
+    from rich.table import Table
+
+    table = Table("key", "t", *(fields or ["value"]), title="nearsub tap watch (Ctrl-C to stop)", title_justify="left")
+    for key in sorted(latest):
+        row = latest[key]
+        t = row["t"]
+        if "error" in row:
+            cells = [row["error"]]
+        elif fields:
+            cells = ["-" if row["fields"][f] is None else json.dumps(row["fields"][f]) for f in fields]
+        else:
+            cells = [json.dumps(row["value"])]
+        table.add_row(key, f"{t:.3f}" if isinstance(t, int | float) else "-", *cells)
+    return table
+
+
+def _watch_screen(fields: list[str] | None, latest: dict[str, dict]):
+    from rich.live import Live
+
+    from ..support import tables
+
+    screen = Live(_watch_table(fields, latest), console=tables.console(), refresh_per_second=4)
+    screen.start()
+    return screen
 
 
 def tap_hz(args) -> int:
