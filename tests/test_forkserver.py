@@ -9,6 +9,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 
 import pytest
@@ -119,6 +120,24 @@ def test_an_exit_in_the_same_read_as_its_pid_is_kept(tmp_path):
     with open(tmp_path / "out", "wb") as handle:
         app = client.spawn("forkprobe", ["3"], handle, WAIT)
     assert (app.returncode, app.cpu) == (3, 0.25)
+    theirs.close()
+    ours.close()
+
+
+def test_the_cpu_of_an_app_reaped_before_its_report_came_is_the_reported_one(tmp_path):
+    """The server reaps an app (its /proc entry goes) a moment before its report reaches the
+    launcher; the launcher's CPU figures at the mission end fell in between and lost that app."""
+    ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
+    client = ForkServer.__new__(ForkServer)
+    client._attach(ours, process=None)
+    gone = subprocess.Popen(["true"])
+    gone.wait()  # reaped: a pid with no /proc entry, as a reaped app's
+    theirs.sendall(json.dumps({"pid": gone.pid}).encode() + b"\n")
+    with open(tmp_path / "out", "wb") as handle:
+        app = client.spawn("forkprobe", [], handle, WAIT)
+    report = json.dumps({"exited": gone.pid, "code": 0, "cpu": 0.25}).encode() + b"\n"
+    threading.Timer(0.2 * forkserver.EXIT_REPORT_WAIT, theirs.sendall, [report]).start()
+    assert process_cpu(app) == 0.25
     theirs.close()
     ours.close()
 

@@ -55,6 +55,7 @@ except ImportError:  # the apps run the same without it
 # "0" in the launcher's environment: start every app as its own `python -m` process instead.
 VARIABLE = "NEARSUB_FORK_SERVER"
 MAX_MESSAGE = 1 << 20
+EXIT_REPORT_WAIT = 2.0  # wall seconds between the server reaping an app and its report reaching us, at most
 
 
 class ForkServerError(RuntimeError):
@@ -203,7 +204,10 @@ def process_cpu(process) -> float | None:
     """User + system CPU seconds of a started app so far: from /proc while it runs, and, for a
     forked app the fork server has reaped, the figure it reported at the exit."""
     seconds = cpu_seconds(process.pid)
-    if seconds is None and isinstance(process, ForkedApp) and process.poll() is not None:
+    if seconds is None and isinstance(process, ForkedApp):
+        # Reaped by the server, whose report of the exit (with the figure) may still be on its way.
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            process.wait(timeout=EXIT_REPORT_WAIT)
         seconds = process.cpu
     return seconds
 
