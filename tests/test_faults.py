@@ -61,6 +61,7 @@ def test_killed_app_is_reported_and_the_log_is_closed(launches, community):
     code, summary, err = finish(process)
     assert code != 0
     assert "app sim-1 exited with code -9 at step" in err
+    assert f"(its output: {log_path(summary).parent / 'sim-1.out'})" in err  # where to look
     assert summary["outcome"] == "error" and summary["failed_app"] == "sim-1"
     contents = read_log(log_path(summary))
     assert not contents.recovered and contents.metadata["outcome"]["outcome"] == "error"

@@ -37,6 +37,10 @@ class Child:
     output: Path
     retiring: bool = False
 
+    def exited(self, when: str) -> str:
+        """The line that says it left (`when`: "at step N", "during start-up") and where its output is."""
+        return f"app {self.instance} exited with code {self.process.returncode} {when} (its output: {self.output})"
+
     def tail(self, lines: int = 12) -> str:
         try:
             text = self.output.read_text(errors="replace").splitlines()
@@ -161,9 +165,7 @@ class Processes:
                 # 0: it ended the mission since `missing` was read (a sim refusing its
                 # interaction settings at step 0); the supervision reads that end and its reason.
                 if code is not None and code != 0:
-                    raise LaunchError(
-                        f"app {inst} exited with code {child.process.returncode} during start-up\n{child.tail()}", inst
-                    )
+                    raise LaunchError(f"{child.exited('during start-up')}\n{child.tail()}", inst)
             if time.monotonic() > deadline:
                 raise LaunchError(f"apps did not come up within {timeout:g} s: {', '.join(missing)}")
             if interrupted():

@@ -203,14 +203,15 @@ class Launcher:
         if self.summary.outcome in NORMAL_OUTCOMES or self.summary.failed_app:
             return
         processes = self.processes
+        at_step = f"at step {self.summary.steps}"
         if processes.router_lost():
-            culprit, code = "router", processes.router.returncode
+            culprit, line = "router", f"app router exited with code {processes.router.returncode} {at_step}"
         else:
             dead = processes.killed()
             if not dead:
                 return
-            culprit, code = dead[0].instance, dead[0].process.returncode
-        line = self.with_disk(f"app {culprit} exited with code {code} at step {self.summary.steps}")
+            culprit, line = dead[0].instance, dead[0].exited(at_step)
+        line = self.with_disk(line)
         print(f"nearsub launch: {line}", file=sys.stderr, flush=True)
         self.summary.failed_app = culprit
         self.summary.reason = f"{line}; {self.summary.reason}" if self.summary.reason else line
@@ -240,7 +241,7 @@ class Launcher:
             if processes.router_lost():
                 return self.check_processes()
             step = "unknown (the clock is gone)" if child.role == "clock" else self.current_step()
-            text = f"app {child.instance} exited with code {code} at step {step}\n{child.tail()}"
+            text = f"{child.exited(f'at step {step}')}\n{child.tail()}"
             raise LaunchError(text, child.instance)
         return False
 
