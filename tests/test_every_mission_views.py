@@ -65,6 +65,8 @@ def test_the_live_map_draws_every_vehicle(run):
     assert sorted(scene["starts"]) == sorted(names)
     assert len(scene["legs"]) == sum(len(m.apps.helm.legs) for m in mission.members())
     assert scene["force_reference"] > 0
+    if mission.fleet and mission.environment.submarine:  # each vehicle's own band, by name
+        assert all(f"{name}: " in scene["band"]["note"] for name in names)
     model = SceneModel.for_mission(mission)
     for record in read_log(path).records:
         feed_payload(model, record.topic, record.data)
