@@ -240,6 +240,11 @@ def seek(chromium, t: float) -> None:
     chromium.evaluate(f"{{ const s = document.getElementById('scrub'); s.value = {t}; s.oninput(); }}")
 
 
+def readout(chromium) -> list[str]:
+    """The page's readout of the selected vehicle: its name, x and y as shown."""
+    return chromium.evaluate("['readout-of', 'r-x', 'r-y'].map((id) => document.getElementById(id).textContent)")
+
+
 def test_replay_of_two_vehicles_draws_both_and_selects_either(chromium, viewers, tmp_path):
     from logsample import write_fleet_log
 
@@ -261,8 +266,12 @@ def test_replay_of_two_vehicles_draws_both_and_selects_either(chromium, viewers,
         logged = states[(name, drawn[name]["step"])]
         assert (drawn[name]["x"], drawn[name]["y"], drawn[name]["psi"]) == (logged["x"], logged["y"], logged["psi"])
     assert chromium.evaluate("window.nearsub.drawn.y") == drawn["alfa"]["y"]  # the first is selected
+    assert readout(chromium) == ["alfa", f"{drawn['alfa']['x']:.2f}", f"{drawn['alfa']['y']:.2f}"]
     chromium.evaluate("{ const v = document.getElementById('vehicle'); v.value = 'bravo'; v.onchange(); }")
     assert chromium.evaluate("window.nearsub.drawn.y") == drawn["bravo"]["y"]
+    assert readout(chromium) == ["bravo", f"{drawn['bravo']['x']:.2f}", f"{drawn['bravo']['y']:.2f}"]
+    labels = chromium.evaluate("window.nearsub.labels")  # each drawn with its name
+    assert sorted(labels) == ["alfa", "bravo"] and all(labels[n].startswith(n) for n in labels)
     # bravo's log ends at 5 s: past it, bravo stays at its last state while alfa moves on.
     seek(chromium, 8)
     chromium.wait_for("window.nearsub.drawnAll.alfa.t === 8", timeout=STEP)

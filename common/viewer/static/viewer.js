@@ -1,6 +1,6 @@
 // nearsub view: draws the scene and frames the server pushes over /ws. Plain canvas, no libraries.
 // window.nearsub exposes what was drawn last (tests read it): drawn = {step, t, x, y, psi} of the
-// selected vehicle, and drawnAll = {name: {step, t, x, y, psi}} of every vehicle.
+// selected vehicle, drawnAll = {name: {step, t, x, y, psi}} of every vehicle, labels = {name: its label}.
 "use strict";
 
 const EVENT_STYLE = {
@@ -16,7 +16,7 @@ const VEHICLE_COLOURS = [["#ff5c5c", "#ffd23f"], ["#4dd2ff", "#9be7ff"], ["#5cff
   ["#c77dff", "#e2c2ff"], ["#ffa31a", "#ffd08a"]];
 
 const state = {
-  scene: null, frame: null, drawn: null, drawnAll: {}, history: [], replies: [], selected: null,
+  scene: null, frame: null, drawn: null, drawnAll: {}, labels: {}, history: [], replies: [], selected: null,
   view: { cx: 0, cy: 0, scale: 4 }, follow: false, fitted: false, socket: null,
 };
 window.nearsub = state;
@@ -146,6 +146,12 @@ function updatePanel(frame) {
   } else {
     label.textContent = s.paused === false ? "running" : "live"; label.className = "running";
   }
+  const v = chosen ? chosen.vehicle : frame.vehicle;  // pMarineViewer's readout of the selected vehicle
+  $("readout-of").textContent = v ? v.name : "";
+  $("r-x").textContent = v ? fmt(v.x, 2) : "-";
+  $("r-y").textContent = v ? fmt(v.y, 2) : "-";
+  $("r-heading").textContent = v ? fmt(v.heading_deg, 1) : "-";
+  $("r-speed").textContent = v ? fmt(v.speed, 2) : "-";
   const f = chosen ? chosen.forces : frame.forces;
   $("forces-of").textContent = several && chosen ? `of ${chosen.name}` : "";
   $("f-x").textContent = f ? fmt(f.X_s, 1) : "-";
@@ -288,7 +294,7 @@ function draw() {
       path(item.trail, false);
       ctx.strokeStyle = trailColour; ctx.lineWidth = 1.8; ctx.stroke();
     }
-    if (item.vehicle) drawVehicle(item.vehicle, item.forces, scene, bodyColour, all.length > 1, item === followed);
+    if (item.vehicle) drawVehicle(item.vehicle, item.forces, scene, bodyColour, item === followed);
   });
   for (const e of frame.events) {  // on top of the UUV: a collision marks where it is
     const style = EVENT_STYLE[e.kind];
@@ -302,7 +308,7 @@ function draw() {
   drawLegend(w);
 }
 
-function drawVehicle(v, forces, scene, colour, labelled, selected) {
+function drawVehicle(v, forces, scene, colour, selected) {
   // Below 16 px the outline is magnified about its centre (as pMarineViewer's vehicle scale).
   const length = (v.length || scene.vehicle.length) * state.view.scale;
   const magnify = length < 16 ? 16 / length : 1;
@@ -316,11 +322,11 @@ function drawVehicle(v, forces, scene, colour, labelled, selected) {
   ctx.closePath();
   ctx.fillStyle = colour; ctx.fill();
   ctx.strokeStyle = "#1a1a1a"; ctx.lineWidth = 1; ctx.stroke();
-  if (magnify > 1) { ctx.fillStyle = colour; ctx.font = "10px system-ui"; ctx.fillText(`x${magnify.toFixed(0)}`, cx + 10, cy + 14); }
-  if (labelled) {  // several vehicles: each one's name beside it (as pMarineViewer's vehicle labels)
-    ctx.fillStyle = colour; ctx.font = selected ? "bold 12px system-ui" : "12px system-ui";
-    ctx.fillText(v.name, cx + 10, cy - 8);
-  }
+  // Each vehicle's name beside it (pMarineViewer's vehicle labels), marked when drawn magnified.
+  const label = magnify > 1 ? `${v.name} (not to scale)` : v.name;
+  ctx.fillStyle = colour; ctx.font = selected ? "bold 12px system-ui" : "12px system-ui";
+  ctx.fillText(label, cx + 10, cy - 8);
+  state.labels[v.name] = label;
   if (forces && forces.arrow) {
     const [[x0, y0], [x1, y1]] = forces.arrow;
     const [ax, ay] = toScreen(x0, y0), [bx, by] = toScreen(x1, y1);
