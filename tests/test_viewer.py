@@ -163,6 +163,8 @@ def test_live_view_follows_the_state_topic_pauses_resumes_and_swaps_from_the_pag
 
     launch.send_signal(signal.SIGINT)
     code, summary, _ = finish(launch, timeout=STARTUP + STEP)
+    ended = "['pause', 'resume', 'warp-set', 'swap'].every((id) => document.getElementById(id).disabled)"
+    chromium.wait_for(f"window.nearsub.frame.status.outcome !== null && {ended}", timeout=STEP)
     controls = [r for r in read_log(summary["log"]).records if r.topic == f"nearsub/{community}/control/clock"]
     commands = [r.value()["cmd"] for r in controls]
     assert "pause" in commands and "resume" in commands  # the page's actions are in the log

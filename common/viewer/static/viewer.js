@@ -141,6 +141,7 @@ function updatePanel(frame) {
     $("cursor").textContent = `${frame.replay.cursor.toFixed(2)} s`;
   } else if (s.outcome) {
     label.textContent = "ended"; label.className = "ended";
+    for (const id of ["pause", "resume", "warp-set", "swap"]) $(id).disabled = true;  // nothing left to steer
   } else if (s.paused) {
     label.textContent = "paused"; label.className = "paused";
   } else {
