@@ -18,6 +18,7 @@ import subprocess
 import sys
 import threading
 import time
+import urllib.parse
 import urllib.request
 from pathlib import Path
 
@@ -278,6 +279,11 @@ def test_replay_of_two_vehicles_draws_both_and_selects_either(chromium, viewers,
     seek(chromium, 8)
     chromium.wait_for("window.nearsub.drawnAll.alfa.t === 8", timeout=STEP)
     assert chromium.evaluate("window.nearsub.drawnAll.bravo.t") == 5
+    # A replay opened at a time (?t=), with its whole duration beside the cursor.
+    page = urllib.parse.urlsplit(viewer.url)
+    chromium.open(page._replace(query=urllib.parse.urlencode([*urllib.parse.parse_qsl(page.query), ("t", 6)])).geturl())
+    chromium.wait_for("window.nearsub.drawnAll.alfa && window.nearsub.drawnAll.alfa.t === 6", timeout=STARTUP)
+    chromium.wait_for("document.getElementById('cursor').textContent === '6.00 / 10.00 s'", timeout=STEP)
 
 
 def test_live_view_follows_every_vehicle_of_a_running_mission(runtime_dir, community, viewers, monkeypatch, tmp_path):

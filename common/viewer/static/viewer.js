@@ -66,6 +66,8 @@ function onScene(scene) {
   if (replay) {
     $("scrub").min = scene.range[0];
     $("scrub").max = scene.range[1];
+    const at = new URLSearchParams(window.location.search).get("t");  // ?t=SECONDS: open the replay there
+    if (at !== null && Number.isFinite(Number(at))) send({ cmd: "seek", t: Number(at) });
   }
   state.fitted = false;
   resize();
@@ -138,7 +140,7 @@ function updatePanel(frame) {
     label.className = frame.replay.playing ? "running" : "";
     $("play").textContent = frame.replay.playing ? "Pause" : "Play";
     if (document.activeElement !== $("scrub")) $("scrub").value = frame.replay.cursor;
-    $("cursor").textContent = `${frame.replay.cursor.toFixed(2)} s`;
+    $("cursor").textContent = `${frame.replay.cursor.toFixed(2)} / ${Number($("scrub").max).toFixed(2)} s`;
   } else if (s.outcome) {
     label.textContent = "ended"; label.className = "ended";
     for (const id of ["pause", "resume", "warp-set", "swap"]) $(id).disabled = true;  // nothing left to steer
