@@ -275,6 +275,8 @@ def test_replay_of_two_vehicles_draws_both_and_selects_either(chromium, viewers,
     assert readout(chromium) == ["bravo", f"{drawn['bravo']['x']:.2f}", f"{drawn['bravo']['y']:.2f}"]
     labels = chromium.evaluate("window.nearsub.labels")  # each drawn with its name
     assert sorted(labels) == ["alfa", "bravo"] and all(labels[n].startswith(n) for n in labels)
+    grid = chromium.evaluate("window.nearsub.gridLabels")  # each grid line says its coordinate
+    assert grid["x"] and grid["y"] and all(float(v) % grid["step"] == 0 for v in grid["x"] + grid["y"])
     # bravo's log ends at 5 s: past it, bravo stays at its last state while alfa moves on.
     seek(chromium, 8)
     chromium.wait_for("window.nearsub.drawnAll.alfa.t === 8", timeout=STEP)

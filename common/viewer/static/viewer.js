@@ -16,7 +16,8 @@ const VEHICLE_COLOURS = [["#ff5c5c", "#ffd23f"], ["#4dd2ff", "#9be7ff"], ["#5cff
   ["#c77dff", "#e2c2ff"], ["#ffa31a", "#ffd08a"]];
 
 const state = {
-  scene: null, frame: null, drawn: null, drawnAll: {}, labels: {}, history: [], replies: [], selected: null,
+  scene: null, frame: null, drawn: null, drawnAll: {}, labels: {}, gridLabels: null, history: [], replies: [],
+  selected: null,
   view: { cx: 0, cy: 0, scale: 4 }, follow: false, fitted: false, socket: null,
 };
 window.nearsub = state;
@@ -373,9 +374,16 @@ function drawGrid(w, h) {
   const [x0, y1] = toWorld(0, 0), [x1, y0] = toWorld(w, h);
   ctx.strokeStyle = "rgba(255,255,255,0.06)"; ctx.lineWidth = 1;
   ctx.beginPath();
-  for (let x = Math.ceil(x0 / step) * step; x <= x1; x += step) { const [px] = toScreen(x, 0); ctx.moveTo(px, 0); ctx.lineTo(px, h); }
-  for (let y = Math.ceil(y0 / step) * step; y <= y1; y += step) { const [, py] = toScreen(0, y); ctx.moveTo(0, py); ctx.lineTo(w, py); }
+  const xs = [], ys = [];
+  for (let x = Math.ceil(x0 / step) * step; x <= x1; x += step) { const [px] = toScreen(x, 0); ctx.moveTo(px, 0); ctx.lineTo(px, h); xs.push(x); }
+  for (let y = Math.ceil(y0 / step) * step; y <= y1; y += step) { const [, py] = toScreen(0, y); ctx.moveTo(0, py); ctx.lineTo(w, py); ys.push(y); }
   ctx.stroke();
+  // Each line's coordinate in metres (x along the bottom edge, y along the left one), as a chart's ticks.
+  const label = (v) => `${Number(v.toPrecision(6))}`;
+  ctx.fillStyle = "rgba(221,230,238,0.55)"; ctx.font = "10px system-ui";
+  for (const x of xs) { const [px] = toScreen(x, 0); ctx.fillText(label(x), px + 3, h - 4); }
+  for (const y of ys) { const [, py] = toScreen(0, y); if (py > 60) ctx.fillText(label(y), 4, py - 3); }
+  state.gridLabels = { x: xs.map(label), y: ys.map(label), step };
 }
 
 function drawScaleBar(w, h) {
