@@ -1,7 +1,8 @@
 """Screenshots of `nearsub view` for docs/viewer: a live overtake near the submarine's stern, the
 replay of its log at the collision, the replay of one envelope cell (its mission written by
-`nearsub envelope --cell-mission`), and the replay of a log of two vehicles (`--fleet` makes only
-that one). Run from the repository: `.venv/bin/python tests/viewer_shots.py [--fleet]`.
+`nearsub envelope --cell-mission`), the replay of a log of two vehicles, and launch_two (two UUVs
+beside the submarine) replayed at its middle (`--fleet` makes only those two). Run from the
+repository: `.venv/bin/python tests/viewer_shots.py [--fleet]`.
 
 The mission pauses itself just before the collision (pause_at_step), so the live picture is the
 same on every run; the page's Resume button then lets it finish and the log is replayed.
@@ -90,6 +91,36 @@ def fleet_shot(out: Path, work: Path) -> None:
             process.wait(timeout=30)
 
 
+def fleet_submarine_shot(out: Path, work: Path) -> None:
+    """launch_two (two UUVs departing from beside the submarine) flown through the launcher and
+    replayed at the middle of its log, opened there with `?t=` and auv2 selected."""
+    done = subprocess.run(
+        [sys.executable, "-m", "nearsub", "launch", "launch_two", "--json", "--log", str(work / "logs")],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    log = json.loads(done.stdout.strip().splitlines()[-1])["log"]
+    replay = nearsub("view", log)
+    try:
+        with Browser(width=1400, height=800) as browser:
+            browser.open(url_of(replay))
+            browser.wait_for("window.nearsub.drawn", 30)
+            middle = sum(browser.evaluate("window.nearsub.scene.range")) / 2
+            browser.open(f"{url_of_page(browser)}?t={middle:.2f}")
+            browser.wait_for(f"window.nearsub.drawn && Math.abs(window.nearsub.drawn.t - {middle:.2f}) < 0.06", 30)
+            browser.evaluate("{ const v = document.getElementById('vehicle'); v.value = 'auv2'; v.onchange(); }")
+            time.sleep(0.3)
+            print(browser.screenshot(out / "replay-fleet-submarine.png"))
+    finally:
+        os.killpg(replay.pid, signal.SIGTERM)
+        replay.wait(timeout=30)
+
+
+def url_of_page(browser: Browser) -> str:
+    return browser.evaluate("window.location.origin + window.location.pathname")
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default=str(ROOT / "docs" / "viewer"))
@@ -101,6 +132,7 @@ def main() -> int:
     sys.path.insert(0, str(ROOT / "tests"))
     if args.fleet:
         fleet_shot(out, work)
+        fleet_submarine_shot(out, work)
         return 0
     launch = subprocess.Popen(
         [sys.executable, "-m", "nearsub", "launch", str(MISSION), "--warp", "0", "--json"]
@@ -144,6 +176,7 @@ def main() -> int:
             time.sleep(0.5)
             print(browser.screenshot(out / "replay-envelope-cell-follow.png"))
         fleet_shot(out, work)
+        fleet_submarine_shot(out, work)
     finally:
         for process in [launch, *viewers]:
             if process.poll() is None:
