@@ -38,6 +38,7 @@ TOOLS = {
     "view": ("view", "live map of a running mission, or replay of a log, in the browser"),
     "foxglove": ("foxglove", "serve a running mission to Foxglove over its WebSocket protocol"),
     "completion": ("completion", "print a shell completion script: bash, zsh or tcsh"),
+    "moos": ("moos", "nearsub in a MOOS-IvP community: the sim as a MOOS app (moos extra)"),
     "lf-field": ("lf_field", "tabulate the LF's submarine field into the file the package ships"),
 }
 

@@ -20,5 +20,6 @@ modules only when it runs.
 - view: the live map of a running mission, or the replay of a log, in the browser.
 - foxglove: a running mission served to Foxglove.
 - completion: shell completion scripts.
+- moos: nearsub in a MOOS-IvP community (the sim as a MOOS app).
 - lf_field: tabulate the low fidelity's submarine field.
 """
