@@ -151,10 +151,10 @@ def test_the_moving_frame_on_the_moos_grid():
 
 def test_node_report_and_view_polygon_read_as_moos_writes_them():
     placement = bridge.Placement((0.0, 0.0), 1.5)
-    report = bridge.submarine_report(20.0, placement, hull.L_SUB)
+    report = bridge.submarine_report(20.0, 1020.0, placement, hull.L_SUB)
     fields = dict(part.split("=", 1) for part in report.split(","))
     assert fields["NAME"] == "submarine" and float(fields["X"]) == pytest.approx(30.0)
-    assert float(fields["HDG"]) == 90.0 and float(fields["SPD"]) == 1.5
+    assert float(fields["HDG"]) == 90.0 and float(fields["SPD"]) == 1.5 and float(fields["TIME"]) == 1020.0
     polygon = bridge.view_polygon([0.0, 10.0, 10.0], [0.0, 0.0, 5.0], 2.0, placement)
     assert polygon.startswith("pts={3.00,0.00:13.00,0.00:13.00,5.00},label=submarine_hull")
 
@@ -205,3 +205,29 @@ def test_a_collision_with_the_submarine_is_posted_and_ends_the_stepping():
     assert "NEARSUB_COLLISION" in found and found["NEARSUB_END"].startswith("collision")
     assert "NEARSUB_CLOSE_CALL" in found or any("close_call" in e for e in sim.events)
     assert sim.advance(120.0) == []
+
+
+def test_a_running_mission_as_pmarineviewer_sees_it():
+    from pathlib import Path
+
+    from nearsub.common.mission.schema import load_mission
+    from nearsub.common.moos.watch import MissionWatch
+
+    mission = load_mission(Path(__file__).parent.parent / "missions" / "overtake_stern_nuv.toml")
+    watch = MissionWatch(mission, clock=lambda: 5000.0)
+    name = mission.vehicle_name
+    state = {"t": 10.0, "step": 200, "u": 1.75, "v": 0.0, "r": 0.0, "x": -42.5, "y": 5.89, "psi": 0.0}
+    (variable, report), *rest = watch.translate(f"nearsub/{mission.name}/{name}/state", state)
+    assert variable == "NODE_REPORT" and rest == []
+    fields = dict(part.split("=", 1) for part in report.split(","))
+    assert fields["NAME"] == name and float(fields["X"]) == pytest.approx(-42.5 + 15.0)  # u_sub 1.5 for 10 s
+    assert float(fields["HDG"]) == 90.0 and float(fields["TIME"]) == 5000.0
+    scene = dict(watch.scene())
+    assert scene["NODE_REPORT"].startswith("NAME=submarine,X=15.00,Y=0.00")
+    assert scene["VIEW_SEGLIST"] == "pts={-45.00,5.89:15.00,5.89},label=" + name + "_track,edge_color=white"
+    assert scene["VIEW_POINT"] == f"x=15.00,y=5.89,label={name}_wpt1,vertex_size=4"
+    assert watch.translate(f"nearsub/{mission.name}/{name}/state/@every5", state) == []
+    assert watch.translate(f"nearsub/{mission.name}/{name}/state", state | {"t": 10.2}) == []  # within 0.25 s
+    assert len(watch.translate(f"nearsub/{mission.name}/{name}/state", state | {"t": 10.25})) == 1
+    event = {"t": 10.0, "kind": "close_call", "detail": "close call at (1, 2)"}
+    assert dict(watch.translate(f"nearsub/{mission.name}/events/sim", event))["NEARSUB_CLOSE_CALL"] == event["detail"]

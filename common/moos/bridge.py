@@ -25,6 +25,7 @@ from nearsub.common.moos.config import Datum
 
 EARTH_RADIUS = 6378137.0  # WGS-84 equatorial radius [m] (NIMA TR8350.2, 2000, table 3.1)
 
+HULL_STATIONS = 40  # per side of the hull's VIEW_POLYGON: its outline to a few centimetres, a short post
 ACTUATOR_VARIABLES = ("DESIRED_THRUST", "DESIRED_RUDDER", "DESIRED_ELEVATOR")
 
 
@@ -128,10 +129,11 @@ def node_report(
     return text + (f",COLOR={color}" if color else "")
 
 
-def submarine_report(t: float, placement: Placement, length: float) -> str:
-    """The submarine as a contact: its CB, heading east (90), at u_sub."""
+def submarine_report(t: float, moos_time: float, placement: Placement, length: float) -> str:
+    """The submarine as a contact at sim time t, stamped `moos_time`: its CB, heading east (90),
+    at u_sub."""
     x, y = placement.to_moos(0.0, 0.0, t)
-    return node_report("submarine", x, y, 90.0, placement.u_sub, t, "ship", length, "gray")
+    return node_report("submarine", x, y, 90.0, placement.u_sub, moos_time, "ship", length, "gray")
 
 
 def view_polygon(xs, ys, t: float, placement: Placement, label: str = "submarine_hull") -> str:
@@ -153,12 +155,12 @@ def forces_variables(forces) -> dict:
     }
 
 
-def event_variables(event) -> dict:
-    """A sim event as MOOS variables: NEARSUB_EVENT always, and NEARSUB_CLOSE_CALL or
+def event_variables(kind: str, detail: str) -> dict:
+    """An event as MOOS variables: NEARSUB_EVENT always, and NEARSUB_CLOSE_CALL or
     NEARSUB_COLLISION for the proximity events (their detail text)."""
-    out = {"NEARSUB_EVENT": f"kind={event.kind},detail={event.detail}"}
-    if event.kind in ("close_call", "collision"):
-        out[f"NEARSUB_{event.kind.upper()}"] = event.detail
+    out = {"NEARSUB_EVENT": f"kind={kind},detail={detail}"}
+    if kind in ("close_call", "collision"):
+        out[f"NEARSUB_{kind.upper()}"] = detail
     return out
 
 

@@ -21,7 +21,6 @@ BASE_MISSION = {
     "environment": {"submarine": False},
     "apps": {"helm": {"legs": [{"points": [[0.0, 0.0]], "speed": 1.0}]}},
 }
-HULL_STATIONS = 40  # per side of the VIEW_POLYGON: the outline to a few centimetres, a short post
 
 
 def sim_mission(config: SimConfig) -> Mission:
@@ -61,7 +60,7 @@ class MoosSim:
         self.clock = bridge.MoosClock(t0, mission.dt * self.period)
         self.submarine = mission.environment.submarine
         self.placement = bridge.Placement(config.submarine_pos, mission.environment.u_sub)
-        self.outline = hull.submarine_outline(HULL_STATIONS) if self.submarine else None
+        self.outline = hull.submarine_outline(bridge.HULL_STATIONS) if self.submarine else None
         self.actuators = bridge.Actuators()
         self.steps = 0  # sim steps run (each `period` base steps)
         self.events: list[str] = []
@@ -101,7 +100,7 @@ class MoosSim:
                     self.take(leaf, message)
             for found in result.events:
                 self.events.append(f"t={found.t:.2f} {found.kind}: {found.detail}")
-                posts += bridge.event_variables(found).items()
+                posts += bridge.event_variables(found.kind, found.detail).items()
             if result.end is not None:
                 self.end = result.reason
                 posts.append(("NEARSUB_END", result.reason))
@@ -115,8 +114,8 @@ class MoosSim:
         if self.forces is not None:
             posts += bridge.forces_variables(self.forces).items()
         if self.submarine:
-            moos_t = self.clock.t0 + t
-            posts.append(("NODE_REPORT", bridge.submarine_report(moos_t, self.placement, hull.L_SUB)))
+            moos_time = self.clock.t0 + t
+            posts.append(("NODE_REPORT", bridge.submarine_report(t, moos_time, self.placement, hull.L_SUB)))
             posts.append(("VIEW_POLYGON", bridge.view_polygon(*self.outline, t, self.placement)))
         return posts
 

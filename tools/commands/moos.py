@@ -1,6 +1,7 @@
 """`nearsub moos sim FILE.moos [NAME]`: nearsub's sim in a MOOS community, as uSimMarineV22
 (docs/moos.md). pAntler starts it with `InhibitMOOSParams = true` and the arguments in
-`ExtraProcessParams` (missions/moos/). Needs the `moos` extra (pymoos2, the MOOSDB client)."""
+`ExtraProcessParams` (missions/moos/). `nearsub moos watch MISSION_NAME --db HOST:PORT`: a running
+nearsub mission posted to a MOOSDB, for pMarineViewer. Both need the `moos` extra (pymoos2)."""
 
 from __future__ import annotations
 
@@ -14,6 +15,14 @@ def add_parser(subparsers) -> None:
     sim.add_argument("moos_file", help="the community's .moos file, with a ProcessConfig block for the sim")
     sim.add_argument("name", nargs="?", default="nearsub_sim", help="its MOOS name and ProcessConfig block")
     sim.set_defaults(func=sim_command)
+    watch = sub.add_parser("watch", help="post a running nearsub mission to a MOOSDB for pMarineViewer")
+    watch.add_argument("community", metavar="MISSION_NAME", help="a running mission's name")
+    watch.add_argument(
+        "--db", default="localhost:9000", metavar="HOST:PORT", help="the MOOSDB (default localhost:9000)"
+    )
+    watch.add_argument("--connect", action="append", metavar="ENDPOINT", help="router endpoint instead of the registry")
+    watch.add_argument("--run", metavar="RUN.json", help="the launcher's run file instead of the registry")
+    watch.set_defaults(func=watch_command)
 
 
 def sim_command(args) -> int:
@@ -39,3 +48,76 @@ def sim_command(args) -> int:
     except AppError as exc:
         print(f"nearsub moos sim: {exc}", file=sys.stderr)
         return exc.code
+
+
+REPUBLISH = 2.0  # wall seconds between posts of what moves with the submarine (hull, waypoints)
+
+
+def db_address(text: str) -> tuple[str, int]:
+    from ..support.errors import InputError
+
+    host, _, port = text.rpartition(":")
+    if not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise InputError(f"--db {text}: expected HOST:PORT")
+    return host, int(port)
+
+
+def watch_command(args) -> int:
+    from nearsub.apps.moos_sim import CONNECT_TIMEOUT, missing_client
+    from nearsub.common.runtime.bus import Bus, Endpoints
+
+    from ..support.errors import InputError
+    from .view import mission_endpoints
+
+    if problem := missing_client():
+        print(f"nearsub moos: {problem}", file=sys.stderr)
+        return 2
+    host, port = db_address(args.db)
+    endpoints, mission, _, credentials = mission_endpoints(args.community, args.connect, args.run)
+    if mission is None:
+        raise InputError(f"{args.community}: its mission is unknown with --connect alone; give --run RUN.json")
+    from pymoos2.core.MOOSCommClient import MOOSCommClient
+
+    client = MOOSCommClient(host, port, app_name="nearsub_watch", comm_tick=20.0)
+    client.start()
+    try:
+        if not client.wait_until_connected(CONNECT_TIMEOUT):
+            print(f"nearsub moos watch: no MOOSDB at {host}:{port} after {CONNECT_TIMEOUT:g} s", file=sys.stderr)
+            return 1
+        with Bus(Endpoints("client", endpoints, credentials=credentials)) as bus:
+            follow(bus, args.community, mission, client)
+    except KeyboardInterrupt:  # the way to stop it
+        pass
+    finally:
+        client.stop()
+    return 0
+
+
+def follow(bus, community: str, mission, client) -> None:
+    """Post the mission's messages as they come (lossy: a slow MOOSDB never slows the mission)."""
+    import time
+
+    from nearsub.common.moos.watch import MissionWatch
+    from nearsub.common.runtime import keys
+    from nearsub.logs import decode_payload
+
+    watch, last_scene = MissionWatch(mission), -REPUBLISH
+    stream = bus.stream(keys.everything(community), lossy=True)
+    while client.is_connected:
+        item = stream.try_recv()
+        if item is None:
+            time.sleep(0.02)
+        else:
+            key, payload = item
+            try:
+                fields = decode_payload(payload)
+            except ValueError:
+                continue
+            if isinstance(fields, dict):
+                for variable, value in watch.translate(key, fields):
+                    client.notify(variable, value)
+        if time.monotonic() - last_scene >= REPUBLISH:
+            last_scene = time.monotonic()
+            for variable, value in watch.scene():
+                client.notify(variable, value)
+    print("nearsub moos watch: lost the MOOSDB", file=sys.stderr)
