@@ -62,6 +62,7 @@ def loop(client, sim: MoosSim, config: SimConfig, name: str) -> int:
             elapsed = max(time.monotonic() - wall_start, 1e-9)
             achieved = iteration / (elapsed * config.time_warp)  # per second of MOOS time
             status = sim.status() | {
+                "behind MOOS time": f"{sim.lag(now):.2f} s",
                 "AppTick asked, achieved": f"{config.app_tick:g}, {achieved:.1f}",
                 "steps per wall second": f"{(sim.steps - steps_start) / elapsed:.0f}",
             }

@@ -192,6 +192,7 @@ def test_the_moos_sim_flies_the_missions_own_sim_core_to_the_same_bits():
     # a positive rudder turns the bow clockwise: the heading grew from 180
     assert 180.0 < posts["NAV_HEADING"] < 360.0
     assert sim.advance(5000.0 + 30.0) == []  # no step due: nothing new
+    assert sim.lag(5000.0 + 30.0) == 0.0 and sim.lag(5000.0 + 31.5) == pytest.approx(1.5)
 
 
 def test_a_collision_with_the_submarine_is_posted_and_ends_the_stepping():

@@ -119,6 +119,11 @@ class MoosSim:
             posts.append(("VIEW_POLYGON", bridge.view_polygon(*self.outline, t, self.placement)))
         return posts
 
+    def lag(self, moos_now: float) -> float:
+        """How far the state is behind MOOS time [s]: below one step while the CPU keeps up with
+        the warp (0 once the stepping has ended)."""
+        return 0.0 if self.end is not None else max(0.0, moos_now - self.clock.t0 - self.state.t)
+
     def status(self) -> dict:
         s, f = self.state, self.forces
         return {
