@@ -113,45 +113,44 @@ def test_the_sim_against_the_real_moosdb_flies_and_leaves_when_the_db_goes(tmp_p
     assert sim.returncode == 1 and "lost the MOOSDB at localhost" in err and err.count("\n") == 1, err
 
 
-def fly_alpha(folder: Path, sim: str) -> tuple[np.ndarray, bool]:
-    """missions/moos/alpha at ALPHA_WARP on a free port, with `sim` ("nearsub" or "uSimMarineV22")
-    launched by pAntler: the NAV_X, NAV_Y track and whether MISSION = complete was posted."""
+def fly(folder: Path, name: str, sim: str, duration: float) -> tuple[np.ndarray, dict]:
+    """missions/moos/NAME.moos + .bhv at ALPHA_WARP on a free port, with `sim` ("nearsub" or
+    "uSimMarineV22") launched by pAntler, until MISSION = complete, NEARSUB_END or `duration`
+    simulated seconds: the NAV_X, NAV_Y track and the last value of every variable watched."""
     folder.mkdir()
     port = free_port()
-    text = (MOOS_MISSIONS / "alpha.moos").read_text()
+    text = (MOOS_MISSIONS / f"{name}.moos").read_text()
     text = re.sub(r"ServerPort *= *\d+", f"ServerPort = {port}", text)
     text = re.sub(r"MOOSTimeWarp *= *[\d.]+", f"MOOSTimeWarp = {ALPHA_WARP:g}", text)
+    text = text.replace("mission   = ../", f"mission   = {MOOS_MISSIONS.parent}/")
     if sim == "uSimMarineV22":
-        text = text.replace("  Run = nearsub ", "  //Run = nearsub ").replace(
-            "  //Run = uSimMarineV22", "  Run = uSimMarineV22"
-        )
-    (folder / "alpha.moos").write_text(text)
-    shutil.copy(MOOS_MISSIONS / "alpha.bhv", folder / "alpha.bhv")
+        text = text.replace("  Run = nearsub ", "  //Run = nearsub ")
+        text = text.replace("  //Run = uSimMarineV22", "  Run = uSimMarineV22")
+    (folder / f"{name}.moos").write_text(text)
+    shutil.copy(MOOS_MISSIONS / f"{name}.bhv", folder / f"{name}.bhv")
     env = os.environ | {"PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}"}
     antler = subprocess.Popen(
-        ["pAntler", "alpha.moos"],
+        ["pAntler", f"{name}.moos"],
         cwd=folder,
         env=env,
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
         start_new_session=True,
     )
-    track, complete, probe = [], False, None
+    track, last, probe = [], {}, None
     try:
         time.sleep(1.0)  # pAntler starts the MOOSDB first
         probe = client(port, ALPHA_WARP)
-        for variable in ("NAV_X", "NAV_Y", "MISSION"):
+        for variable in ("NAV_X", "NAV_Y", "MISSION", "NEARSUB_END", "NEARSUB_COLLISION", "NEARSUB_CLOSE_CALL"):
             probe.register(variable)
-        x = None
-        deadline = time.monotonic() + WAIT + ALPHA_DURATION / ALPHA_WARP
-        while not complete and time.monotonic() < deadline and antler.poll() is None:
+        deadline = time.monotonic() + WAIT + duration / ALPHA_WARP
+        while time.monotonic() < deadline and antler.poll() is None:
             for message in probe.fetch():
-                if message.key == "NAV_X":
-                    x = message.val
-                elif message.key == "NAV_Y" and x is not None:
-                    track.append((x, message.val))
-                elif message.key == "MISSION":
-                    complete = message.string() == "complete"
+                last[message.key] = message.val if message.is_double() else message.string()
+                if message.key == "NAV_Y" and "NAV_X" in last:
+                    track.append((last["NAV_X"], message.val))
+            if last.get("MISSION") == "complete" or "NEARSUB_END" in last:
+                break
             time.sleep(0.02)
     finally:
         if probe is not None:
@@ -162,7 +161,7 @@ def fly_alpha(folder: Path, sim: str) -> tuple[np.ndarray, bool]:
         except subprocess.TimeoutExpired:
             os.killpg(antler.pid, signal.SIGKILL)
             antler.wait()
-    return np.array(track), complete
+    return np.array(track), last
 
 
 def distances_to_path(points: np.ndarray, path: np.ndarray) -> np.ndarray:
@@ -177,10 +176,10 @@ def distances_to_path(points: np.ndarray, path: np.ndarray) -> np.ndarray:
 
 def test_moos_ivps_alpha_completes_with_nearsubs_sim_and_its_path_is_compared_with_usimmarine(tmp_path):
     need(*ALPHA_APPS)
-    ours, ours_complete = fly_alpha(tmp_path / "nearsub", "nearsub")
-    theirs, theirs_complete = fly_alpha(tmp_path / "usim", "uSimMarineV22")
-    assert theirs_complete, "uSimMarineV22's alpha did not complete: the MOOS side is broken"
-    assert ours_complete, f"alpha with nearsub's sim did not complete; last position {ours[-1] if len(ours) else None}"
+    ours, ours_last = fly(tmp_path / "nearsub", "alpha", "nearsub", ALPHA_DURATION)
+    theirs, theirs_last = fly(tmp_path / "usim", "alpha", "uSimMarineV22", ALPHA_DURATION)
+    assert theirs_last.get("MISSION") == "complete", "uSimMarineV22's alpha did not complete: the MOOS side is broken"
+    assert ours_last.get("MISSION") == "complete", f"nearsub's alpha did not complete: {ours_last}"
     distance = distances_to_path(ours, theirs)
     print(
         f"alpha, nearsub's sim against uSimMarineV22's path: mean {distance.mean():.2f} m, max {distance.max():.2f} m"
@@ -188,3 +187,22 @@ def test_moos_ivps_alpha_completes_with_nearsubs_sim_and_its_path_is_compared_wi
     # Different vehicles (the REMUS 100's dynamics, rudder limited to 15 deg, against a kinematic
     # model turning at up to 95 deg/s): they differ in the turns, not in the survey they fly.
     assert distance.max() < 25.0 and distance.mean() < 5.0, (distance.mean(), distance.max())
+
+
+def test_the_moos_stern_overtake_ends_as_the_nearsub_mission_does(tmp_path):
+    """missions/moos/overtake (pHelmIvP, pMarinePIDV22) against missions/overtake_stern_standard.toml
+    (nearsub's helm and pid, in process): both collide near the stern. The autonomy differs (MOOS's
+    waypoint behaviour and PID against nearsub's), so the tolerance is on where, not when."""
+    need(*ALPHA_APPS)
+    from nearsub.common.mission.cores import run_mission
+    from nearsub.common.mission.schema import load_mission
+
+    reference = run_mission(load_mission(MOOS_MISSIONS.parent / "overtake_stern_standard.toml"))
+    collision = next(m for _, _, m in reference.messages if getattr(m, "kind", None) == "collision")
+    _, last = fly(tmp_path / "overtake", "overtake", "nearsub", 400.0)
+    assert "NEARSUB_COLLISION" in last, f"no collision in MOOS: {last}"
+    where = re.search(r"\(([-\d.]+), ([-\d.]+)\)", last["NEARSUB_COLLISION"]).groups()
+    x_moos, y_moos = (float(v) for v in where)
+    theirs = f"({collision.data['x']:.2f}, {collision.data['y']:.2f}) at t = {collision.t:.2f} s"
+    print(f"stern overtake: MOOS {last['NEARSUB_COLLISION']} ({last['NEARSUB_END']}); nearsub's mission {theirs}")
+    assert abs(x_moos - collision.data["x"]) < 15.0 and abs(y_moos - collision.data["y"]) < 2.0
