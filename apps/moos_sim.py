@@ -43,8 +43,8 @@ def loop(client, sim: MoosSim, config: SimConfig, name: str) -> int:
     from pymoos2.core import time as moos_clock
 
     post(client, sim.report())
-    iteration, next_appcast, tick = 0, 0.0, 1.0 / config.app_tick
-    wall_start, steps_start = time.monotonic(), sim.steps
+    iteration, elapsed, next_appcast, tick = 0, 1e-9, 0.0, 1.0 / config.app_tick
+    wall_start = time.monotonic()
     while True:
         if not client.is_connected:
             raise AppError(
@@ -57,20 +57,20 @@ def loop(client, sim: MoosSim, config: SimConfig, name: str) -> int:
                 sim.receive(message.key, message.val if message.is_double() else message.string())
         now = moos_clock.moos_time()
         post(client, sim.advance(now))
-        iteration += 1
+        if sim.end is None:  # the rates are those of the stepping, not of the idling after its end
+            iteration, elapsed = iteration + 1, max(time.monotonic() - wall_start, 1e-9)
         if now >= next_appcast:
-            elapsed = max(time.monotonic() - wall_start, 1e-9)
             achieved = iteration / (elapsed * config.time_warp)  # per second of MOOS time
             status = sim.status() | {
                 "behind MOOS time": f"{sim.lag(now):.2f} s",
                 "AppTick asked, achieved": f"{config.app_tick:g}, {achieved:.1f}",
-                "steps per wall second": f"{(sim.steps - steps_start) / elapsed:.0f}",
+                "steps per wall second": f"{sim.steps / elapsed:.0f}",
             }
             warnings = {f"malformed {key} ignored": count for key, count in sim.actuators.malformed.items()}
             appcast = bridge.appcast(name, config.community, iteration, status, sim.events, warnings)
             client.notify("APPCAST", appcast)
             next_appcast = now + APPCAST_PERIOD
-        moos_clock.moos_pause(tick * 1000.0)
+        moos_clock.moos_pause(max(0.0, now + tick - moos_clock.moos_time()) * 1000.0)  # the rest of the tick
 
 
 def post(client, posts) -> None:
