@@ -178,3 +178,43 @@ def test_without_the_extra_moos_is_one_line_saying_what_to_install(tmp_path, mon
 
     assert main(["moos", "sim", moos_file(tmp_path, 9)]) == 2
     assert capsys.readouterr().err == "nearsub moos: MOOS support needs its extra: pip install 'nearsub[moos]'\n"
+
+
+def test_moos_watch_posts_a_launched_missions_vehicle_waypoints_and_track(launches, community, tmp_path):
+    """`nearsub moos watch` follows a launched alpha (by its run file) and posts what pMarineViewer
+    draws: the vehicle's NODE_REPORT, the waypoints and the track; it leaves when the DB goes."""
+    import os
+    import signal
+    from pathlib import Path
+
+    from conftest import ALPHA
+    from helpers import wait_registered
+    from nearsub.common.mission.schema import load_mission
+
+    mission = load_mission(ALPHA)
+    startup, step = mission.startup_timeout, mission.step_timeout
+    launches.start(ALPHA, "--set", f"name={community}", "--warp", "5", "--until", "300")
+    entry = wait_registered(community, timeout=2 * startup + step)
+    db = StandInDB()
+    run = str(Path(entry["log"]).parent / "run.json")
+    argv = [sys.executable, "-m", "nearsub", "moos", "watch", community, "--run", run, "--db", f"127.0.0.1:{db.port}"]
+    watch = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, process_group=0)
+    try:
+        deadline = time.monotonic() + 2 * startup
+        while db.latest("NODE_REPORT") is None or "NAME=remus100" not in db.latest("NODE_REPORT").sval:
+            assert time.monotonic() < deadline, f"no NODE_REPORT within {2 * startup:g} s"
+            assert watch.poll() is None, watch.communicate()
+            time.sleep(0.05)
+        report = dict(part.split("=", 1) for part in db.latest("NODE_REPORT").sval.split(","))
+        assert report["TYPE"] == "uuv" and float(report["LENGTH"]) == mission.vehicle_model.length
+        assert abs(float(report["TIME"]) - time.time()) < 60  # MOOS time at warp 1: the wall clock
+        seglist = db.latest("VIEW_SEGLIST").sval
+        assert seglist.startswith("pts={0.00,-20.00:60.00,-40.00:") and "label=remus100_track" in seglist
+        assert db.latest("VIEW_POINT").sval.startswith("x=")
+        db.close()
+        _, err = watch.communicate(timeout=2 * step)
+    finally:
+        if watch.poll() is None:
+            os.killpg(watch.pid, signal.SIGKILL)
+            watch.wait()
+    assert watch.returncode == 1 and err == "nearsub moos watch: lost the MOOSDB\n"

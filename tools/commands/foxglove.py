@@ -106,10 +106,9 @@ def serve_mission(bus, community: str, mission, port: int, ready) -> None:
     The subscription is lossy: a slow Foxglove client never slows the mission down."""
     import foxglove
 
-    from nearsub.common.runtime import keys
     from nearsub.common.viewer.foxglove import FoxgloveScene
-    from nearsub.logs import decode_payload
 
+    from ..support.connect import mission_messages
     from ..support.errors import InputError
 
     context = foxglove.Context()
@@ -118,23 +117,13 @@ def serve_mission(bus, community: str, mission, port: int, ready) -> None:
     except RuntimeError as exc:  # foxglove-sdk's error: the port cannot be bound
         raise InputError(f"--port {port}: cannot serve on 127.0.0.1 ({exc})") from None
     try:
-        stream = bus.stream(keys.everything(community), lossy=True)
         channels = _Channels(context)
         scene: FoxgloveScene | None = None
         sim_time, last_static = 0.0, 0.0
         ready(f"ws://127.0.0.1:{server.port}")
-        while True:
-            item = stream.try_recv()
-            if item is None:
-                time.sleep(0.02)
-            else:
-                key, payload = item
-                try:
-                    fields = decode_payload(payload)
-                except ValueError:
-                    continue
-                if not isinstance(fields, dict):
-                    continue
+        for item in mission_messages(bus, community):
+            if item is not None:
+                key, fields = item
                 sim_time = max(sim_time, float(fields.get("t", 0.0) or 0.0))
                 if scene is None:  # simulated time 0 on the epoch: now, less what has run
                     scene = FoxgloveScene(mission, time.time_ns() - round(sim_time * 1e9))

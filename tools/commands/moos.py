@@ -86,38 +86,31 @@ def watch_command(args) -> int:
             return 1
         with Bus(Endpoints("client", endpoints, credentials=credentials)) as bus:
             follow(bus, args.community, mission, client)
+        print("nearsub moos watch: lost the MOOSDB", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:  # the way to stop it
-        pass
+        return 0
     finally:
         client.stop()
-    return 0
 
 
 def follow(bus, community: str, mission, client) -> None:
-    """Post the mission's messages as they come (lossy: a slow MOOSDB never slows the mission)."""
+    """Post the mission's messages as they come (lossy: a slow MOOSDB never slows the mission),
+    until the MOOSDB goes."""
     import time
 
     from nearsub.common.moos.watch import MissionWatch
-    from nearsub.common.runtime import keys
-    from nearsub.logs import decode_payload
+
+    from ..support.connect import mission_messages
 
     watch, last_scene = MissionWatch(mission), -REPUBLISH
-    stream = bus.stream(keys.everything(community), lossy=True)
-    while client.is_connected:
-        item = stream.try_recv()
-        if item is None:
-            time.sleep(0.02)
-        else:
-            key, payload = item
-            try:
-                fields = decode_payload(payload)
-            except ValueError:
-                continue
-            if isinstance(fields, dict):
-                for variable, value in watch.translate(key, fields):
-                    client.notify(variable, value)
+    for item in mission_messages(bus, community):
+        if not client.is_connected:
+            break
+        if item is not None:
+            for variable, value in watch.translate(*item):
+                client.notify(variable, value)
         if time.monotonic() - last_scene >= REPUBLISH:
             last_scene = time.monotonic()
             for variable, value in watch.scene():
                 client.notify(variable, value)
-    print("nearsub moos watch: lost the MOOSDB", file=sys.stderr)

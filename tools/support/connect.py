@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from typing import TYPE_CHECKING
 
 from . import registry
@@ -49,3 +50,26 @@ def open_bus(args, key: str | None = None) -> tuple[Bus, str | None]:
     from nearsub.common.runtime.bus import Bus, Endpoints
 
     return Bus(Endpoints("client", tuple(connect), credentials=credentials)), community
+
+
+def mission_messages(bus: Bus, community: str, idle: float = 0.02):
+    """A running mission's messages as (key, fields) as they come, lossy (a slow consumer never
+    slows the mission down); None after `idle` wall seconds without one, for the caller's periodic
+    work. Payloads that are not a message's fields are skipped."""
+    from nearsub.common.runtime import keys
+    from nearsub.logs import decode_payload
+
+    stream = bus.stream(keys.everything(community), lossy=True)
+    while True:
+        item = stream.try_recv()
+        if item is None:
+            time.sleep(idle)
+            yield None
+            continue
+        key, payload = item
+        try:
+            fields = decode_payload(payload)
+        except ValueError:
+            continue
+        if isinstance(fields, dict):
+            yield key, fields
