@@ -32,6 +32,7 @@ TOOLS = {
     "al-bench": ("al_bench", "NMMF vs myopic MF vs HF-only active learning on thesis benchmarks"),
     "maps": ("maps", "colour maps of thesis figures 4-4 to 4-11 as PNGs"),
     "campaign": ("campaign", "NMMF training with your own CFD as the high fidelity"),
+    "cfd": ("cfd", "RANS CFD on OpenFOAM: SUBOFF validation and two-body cases"),
     "envelope": ("envelope", "safe operating envelopes around the submarine (PNG, CSV, JSON)"),
     "validate": ("validate", "physics validation cases (thesis 5.10) and scenario checks"),
     "bench": ("bench", "benchmarks that print measured figures"),

@@ -1,0 +1,906 @@
+"""RANS high fidelity on OpenFOAM (docs/hydro/rans/README.md): steady incompressible simpleFoam
+with k-omega SST and wall functions, on a blockMesh background refined by snappyHexMesh with
+boundary layers, in the half domain z >= 0 (the plane of both axes is a symmetry plane, thesis
+section 3.3.3.1; a quarter domain for an axisymmetric case at zero drift).
+
+A case is a `CaseSpec`: the bodies (rans_geometry.Body, from the project's hull profiles), the
+stream, the fluid, the mesh level and the near-wall treatment. `write_case` writes the complete
+OpenFOAM case with foamlib; `run_case` meshes and solves it (MPI with `cores` > 1) and returns a
+`Result`: the forces on every body, X', Y', N' of the measured body nondimensionalised as the rest
+of the project (docs/hydro/README.md, "Conventions"), and the convergence verdict.
+
+Frames: the case frame is the submarine frame (origin at the submarine's CB, x towards the bow);
+the stream is -U x. The measured body sits at (x, y) turned by psi (towards +y: away from the
+submarine), so a single SUBOFF at drift angle psi sees the onset (-cos psi, sin psi) in its body
+axes, exactly as high_fidelity.suboff_drift. Forces are taken in that body's axes, moments about
+its CB.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+import shutil
+import subprocess
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from nearsub.common.hydro.high_fidelity import SUBOFF_TEST_NU, SUBOFF_TEST_SPEED
+from nearsub.common.hydro.low_fidelity import NU, input_columns, ittc57
+from nearsub.common.hydro.rans_geometry import Body, write_stl
+from nearsub.common.physics.hull import D_SUB, L_SUB, FT, SUBOFF_LENGTH_FT, SUBOFF_RMAX_FT
+from nearsub.common.physics.proximity import closest_distance
+from nearsub.common.surrogate.domain import INPUT_NAMES, RHO_SEA
+
+OPENFOAM_DIR = "/usr/share/openfoam"  # Debian's openfoam package (v1912); its etc/bashrc cannot be sourced
+FRESH_WATER_RHO = 997.0  # thesis section 3.2 (tow-tank conditions of tables 3.1, 3.2)
+SUBOFF_MODEL_LENGTH = SUBOFF_LENGTH_FT * FT  # 4.3561 m (Groves, Huang & Chang 1989)
+SUBOFF_MODEL_DIAMETER = 2.0 * SUBOFF_RMAX_FT * FT  # 0.508 m
+# Thesis table 3.1: SUBOFF bare hull at 3.05 m/s, EFD resistance (and the thesis's own CFD).
+TABLE_3_1_EFD_X = -87.4  # [N]
+TABLE_3_1_EFD_XPRIME = -9.95e-4
+TABLE_3_1_CFD_X = -85.6  # [N]
+
+# Inflow turbulence: 1 % intensity and an eddy-viscosity ratio of 10, common towing-tank RANS
+# settings (nearsub's choice; their effect on the forces is not studied here).
+INFLOW_INTENSITY = 0.01
+INFLOW_VISCOSITY_RATIO = 10.0
+# Boundary layers: the first layer from a target y+ (at its cell centre) with u_tau from the
+# ITTC-57 mean friction; 8 layers growing by 1.25 (the thesis grows its prism layers by 1.2,
+# section 3.3.3.3; 1.25 reaches the outer cells with 8 layers).
+LAYERS = 8
+LAYER_EXPANSION = 1.25
+WALL_FUNCTIONS = {"nutk": "nutkWallFunction", "spalding": "nutUSpaldingWallFunction"}
+
+# Convergence verdict: the spread (max - min) of each coefficient over the last 20 % of the
+# iterations must stay within 1 % of its mean or 5e-6, whichever is larger (5e-6 is 4 % of the
+# smallest EFD coefficient of thesis table 3.2, Y' = 1.34e-4 at 2.08 deg).
+SPREAD_WINDOW = 0.2
+SPREAD_RELATIVE = 0.01
+SPREAD_ABSOLUTE = 5e-6
+DIVERGED_COEFFICIENT = 0.1  # |X'|, |Y'| or |N'| above this is no flow round a hull (EFD: about 1e-3)
+
+
+class CaseError(Exception):
+    """A case that cannot be built or run; the text names the cause in one line."""
+
+
+@dataclass(frozen=True)
+class MeshLevel:
+    """Background cells per reference length, and how many refinement levels the measured body's
+    surface gets. The levels are fixed for a geometry and the background spacing is scaled by
+    `scale`, so coarse/medium/fine refine every cell by the same ratio (sqrt 2), as a grid
+    convergence study needs (Celik et al. 2008)."""
+
+    name: str
+    scale: float
+    iterations: int
+
+
+MESH_LEVELS = {
+    "smoke": MeshLevel("smoke", 1.0, 150),  # the coarse background, one surface level less
+    "coarse": MeshLevel("coarse", 1.0, 600),
+    "medium": MeshLevel("medium", math.sqrt(2.0), 800),
+    "fine": MeshLevel("fine", 2.0, 1000),
+}
+SURFACE_CELLS_PER_DIAMETER = 24  # at the coarse level (medium 34, fine 48) on the measured body
+
+
+@dataclass(frozen=True)
+class CaseSpec:
+    """Everything that defines one RANS case. `bodies[0]` is the measured body (the UUV, or the
+    SUBOFF model in the validation)."""
+
+    case_id: str
+    kind: str  # "suboff" or "two-body"
+    bodies: tuple[Body, ...]
+    speed: float  # [m/s], stream -speed x
+    rho: float
+    nu: float
+    level: str = "medium"
+    wall_function: str = "nutk"
+    y_plus: float = 50.0
+    quarter: bool = False  # a second symmetry plane y = 0 (axisymmetric body at zero drift)
+    inputs: tuple[float, ...] | None = None  # the project's row for a two-body case
+    iterations: int | None = None  # default: the level's
+
+    @property
+    def body(self) -> Body:
+        return self.bodies[0]
+
+    @property
+    def mesh_level(self) -> MeshLevel:
+        return MESH_LEVELS[self.level]
+
+    @property
+    def end_iteration(self) -> int:
+        return self.iterations or self.mesh_level.iterations
+
+    def describe(self) -> dict:
+        out = asdict(self)
+        out["bodies"] = [asdict(b) for b in self.bodies]
+        return out
+
+
+def _check_choice(name: str, value: str, choices) -> None:
+    if value not in choices:
+        raise CaseError(f"{name} {value!r}: choose one of {', '.join(choices)}")
+
+
+def _case_suffix(level: str, wall_function: str, y_plus: float) -> str:
+    suffix = f"-{level}"
+    if wall_function != "nutk":
+        suffix += f"-{wall_function}"
+    if y_plus != 50.0:
+        suffix += f"-yp{y_plus:g}"
+    return suffix
+
+
+def suboff_case(psi_deg: float = 0.0, level: str = "medium", wall_function: str = "nutk", y_plus: float = 50.0,
+                iterations: int | None = None) -> CaseSpec:  # fmt: skip
+    """The model-scale SUBOFF bare hull alone at drift angle psi_deg in the tow-tank conditions of
+    thesis tables 3.1/3.2 (3.05 m/s, fresh water, nu = 8.899e-4/997): the validation case."""
+    _check_choice("--level", level, MESH_LEVELS)
+    _check_choice("--wall-function", wall_function, WALL_FUNCTIONS)
+    if not (math.isfinite(psi_deg) and 0.0 <= psi_deg <= 20.0):
+        raise CaseError(f"--psi {psi_deg!r}: the validation covers drift angles 0 to 20 deg")
+    if not (math.isfinite(y_plus) and 1.0 <= y_plus <= 300.0):
+        raise CaseError(f"--y-plus {y_plus!r}: wall functions need a first-cell y+ of about 1 to 300")
+    hull = Body("suboff", "suboff-model", SUBOFF_MODEL_LENGTH, SUBOFF_MODEL_DIAMETER, psi=math.radians(psi_deg))
+    return CaseSpec(
+        case_id=f"suboff-psi{psi_deg:.2f}" + _case_suffix(level, wall_function, y_plus),
+        kind="suboff",
+        bodies=(hull,),
+        speed=SUBOFF_TEST_SPEED,
+        rho=FRESH_WATER_RHO,
+        nu=SUBOFF_TEST_NU,
+        level=level,
+        wall_function=wall_function,
+        y_plus=y_plus,
+        quarter=psi_deg == 0.0,
+        iterations=iterations,
+    )
+
+
+def two_body_case(row, level: str = "medium", wall_function: str = "nutk", y_plus: float = 50.0,
+                  iterations: int | None = None) -> CaseSpec:  # fmt: skip
+    """The full-scale submarine and the Explorer UUV at a configuration row [R_long, R_lat, u_kn,
+    psi_deg, d_ratio, ld_ratio] (thesis table 4.2), in sea water (docs/hydro/README.md)."""
+    _check_choice("--level", level, MESH_LEVELS)
+    _check_choice("--wall-function", wall_function, WALL_FUNCTIONS)
+    row = np.asarray(row, dtype=float).reshape(-1)
+    if row.shape != (len(INPUT_NAMES),) or not np.all(np.isfinite(row)):
+        raise CaseError(f"configuration {row.tolist()}: needs {len(INPUT_NAMES)} finite values {', '.join(INPUT_NAMES)}")
+    x, y, speed, psi, diameter, length = (float(c[0]) for c in input_columns(row[None, :]))
+    if not speed > 0:
+        raise CaseError(f"u_kn {row[2]:g}: the speed must be positive")
+    if y <= 0:
+        raise CaseError(f"R_lat {row[1]:g}: the UUV sits on the +y side of the submarine (R_lat > 0)")
+    if length < 3.0 * diameter:
+        raise CaseError(f"ld_ratio {row[5]:g}: the Explorer hull needs L/D >= 3")
+    clearance = float(closest_distance(x, y, psi, length, diameter))
+    # The mesher needs a few surface cells between the hulls: refuse a gap under a fifth of a UUV
+    # diameter (touching or overlapping hulls included).
+    if clearance < 0.2 * diameter:
+        raise CaseError(
+            f"configuration R_long={row[0]:g} R_lat={row[1]:g} psi={row[3]:g}: hull clearance {clearance:.3f} m is "
+            f"below a fifth of the UUV diameter ({0.2 * diameter:.3f} m): the mesher cannot build it"
+        )
+    uuv = Body("uuv", "explorer", length, diameter, x, y, psi)
+    sub = Body("submarine", "suboff-full", L_SUB, D_SUB)
+    name = "tb-" + "_".join(f"{v:g}" for v in row)
+    return CaseSpec(
+        case_id=name + _case_suffix(level, wall_function, y_plus),
+        kind="two-body",
+        bodies=(uuv, sub),
+        speed=speed,
+        rho=RHO_SEA,
+        nu=NU,
+        level=level,
+        wall_function=wall_function,
+        y_plus=y_plus,
+        inputs=tuple(row.tolist()),
+        iterations=iterations,
+    )
+
+
+# --- the case's numbers ------------------------------------------------------------------------
+
+
+def first_layer_thickness(spec: CaseSpec) -> float:
+    """First boundary-layer cell height [m] for the target y+ at its centre: u_tau from the ITTC-57
+    mean friction coefficient of the measured body, u_tau = U sqrt(C_F / 2)."""
+    cf = float(ittc57(spec.speed * spec.body.length / spec.nu))
+    u_tau = spec.speed * math.sqrt(0.5 * cf)
+    return 2.0 * spec.y_plus * spec.nu / u_tau
+
+
+@dataclass(frozen=True)
+class Domain:
+    lo: np.ndarray
+    hi: np.ndarray
+    cells: tuple[int, int, int]
+    surface_levels: tuple[int, ...]  # per body
+    background: float  # background cell size [m]
+
+
+def domain(spec: CaseSpec) -> Domain:
+    """The box: one longest-body length ahead, above and to the sides, three behind (thesis section
+    3.3.3.1, after the ITTC); z >= 0 (and y >= 0 for a quarter domain). Background cells of a
+    twelfth of the longest body's length at the coarse level; each body's surface gets the
+    refinement level nearest to SURFACE_CELLS_PER_DIAMETER cells per diameter."""
+    boxes = [b.bounds() for b in spec.bodies]
+    lo = np.min([b[0] for b in boxes], axis=0)
+    hi = np.max([b[1] for b in boxes], axis=0)
+    reach = max(b.length for b in spec.bodies)
+    lo = lo - np.array([3.0 * reach, reach, 0.0])
+    hi = hi + np.array([reach, reach, reach])
+    lo[2] = 0.0
+    if spec.quarter:
+        lo[1] = 0.0
+    coarse = reach / 12.0
+    surface = [max(0, round(math.log2(coarse / (b.diameter / SURFACE_CELLS_PER_DIAMETER)))) for b in spec.bodies]
+    background = coarse / spec.mesh_level.scale
+    if spec.level == "smoke":
+        surface = [max(0, s - 1) for s in surface]
+    cells = tuple(int(math.ceil((h - l) / background)) for l, h in zip(lo, hi, strict=True))
+    return Domain(lo, hi, cells, tuple(surface), background)
+
+
+def inflow_turbulence(spec: CaseSpec) -> tuple[float, float]:
+    k = 1.5 * (INFLOW_INTENSITY * spec.speed) ** 2
+    return k, k / (INFLOW_VISCOSITY_RATIO * spec.nu)
+
+
+# --- writing the case --------------------------------------------------------------------------
+
+
+def _write(path: Path, entries: dict, field_class: str | None = None) -> None:
+    from foamlib import FoamFieldFile, FoamFile
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.unlink(missing_ok=True)
+    path.touch()
+    f = FoamFieldFile(path) if field_class else FoamFile(path)
+    with f:
+        if field_class:
+            f["FoamFile"] = {"version": 2.0, "format": "ascii", "class": field_class, "object": path.name}
+        f.update(entries)
+
+
+def _vec(v) -> list[float]:
+    return [float(round(c, 9)) for c in v]
+
+
+def _block_mesh(spec: CaseSpec, dom: Domain) -> dict:
+    (x0, y0, z0), (x1, y1, z1) = dom.lo, dom.hi
+    vertices = [[x0, y0, z0], [x1, y0, z0], [x1, y1, z0], [x0, y1, z0], [x0, y0, z1], [x1, y0, z1], [x1, y1, z1], [x0, y1, z1]]
+    patches = [
+        ("inlet", {"type": "patch", "faces": [[1, 2, 6, 5]]}),  # +x: the stream comes from ahead
+        ("outlet", {"type": "patch", "faces": [[0, 4, 7, 3]]}),
+        ("symmetryZ", {"type": "symmetryPlane", "faces": [[0, 3, 2, 1]]}),
+        ("top", {"type": "patch", "faces": [[4, 5, 6, 7]]}),
+        ("sideFar", {"type": "patch", "faces": [[3, 7, 6, 2]]}),
+    ]
+    near_side = ("sideNear", {"type": "patch", "faces": [[0, 1, 5, 4]]})
+    if spec.quarter:
+        near_side = ("symmetryY", {"type": "symmetryPlane", "faces": [[0, 1, 5, 4]]})
+    patches.append(near_side)
+    return {
+        "scale": 1,
+        "vertices": [_vec(v) for v in vertices],
+        "blocks": ["hex", list(range(8)), list(dom.cells), "simpleGrading", [1, 1, 1]],
+        "edges": [],
+        "boundary": patches,
+        "mergePatchPairs": [],
+    }
+
+
+def far_patches(spec: CaseSpec) -> list[str]:
+    return ["top", "sideFar"] + ([] if spec.quarter else ["sideNear"])
+
+
+def symmetry_patches(spec: CaseSpec) -> list[str]:
+    return ["symmetryZ"] + (["symmetryY"] if spec.quarter else [])
+
+
+def _snappy(spec: CaseSpec, dom: Domain) -> dict:
+    geometry, surfaces, regions, layers = {}, {}, {}, {}
+    for body, level in zip(spec.bodies, dom.surface_levels, strict=True):
+        geometry[f"{body.patch}.stl"] = {"type": "triSurfaceMesh", "name": body.patch}
+        # One level more where the surface curves more than 30 deg within a cell (the tips).
+        surfaces[body.patch] = {"level": [level, level + 1], "patchInfo": {"type": "wall"}}
+        near = body.diameter
+        regions[body.patch] = {"mode": "distance", "levels": [[0.5 * near, max(level - 1, 0)], [2 * near, max(level - 2, 0)]]}
+        layers[body.patch] = {"nSurfaceLayers": LAYERS}
+    # The measured body's wake: one level below its surface level, half a length behind it, and
+    # a box round it two levels below.
+    body, level = spec.body, dom.surface_levels[0]
+    lo, hi = body.bounds()
+    pad = 0.5 * body.diameter
+    geometry["wake"] = {"type": "searchableBox", "min": _vec(lo - [0.5 * body.length, pad, 0.0]), "max": _vec(hi + [pad, pad, pad])}
+    geometry["around"] = {
+        "type": "searchableBox",
+        "min": _vec(lo - [1.5 * body.length, 4 * pad, 0.0]),
+        "max": _vec(hi + [0.5 * body.length, 4 * pad, 4 * pad]),
+    }
+    regions["wake"] = {"mode": "inside", "levels": [[1e15, max(level - 2, 0)]]}
+    regions["around"] = {"mode": "inside", "levels": [[1e15, max(level - 3, 0)]]}
+    inside = dom.lo + (dom.hi - dom.lo) * np.array([0.0123, 0.9071, 0.9137])  # a far corner, in the fluid
+    return {
+        "castellatedMesh": True,
+        "snap": True,
+        "addLayers": True,
+        "geometry": geometry,
+        "castellatedMeshControls": {
+            "maxLocalCells": 4_000_000,
+            "maxGlobalCells": 8_000_000,
+            "minRefinementCells": 0,
+            "maxLoadUnbalance": 0.10,
+            "nCellsBetweenLevels": 3,
+            "features": [],
+            "refinementSurfaces": surfaces,
+            "resolveFeatureAngle": 30,
+            "refinementRegions": regions,
+            "locationInMesh": _vec(inside),
+            "allowFreeStandingZoneFaces": True,
+        },
+        "snapControls": {
+            "nSmoothPatch": 3,
+            "tolerance": 2.0,
+            "nSolveIter": 100,
+            "nRelaxIter": 5,
+            "nFeatureSnapIter": 10,
+            "implicitFeatureSnap": False,
+            "explicitFeatureSnap": False,
+            "multiRegionFeatureSnap": False,
+        },
+        "addLayersControls": {
+            "relativeSizes": False,
+            "layers": layers,
+            "expansionRatio": LAYER_EXPANSION,
+            "firstLayerThickness": float(f"{first_layer_thickness(spec):.4g}"),
+            "minThickness": float(f"{0.1 * first_layer_thickness(spec):.4g}"),
+            "nGrow": 0,
+            "featureAngle": 130,
+            "slipFeatureAngle": 30,
+            "nRelaxIter": 3,
+            "nSmoothSurfaceNormals": 1,
+            "nSmoothNormals": 3,
+            "nSmoothThickness": 10,
+            "maxFaceThicknessRatio": 0.5,
+            "maxThicknessToMedialRatio": 0.3,
+            "minMedialAxisAngle": 90,
+            "nBufferCellsNoExtrude": 0,
+            "nLayerIter": 50,
+        },
+        "meshQualityControls": {  # the values of OpenFOAM's etc/caseDicts/meshQualityDict
+            "maxNonOrtho": 65,
+            "maxBoundarySkewness": 20,
+            "maxInternalSkewness": 4,
+            "maxConcave": 80,
+            "minVol": 1e-13,
+            "minTetQuality": 1e-15,
+            "minArea": -1,
+            "minTwist": 0.02,
+            "minDeterminant": 0.001,
+            "minFaceWeight": 0.05,
+            "minVolRatio": 0.01,
+            "minTriangleTwist": -1,
+            "nSmoothScale": 4,
+            "errorReduction": 0.75,
+        },
+        "mergeTolerance": 1e-6,
+    }
+
+
+def _control(spec: CaseSpec) -> dict:
+    functions = {}
+    for body in spec.bodies:
+        functions[f"forces_{body.patch}"] = {
+            "type": "forces",
+            "libs": ["libforces.so"],
+            "writeControl": "timeStep",
+            "writeInterval": 1,
+            "patches": [body.patch],
+            "rho": "rhoInf",
+            "rhoInf": spec.rho,
+            "CofR": _vec(body.centre),
+            "log": False,
+        }
+    functions["yPlus"] = {"type": "yPlus", "libs": ["libfieldFunctionObjects.so"], "writeControl": "writeTime"}
+    n = spec.end_iteration
+    return {
+        "application": "simpleFoam",
+        "startFrom": "startTime",
+        "startTime": 0,
+        "stopAt": "endTime",
+        "endTime": n,
+        "deltaT": 1,
+        "writeControl": "timeStep",
+        "writeInterval": n,
+        "purgeWrite": 1,
+        "writeFormat": "binary",
+        "writePrecision": 8,
+        "writeCompression": False,
+        "timeFormat": "general",
+        "timePrecision": 6,
+        "runTimeModifiable": False,
+        "functions": functions,
+    }
+
+
+FV_SCHEMES = {
+    "ddtSchemes": {"default": "steadyState"},
+    "gradSchemes": {"default": "Gauss linear", "grad(U)": "cellLimited Gauss linear 1"},
+    "divSchemes": {
+        "default": "none",
+        "div(phi,U)": "bounded Gauss linearUpwind grad(U)",
+        "div(phi,k)": "bounded Gauss upwind",
+        "div(phi,omega)": "bounded Gauss upwind",
+        "div((nuEff*dev2(T(grad(U)))))": "Gauss linear",
+    },
+    "laplacianSchemes": {"default": "Gauss linear limited corrected 0.33"},
+    "interpolationSchemes": {"default": "linear"},
+    "snGradSchemes": {"default": "limited corrected 0.33"},
+    "wallDist": {"method": "meshWave"},
+}
+
+FV_SOLUTION = {
+    "solvers": {
+        "p": {"solver": "GAMG", "smoother": "GaussSeidel", "tolerance": 1e-7, "relTol": 0.1},
+        "(U|k|omega)": {"solver": "smoothSolver", "smoother": "symGaussSeidel", "tolerance": 1e-8, "relTol": 0.1, "nSweeps": 1},
+    },
+    "SIMPLE": {
+        "nNonOrthogonalCorrectors": 0,
+        "consistent": True,
+        "residualControl": {"p": 1e-4, "U": 1e-5, "(k|omega)": 1e-5},
+    },
+    "relaxationFactors": {"equations": {"U": 0.9, ".*": 0.7}},
+}
+
+
+def _token(word: str):
+    try:
+        return int(word)
+    except ValueError:
+        try:
+            return float(word)
+        except ValueError:
+            return word
+
+
+def _foam_entries(entries: dict) -> dict:
+    """Scheme-style entries as foamlib writes them: a value of several words becomes a tuple of
+    tokens (foamlib refuses a string with spaces), and a regular-expression key gets its quotes
+    (foamlib writes keys as given)."""
+    out = {}
+    for key, value in entries.items():
+        if isinstance(value, dict):
+            value = _foam_entries(value)
+        elif isinstance(value, str) and " " in value:
+            value = tuple(_token(w) for w in value.split())
+        out[f'"{key}"' if any(c in key for c in "|*") and not key.startswith(("div", "grad")) else key] = value
+    return out
+
+
+def _fields(spec: CaseSpec) -> dict[str, tuple[str, dict]]:
+    """The 0/ files: uniform start (potentialFoam is not used: docs/hydro/rans/README.md)."""
+    from foamlib import FoamFieldFile
+
+    u = np.array([-spec.speed, 0.0, 0.0])
+    k, omega = inflow_turbulence(spec)
+    nut_wall = WALL_FUNCTIONS[spec.wall_function]
+    walls = [b.patch for b in spec.bodies]
+    far, sym = far_patches(spec), symmetry_patches(spec)
+    proc = '"procBoundary.*"'  # the processor patches of a decomposed case
+
+    def boundary(inlet, outlet, wall, internal):
+        out = {"inlet": inlet, "outlet": outlet}
+        out |= {p: {"type": "slip"} for p in far}
+        out |= {p: {"type": "symmetryPlane"} for p in sym}
+        out |= {w: dict(wall) for w in walls}
+        out[proc] = {"type": "processor", "value": internal}
+        return out
+
+    dims = FoamFieldFile.DimensionSet
+    fields = {
+        "U": ("volVectorField", dims(length=1, time=-1), u,
+              boundary({"type": "fixedValue", "value": u}, {"type": "inletOutlet", "inletValue": np.zeros(3), "value": u},
+                       {"type": "noSlip"}, u)),
+        "p": ("volScalarField", dims(length=2, time=-2), 0.0,
+              boundary({"type": "zeroGradient"}, {"type": "fixedValue", "value": 0.0}, {"type": "zeroGradient"}, 0.0)),
+        "k": ("volScalarField", dims(length=2, time=-2), k,
+              boundary({"type": "fixedValue", "value": k}, {"type": "inletOutlet", "inletValue": k, "value": k},
+                       {"type": "kqRWallFunction", "value": k}, k)),
+        "omega": ("volScalarField", dims(time=-1), omega,
+                  boundary({"type": "fixedValue", "value": omega}, {"type": "inletOutlet", "inletValue": omega, "value": omega},
+                           {"type": "omegaWallFunction", "value": omega}, omega)),
+        "nut": ("volScalarField", dims(length=2, time=-1), 0.0,
+                boundary({"type": "calculated", "value": 0.0}, {"type": "calculated", "value": 0.0},
+                         {"type": nut_wall, "value": 0.0}, 0.0)),
+    }  # fmt: skip
+    return {
+        name: (cls, {"dimensions": d, "internalField": v, "boundaryField": b}) for name, (cls, d, v, b) in fields.items()
+    }
+
+
+def write_case(spec: CaseSpec, folder, cores: int = 1) -> Path:
+    """Write the complete case into `folder` (created; an existing case there is replaced): the
+    STL of every body, system/ (blockMesh, snappyHexMesh, controlDict with the forces and yPlus
+    function objects, schemes, solution, decomposition), constant/ (transport, turbulence) and
+    the initial fields in 0.orig/ (copied to 0/ after meshing), and case.json (the spec)."""
+    folder = Path(folder)
+    if folder.exists():
+        shutil.rmtree(folder)
+    (folder / "constant" / "triSurface").mkdir(parents=True)
+    dom = domain(spec)
+    for body in spec.bodies:
+        write_stl(folder / "constant" / "triSurface" / f"{body.patch}.stl", body.triangles(), body.patch)
+    system = folder / "system"
+    _write(system / "blockMeshDict", _block_mesh(spec, dom))
+    _write(system / "snappyHexMeshDict", _snappy(spec, dom))
+    _write(system / "controlDict", _control(spec))
+    _write(system / "fvSchemes", _foam_entries(FV_SCHEMES))
+    _write(system / "fvSolution", _foam_entries(FV_SOLUTION))
+    _write(system / "decomposeParDict", {"numberOfSubdomains": cores, "method": "hierarchical",
+                                         "coeffs": {"n": [cores, 1, 1]}})  # fmt: skip
+    _write(folder / "constant" / "transportProperties", {"transportModel": "Newtonian", "nu": spec.nu})
+    _write(folder / "constant" / "turbulenceProperties",
+           {"simulationType": "RAS", "RAS": {"RASModel": "kOmegaSST", "turbulence": True, "printCoeffs": True}})  # fmt: skip
+    for name, (cls, entries) in _fields(spec).items():
+        _write(folder / "0.orig" / name, entries, field_class=cls)
+    (folder / "case.json").write_text(json.dumps(spec.describe(), indent=1) + "\n")
+    return folder
+
+
+def load_spec(folder) -> CaseSpec:
+    """The spec a case folder was written from (its case.json)."""
+    data = json.loads((Path(folder) / "case.json").read_text())
+    data["bodies"] = tuple(Body(**b) for b in data["bodies"])
+    if data.get("inputs") is not None:
+        data["inputs"] = tuple(data["inputs"])
+    return CaseSpec(**data)
+
+
+# --- running -----------------------------------------------------------------------------------
+
+
+def openfoam_environment() -> None:
+    """What Debian's OpenFOAM needs in the environment of its tools (foamlib passes ours on):
+    WM_PROJECT_DIR (the package's etc/bashrc cannot be sourced), and, as root, Open MPI's consent."""
+    os.environ.setdefault("WM_PROJECT_DIR", OPENFOAM_DIR)
+    if hasattr(os, "geteuid") and os.geteuid() == 0:
+        os.environ.setdefault("OMPI_ALLOW_RUN_AS_ROOT", "1")
+        os.environ.setdefault("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+
+
+def openfoam_missing() -> str | None:
+    """Why OpenFOAM cannot run here (one line), or None."""
+    for tool in ("blockMesh", "snappyHexMesh", "simpleFoam", "decomposePar", "mpiexec"):
+        if shutil.which(tool) is None:
+            return f"OpenFOAM is not installed ({tool} not found); install Debian's package: apt-get install openfoam"
+    if not Path(OPENFOAM_DIR, "etc", "controlDict").is_file():
+        return f"OpenFOAM's etc/controlDict is missing under {OPENFOAM_DIR}; install Debian's package: apt-get install openfoam"
+    return None
+
+
+@dataclass
+class Convergence:
+    status: str  # "converged", "not converged" or "diverged"
+    reason: str
+    iterations: int
+    window: int
+    spread: dict[str, float]
+    residuals: dict[str, float]
+
+    @property
+    def usable(self) -> bool:
+        return self.status == "converged"
+
+
+@dataclass
+class Result:
+    case_id: str
+    kind: str
+    level: str
+    wall_function: str
+    y_plus_target: float
+    cells: int
+    cores: int
+    mesh_seconds: float
+    solve_seconds: float
+    coefficients: dict[str, float]  # X', Y', N' of the measured body, mean over the window
+    forces: dict[str, dict[str, float]]  # per patch: X, Y [N], N [N m] whole body, body axes, about its CB
+    convergence: Convergence
+    y_plus: dict[str, dict[str, float]] = field(default_factory=dict)
+    inputs: tuple[float, ...] | None = None
+    openfoam: str = ""
+
+    @property
+    def wall_seconds(self) -> float:
+        return self.mesh_seconds + self.solve_seconds
+
+    def to_json(self) -> dict:
+        out = asdict(self)
+        out["wall_seconds"] = self.wall_seconds
+        return out
+
+    @classmethod
+    def from_json(cls, data: dict) -> Result:
+        data = dict(data)
+        data.pop("wall_seconds", None)
+        data["convergence"] = Convergence(**data["convergence"])
+        if data.get("inputs") is not None:
+            data["inputs"] = tuple(data["inputs"])
+        return cls(**data)
+
+    def line(self) -> str:
+        c = self.coefficients
+        return (
+            f"{self.case_id}: {self.convergence.status}; X'={c['X']:.4e} Y'={c['Y']:.4e} N'={c['N']:.4e}; "
+            f"{self.cells} cells, {self.wall_seconds / 60:.1f} min on {self.cores} cores"
+        )
+
+
+def _run(case, cmd: list[str], cores: int, parallel: bool) -> None:
+    from foamlib._cases._subprocess import CalledProcessError  # foamlib's subclass of subprocess's
+
+    try:
+        case.run(cmd, parallel=parallel, cpus=cores if parallel else 1, check=True, log=True)
+    except (CalledProcessError, subprocess.CalledProcessError) as exc:
+        log = Path(case.path) / f"log.{cmd[0]}"
+        raise CaseError(f"{cmd[0]} failed (exit {exc.returncode}): {_fatal_line(log)}; see {log}") from None
+
+
+def _fatal_line(log: Path) -> str:
+    """The first line after OpenFOAM's 'FOAM FATAL' banner, or the log's last line."""
+    try:
+        lines = [ln.strip() for ln in log.read_text(errors="replace").splitlines() if ln.strip()]
+    except OSError:
+        return "no log"
+    for i, ln in enumerate(lines):
+        if "FOAM FATAL" in ln:
+            return " ".join(lines[i + 1 : i + 3])[:300]
+    return lines[-1][:300] if lines else "empty log"
+
+
+def mesh_case(folder, cores: int = 1) -> int:
+    """blockMesh, decomposition and snappyHexMesh (-overwrite), then the initial fields in place;
+    returns the cell count."""
+    from foamlib import FoamCase
+
+    openfoam_environment()
+    folder = Path(folder)
+    case = FoamCase(folder)
+    parallel = cores > 1
+    for stale in [*folder.glob("processor*"), folder / "0", folder / "postProcessing"]:
+        shutil.rmtree(stale, ignore_errors=True)
+    for log in folder.glob("log.*"):
+        log.unlink()
+    _run(case, ["blockMesh"], cores, False)
+    if parallel:
+        _run(case, ["decomposePar", "-force"], cores, False)
+    _run(case, ["snappyHexMesh", "-overwrite"], cores, parallel)
+    targets = sorted(folder.glob("processor*")) if parallel else [folder]
+    for target in targets:
+        shutil.copytree(folder / "0.orig", target / "0", dirs_exist_ok=True)
+    cells = cell_count(folder)
+    if cells <= 0:
+        raise CaseError(f"snappyHexMesh left no cells; see {folder / 'log.snappyHexMesh'}")
+    return cells
+
+
+def cell_count(folder) -> int:
+    """Cells of the (possibly decomposed) mesh, from the owner files' headers."""
+    folder = Path(folder)
+    owners = sorted(folder.glob("processor*/constant/polyMesh/owner")) or [folder / "constant/polyMesh/owner"]
+    total = 0
+    for owner in owners:
+        head = owner.read_bytes()[:2000].decode("latin-1")
+        match = re.search(r"nCells:\s*(\d+)", head)
+        total += int(match.group(1)) if match else 0
+    return total
+
+
+def run_case(spec: CaseSpec, folder, cores: int = 1) -> Result:
+    """Write, mesh and solve one case; the Result (convergence verdict included) is also saved as
+    result.json in the folder. A solver that stops with an error gives a diverged Result, not an
+    exception; a case that cannot be meshed raises CaseError."""
+    from foamlib import FoamCase
+
+    missing = openfoam_missing()
+    if missing:
+        raise CaseError(missing)
+    folder = Path(folder)
+    write_case(spec, folder, cores)
+    start = time.monotonic()
+    cells = mesh_case(folder, cores)
+    meshed = time.monotonic()
+    failure = None
+    try:
+        _run(FoamCase(folder), ["simpleFoam"], cores, cores > 1)
+    except CaseError as exc:
+        failure = str(exc)
+    solved = time.monotonic()
+    result = read_result(spec, folder, cells=cells, cores=cores, mesh_seconds=meshed - start,
+                         solve_seconds=solved - meshed, failure=failure)  # fmt: skip
+    (folder / "result.json").write_text(json.dumps(result.to_json(), indent=1) + "\n")
+    return result
+
+
+# --- reading -----------------------------------------------------------------------------------
+
+
+def read_table(path) -> np.ndarray:
+    """A function object's .dat table as a float array (rows = iterations), parentheses dropped."""
+    rows = []
+    for line in Path(path).read_text().splitlines():
+        if not line.strip() or line.lstrip().startswith("#"):
+            continue
+        values = line.replace("(", " ").replace(")", " ").split()
+        try:
+            rows.append([float(v) for v in values])
+        except ValueError:
+            continue
+    width = max((len(r) for r in rows), default=0)
+    return np.array([r for r in rows if len(r) == width], dtype=float).reshape(-1, width)
+
+
+def force_history(folder, patch: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(iterations, total force (n, 3) [N], total moment about the CofR (n, 3) [N m]) of one
+    patch, in the case frame and for the half (or quarter) of the body inside the domain."""
+    base = Path(folder) / "postProcessing" / f"forces_{patch}"
+    starts = sorted(base.glob("*"), key=lambda p: float(p.name) if re.fullmatch(r"[\d.eE+-]+", p.name) else -1)
+    if not starts:
+        raise CaseError(f"no forces written for patch {patch} under {base}")
+    force = read_table(starts[-1] / "force.dat")
+    moment = read_table(starts[-1] / "moment.dat")
+    n = min(len(force), len(moment))
+    return force[:n, 0], force[:n, 1:4], moment[:n, 1:4]
+
+
+def body_axes_history(spec: CaseSpec, body: Body, force: np.ndarray, moment: np.ndarray) -> np.ndarray:
+    """(n, 3) whole-body X, Y [N] in the body's axes and N [N m] about its CB, from the forces on
+    the part inside the domain: the half domain z >= 0 holds half of the body, so X, Y and N are
+    doubled (Z, K, M cancel with the mirror half and are not used); the quarter domain (zero
+    drift, y >= 0 as well) holds a quarter, so X is multiplied by 4 and Y, N are zero by
+    symmetry."""
+    e_x, e_y = body.axes
+    x = force @ e_x
+    y = force @ e_y
+    n = moment[:, 2]
+    if spec.quarter:
+        return np.column_stack([4.0 * x, 0.0 * x, 0.0 * x])
+    return np.column_stack([2.0 * x, 2.0 * y, 2.0 * n])
+
+
+def coefficient_scale(spec: CaseSpec, body: Body) -> np.ndarray:
+    """Divisors of X, Y, N: (1/2) rho U^2 L^2, L^2, L^3 with the body's length (thesis section
+    5.2; docs/hydro/README.md, "Conventions")."""
+    q = 0.5 * spec.rho * spec.speed**2
+    return np.array([q * body.length**2, q * body.length**2, q * body.length**3])
+
+
+def final_residuals(log) -> dict[str, float]:
+    """The initial residual of each equation at the last iteration of a simpleFoam log."""
+    out: dict[str, float] = {}
+    try:
+        text = Path(log).read_text(errors="replace")
+    except OSError:
+        return out
+    last = text.rsplit("\nTime = ", 1)[-1]
+    for name, value in re.findall(r"Solving for (\w+), Initial residual = ([\d.eE+-]+)", last):
+        out.setdefault(name, float(value))
+    return out
+
+
+def converged_by_residuals(log) -> bool:
+    try:
+        return "SIMPLE solution converged" in Path(log).read_text(errors="replace")
+    except OSError:
+        return False
+
+
+def verdict(coefficients: np.ndarray, residuals: dict[str, float], failure: str | None = None,
+            quarter: bool = False) -> tuple[Convergence, np.ndarray]:  # fmt: skip
+    """The convergence verdict of a coefficient history (n, 3) and the mean over the last
+    SPREAD_WINDOW of the iterations:
+    - diverged: the solver stopped with an error, or a coefficient is not finite or beyond
+      DIVERGED_COEFFICIENT;
+    - not converged: a coefficient's spread over the window exceeds SPREAD_RELATIVE of its mean
+      (or SPREAD_ABSOLUTE, whichever is larger);
+    - converged otherwise."""
+    n = len(coefficients)
+    window = max(1, int(round(SPREAD_WINDOW * n)))
+    tail = coefficients[-window:] if n else np.full((1, 3), np.nan)
+    mean = tail.mean(axis=0)
+    spread = tail.max(axis=0) - tail.min(axis=0)
+    names = ("X", "Y", "N")
+    spreads = {k: float(v) for k, v in zip(names, spread, strict=True)}
+
+    def make(status, reason):
+        return Convergence(status, reason, n, window, spreads, residuals), mean
+
+    if failure:
+        return make("diverged", failure)
+    if n == 0 or not np.all(np.isfinite(coefficients)):
+        return make("diverged", "the forces are not finite")
+    worst = np.max(np.abs(coefficients[-1]))
+    if worst > DIVERGED_COEFFICIENT:
+        return make("diverged", f"a coefficient reached {worst:.3g} (a flow round a hull gives about 1e-3)")
+    limits = np.maximum(SPREAD_RELATIVE * np.abs(mean), SPREAD_ABSOLUTE)
+    checked = (0,) if quarter else (0, 1, 2)
+    over = [i for i in checked if spread[i] > limits[i]]
+    if over:
+        text = ", ".join(f"{names[i]}' spreads {spread[i]:.2e} (limit {limits[i]:.2e})" for i in over)
+        return make("not converged", f"over the last {window} of {n} iterations {text}")
+    return make("converged", f"spread within {SPREAD_RELATIVE:.0%} (or {SPREAD_ABSOLUTE:g}) over the last {window} of {n} iterations")
+
+
+def read_y_plus(folder) -> dict[str, dict[str, float]]:
+    """min / max / mean y+ per wall patch at the last write, from the yPlus function object."""
+    out: dict[str, dict[str, float]] = {}
+    for path in sorted((Path(folder) / "postProcessing" / "yPlus").glob("*/yPlus.dat")):
+        for line in path.read_text().splitlines():
+            parts = line.split()
+            if len(parts) == 5 and not line.startswith("#"):
+                try:
+                    out[parts[1]] = {"min": float(parts[2]), "max": float(parts[3]), "mean": float(parts[4])}
+                except ValueError:
+                    continue
+    return out
+
+
+def openfoam_version() -> str:
+    try:
+        header = Path(OPENFOAM_DIR, "etc", "controlDict").read_text(errors="replace")[:2000]
+    except OSError:
+        return ""
+    match = re.search(r"Version:\s*(\S+)", header)
+    return f"OpenFOAM {match.group(1)}" if match else "OpenFOAM"
+
+
+def read_result(spec: CaseSpec, folder, *, cells: int, cores: int, mesh_seconds: float, solve_seconds: float,
+                failure: str | None = None) -> Result:  # fmt: skip
+    """The Result of a solved case folder: forces, coefficients and the convergence verdict."""
+    folder = Path(folder)
+    residuals = final_residuals(folder / "log.simpleFoam")
+    forces: dict[str, dict[str, float]] = {}
+    measured = np.full((0, 3), np.nan)
+    window_mean = None
+    for body in spec.bodies:
+        try:
+            _, force, moment = force_history(folder, body.patch)
+        except (CaseError, OSError):
+            force = moment = np.zeros((0, 3))
+        history = body_axes_history(spec, body, force, moment)
+        if body is spec.body:
+            measured = history / coefficient_scale(spec, body)
+        else:
+            window_mean = history[-max(1, int(round(SPREAD_WINDOW * len(history)))) :].mean(axis=0) if len(history) else None
+            forces[body.patch] = dict(zip(("X", "Y", "N"), map(float, window_mean), strict=True)) if window_mean is not None else {}
+    convergence, mean = verdict(measured, residuals, failure, spec.quarter)
+    forces = {spec.body.patch: dict(zip(("X", "Y", "N"), map(float, mean * coefficient_scale(spec, spec.body)), strict=True))} | forces
+    return Result(
+        case_id=spec.case_id,
+        kind=spec.kind,
+        level=spec.level,
+        wall_function=spec.wall_function,
+        y_plus_target=spec.y_plus,
+        cells=int(cells),
+        cores=int(cores),
+        mesh_seconds=float(mesh_seconds),
+        solve_seconds=float(solve_seconds),
+        coefficients=dict(zip(("X", "Y", "N"), map(float, mean), strict=True)),
+        forces=forces,
+        convergence=convergence,
+        y_plus=read_y_plus(folder),
+        inputs=spec.inputs,
+        openfoam=openfoam_version(),
+    )
