@@ -44,8 +44,10 @@ def case_command(args) -> int:
         raise InputError(f"-o {out}: exists and is not empty; give a new folder")
     rans.write_case(spec, out, args.cores)
     dom = rans.domain(spec)
-    print(f"wrote {out}: {spec.case_id}, background {dom.cells} cells of {dom.background:.3g} m, surface levels "
-          f"{dom.surface_levels}, first layer {rans.first_layer_thickness(spec) * 1e3:.3g} mm")  # fmt: skip
+    print(
+        f"wrote {out}: {spec.case_id}, background {dom.cells} cells of {dom.background:.3g} m, surface levels "
+        f"{dom.surface_levels}, first layer {rans.first_layer_thickness(spec) * 1e3:.3g} mm"
+    )
     return 0
 
 
@@ -60,8 +62,10 @@ def run_command(args) -> int:
     if args.commit and export_dir is None:
         raise InputError("--commit: needs --export (the folder in the repository the artefacts go to)")
     pending = [s.case_id for s in specs if rans_campaign.finished(s.case_id, work_dir, export_dir) is None]
-    print(f"{len(specs) - len(pending)} of {len(specs)} case(s) finished; running {len(pending)}: {', '.join(pending)}",
-          flush=True)  # fmt: skip
+    print(
+        f"{len(specs) - len(pending)} of {len(specs)} case(s) finished; running {len(pending)}: {', '.join(pending)}",
+        flush=True,
+    )
     refused = []
 
     def done(case_id: str, outcome: dict) -> None:
@@ -74,8 +78,9 @@ def run_command(args) -> int:
             refused.append(case_id)
         print(result.line() + ("" if result.convergence.usable else f" ({result.convergence.reason})"), flush=True)
 
-    rans_campaign.run_cases(specs, work_dir, args.cores, scheduler=args.scheduler, export_dir=export_dir,
-                            commit=args.commit, on_done=done)  # fmt: skip
+    rans_campaign.run_cases(
+        specs, work_dir, args.cores, scheduler=args.scheduler, export_dir=export_dir, commit=args.commit, on_done=done
+    )
     return 2 if refused else 0
 
 
@@ -96,28 +101,40 @@ def validate_command(args) -> int:
     if args.json:
         print(json.dumps(table, indent=1))
         return 0
-    print(f"SUBOFF resistance at 3.05 m/s against thesis table 3.1 (EFD X = {rans.TABLE_3_1_EFD_X} N, "
-          f"X' = {rans.TABLE_3_1_EFD_XPRIME:.3g}); target |error| <= {rans_campaign.RESISTANCE_TARGET:.0%}")  # fmt: skip
+    print(
+        f"SUBOFF resistance at 3.05 m/s against thesis table 3.1 (EFD X = {rans.TABLE_3_1_EFD_X} N, "
+        f"X' = {rans.TABLE_3_1_EFD_XPRIME:.3g}); target |error| <= {rans_campaign.RESISTANCE_TARGET:.0%}"
+    )
     print("| case | mesh | wall function | y+ target | mean y+ | cells | min | X [N] | X' | vs EFD | verdict |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for r in table["resistance"]:
-        print(f"| {r['case']} | {r['level']} | {r['wall_function']} | {r['y_plus_target']:g} | {r['y_plus_mean']:.0f} | "
-              f"{r['cells']:,} | {r['minutes']:.1f} | {r['X_N']:.1f} | {r['Xp']:.4e} | {r['error']:+.1%} | "
-              f"{r['status']}{', meets' if r['meets'] else ''} |")  # fmt: skip
+        print(
+            f"| {r['case']} | {r['level']} | {r['wall_function']} | {r['y_plus_target']:g} | {r['y_plus_mean']:.0f} | "
+            f"{r['cells']:,} | {r['minutes']:.1f} | {r['X_N']:.1f} | {r['Xp']:.4e} | {r['error']:+.1%} | "
+            f"{r['status']}{', meets' if r['meets'] else ''} |"
+        )
     if table["gci"]:
         g = table["gci"]
-        print(f"\nGCI (coarse/medium/fine, ratio sqrt 2; Celik et al. 2008): observed order {g['p']:.2f}, "
-              f"extrapolated X' {g['extrapolated']:.4e}, GCI_fine {g['gci_fine']:.2%}")  # fmt: skip
-    print("\nSUBOFF drift against thesis table 3.2 (x 1e-3; errors against EFD; targets: X', N' within 10 %, "
-          "Y' within 10 % at 4.07 and 6.03 deg)")  # fmt: skip
-    print("| psi | X' | Y' | N' | EFD X' | Y' | N' | err X' | Y' | N' | thesis CFD X' | Y' | N' | cells | min | verdict |")
+        print(
+            f"\nGCI (coarse/medium/fine, ratio sqrt 2; Celik et al. 2008): observed order {g['p']:.2f}, "
+            f"extrapolated X' {g['extrapolated']:.4e}, GCI_fine {g['gci_fine']:.2%}"
+        )
+    print(
+        "\nSUBOFF drift against thesis table 3.2 (x 1e-3; errors against EFD; targets: X', N' within 10 %, "
+        "Y' within 10 % at 4.07 and 6.03 deg)"
+    )
+    print(
+        "| psi | X' | Y' | N' | EFD X' | Y' | N' | err X' | Y' | N' | thesis CFD X' | Y' | N' | cells | min | verdict |"
+    )
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in table["drift"]:
         o, e, err, c = r["ours"], r["efd"], r["error"], r["thesis_cfd"]
         meets = {True: ", meets", False: ", misses", None: ""}[r["meets"]]
-        print(f"| {r['psi']:.2f} | {o[0]:.3f} | {o[1]:.3f} | {o[2]:.3f} | {e[0]:.3f} | {e[1]:.3f} | {e[2]:.3f} | "
-              f"{err[0]:+.1%} | {err[1]:+.1%} | {err[2]:+.1%} | {c[0]:.3f} | {c[1]:.3f} | {c[2]:.3f} | "
-              f"{r['cells']:,} | {r['minutes']:.1f} | {r['status']}{meets} |")  # fmt: skip
+        print(
+            f"| {r['psi']:.2f} | {o[0]:.3f} | {o[1]:.3f} | {o[2]:.3f} | {e[0]:.3f} | {e[1]:.3f} | {e[2]:.3f} | "
+            f"{err[0]:+.1%} | {err[1]:+.1%} | {err[2]:+.1%} | {c[0]:.3f} | {c[1]:.3f} | {c[2]:.3f} | "
+            f"{r['cells']:,} | {r['minutes']:.1f} | {r['status']}{meets} |"
+        )
     return 0
 
 
@@ -152,16 +169,29 @@ def cfd_command(args) -> int:
 
 def _case_arguments(p, suite: bool = False) -> None:
     which = p.add_mutually_exclusive_group()
-    which.add_argument("--psi", type=number(minimum=0.0, maximum=20.0), default=0.0,
-                       help="the model-scale SUBOFF alone at this drift angle [deg] (default 0; thesis table 3.2)")  # fmt: skip
-    which.add_argument("--config", type=float, nargs=6, metavar=("R_LONG", "R_LAT", "U_KN", "PSI", "D_RATIO", "LD_RATIO"),
-                       help="a two-body configuration in the project's order (thesis table 4.2)")  # fmt: skip
+    which.add_argument(
+        "--psi",
+        type=number(minimum=0.0, maximum=20.0),
+        default=0.0,
+        help="the model-scale SUBOFF alone at this drift angle [deg] (default 0; thesis table 3.2)",
+    )
+    which.add_argument(
+        "--config",
+        type=float,
+        nargs=6,
+        metavar=("R_LONG", "R_LAT", "U_KN", "PSI", "D_RATIO", "LD_RATIO"),
+        help="a two-body configuration in the project's order (thesis table 4.2)",
+    )
     if suite:
         which.add_argument("--suite", help="a named set of cases: suboff-validation, smoke")
     p.add_argument("--level", default="medium", help="mesh: smoke, coarse, medium (default), fine")
     p.add_argument("--wall-function", default="nutk", help="nutk (default) or spalding")
-    p.add_argument("--y-plus", type=number(minimum=1.0, maximum=300.0), default=50.0,
-                   help="target y+ of the first cell (default 50)")  # fmt: skip
+    p.add_argument(
+        "--y-plus",
+        type=number(minimum=1.0, maximum=300.0),
+        default=50.0,
+        help="target y+ of the first cell (default 50)",
+    )
     p.add_argument("--iterations", type=integer(minimum=10), help="SIMPLE iterations at most (default: the level's)")
     p.add_argument("--cores", type=integer(minimum=1, maximum=1024), default=1, help="MPI ranks per case (default 1)")
 
@@ -174,14 +204,22 @@ def add_parser(subparsers) -> None:
     t.add_argument("-o", "--out", help=f"case folder to write (default {DEFAULT_WORK_DIR}/<case id>)")
     t = sub.add_parser("run", help="mesh and solve cases (resumable: finished cases are skipped)")
     _case_arguments(t, suite=True)
-    t.add_argument("--work-dir", default=str(DEFAULT_WORK_DIR), help=f"case folders with meshes (default {DEFAULT_WORK_DIR})")
+    t.add_argument(
+        "--work-dir", default=str(DEFAULT_WORK_DIR), help=f"case folders with meshes (default {DEFAULT_WORK_DIR})"
+    )
     t.add_argument("--export", help=f"copy each finished case's small artefacts here (e.g. {DEFAULT_ARTEFACTS})")
     t.add_argument("--commit", action="store_true", help="git-commit each exported case as it finishes")
     t.add_argument("--scheduler", type=scheduler_address, help="run the cases as tasks on this Dask scheduler")
-    for name, text in (("validate", "the SUBOFF validation table (thesis tables 3.1, 3.2)"),
-                       ("report", "a table of the finished cases")):  # fmt: skip
+    for name, text in (
+        ("validate", "the SUBOFF validation table (thesis tables 3.1, 3.2)"),
+        ("report", "a table of the finished cases"),
+    ):
         t = sub.add_parser(name, help=text)
-        t.add_argument("--from", dest="sources", nargs="+",
-                       help=f"folders of finished cases (default {DEFAULT_WORK_DIR} and {DEFAULT_ARTEFACTS})")  # fmt: skip
+        t.add_argument(
+            "--from",
+            dest="sources",
+            nargs="+",
+            help=f"folders of finished cases (default {DEFAULT_WORK_DIR} and {DEFAULT_ARTEFACTS})",
+        )
         t.add_argument("--json", action="store_true")
     p.set_defaults(func=cfd_command)

@@ -33,12 +33,13 @@ import numpy as np
 from nearsub.common.hydro.high_fidelity import SUBOFF_TEST_NU, SUBOFF_TEST_SPEED
 from nearsub.common.hydro.low_fidelity import NU, input_columns, ittc57
 from nearsub.common.hydro.rans_geometry import Body, write_stl
-from nearsub.common.physics.hull import D_SUB, L_SUB, FT, SUBOFF_LENGTH_FT, SUBOFF_RMAX_FT
+from nearsub.common.physics.hull import D_SUB, FT, L_SUB, SUBOFF_LENGTH_FT, SUBOFF_RMAX_FT
 from nearsub.common.physics.proximity import closest_distance
-from nearsub.common.surrogate.domain import INPUT_NAMES, RHO_SEA
 
 OPENFOAM_DIR = "/usr/share/openfoam"  # Debian's openfoam package (v1912); its etc/bashrc cannot be sourced
 FRESH_WATER_RHO = 997.0  # thesis section 3.2 (tow-tank conditions of tables 3.1, 3.2)
+SEA_WATER_RHO = 1025.0  # the two-body cases (docs/design.md, "Frames, units and signs")
+CONFIGURATION = ("R_long", "R_lat", "u_kn", "psi_deg", "d_ratio", "ld_ratio")  # thesis table 4.2's order
 SUBOFF_MODEL_LENGTH = SUBOFF_LENGTH_FT * FT  # 4.3561 m (Groves, Huang & Chang 1989)
 SUBOFF_MODEL_DIAMETER = 2.0 * SUBOFF_RMAX_FT * FT  # 0.508 m
 # Thesis table 3.1: SUBOFF bare hull at 3.05 m/s, EFD resistance (and the thesis's own CFD).
@@ -141,8 +142,13 @@ def _case_suffix(level: str, wall_function: str, y_plus: float) -> str:
     return suffix
 
 
-def suboff_case(psi_deg: float = 0.0, level: str = "medium", wall_function: str = "nutk", y_plus: float = 50.0,
-                iterations: int | None = None) -> CaseSpec:  # fmt: skip
+def suboff_case(
+    psi_deg: float = 0.0,
+    level: str = "medium",
+    wall_function: str = "nutk",
+    y_plus: float = 50.0,
+    iterations: int | None = None,
+) -> CaseSpec:
     """The model-scale SUBOFF bare hull alone at drift angle psi_deg in the tow-tank conditions of
     thesis tables 3.1/3.2 (3.05 m/s, fresh water, nu = 8.899e-4/997): the validation case."""
     _check_choice("--level", level, MESH_LEVELS)
@@ -167,15 +173,16 @@ def suboff_case(psi_deg: float = 0.0, level: str = "medium", wall_function: str 
     )
 
 
-def two_body_case(row, level: str = "medium", wall_function: str = "nutk", y_plus: float = 50.0,
-                  iterations: int | None = None) -> CaseSpec:  # fmt: skip
+def two_body_case(
+    row, level: str = "medium", wall_function: str = "nutk", y_plus: float = 50.0, iterations: int | None = None
+) -> CaseSpec:
     """The full-scale submarine and the Explorer UUV at a configuration row [R_long, R_lat, u_kn,
     psi_deg, d_ratio, ld_ratio] (thesis table 4.2), in sea water (docs/hydro/README.md)."""
     _check_choice("--level", level, MESH_LEVELS)
     _check_choice("--wall-function", wall_function, WALL_FUNCTIONS)
     row = np.asarray(row, dtype=float).reshape(-1)
-    if row.shape != (len(INPUT_NAMES),) or not np.all(np.isfinite(row)):
-        raise CaseError(f"configuration {row.tolist()}: needs {len(INPUT_NAMES)} finite values {', '.join(INPUT_NAMES)}")
+    if row.shape != (len(CONFIGURATION),) or not np.all(np.isfinite(row)):
+        raise CaseError(f"configuration {row.tolist()}: needs 6 finite values {', '.join(CONFIGURATION)}")
     x, y, speed, psi, diameter, length = (float(c[0]) for c in input_columns(row[None, :]))
     if not speed > 0:
         raise CaseError(f"u_kn {row[2]:g}: the speed must be positive")
@@ -199,7 +206,7 @@ def two_body_case(row, level: str = "medium", wall_function: str = "nutk", y_plu
         kind="two-body",
         bodies=(uuv, sub),
         speed=speed,
-        rho=RHO_SEA,
+        rho=SEA_WATER_RHO,
         nu=NU,
         level=level,
         wall_function=wall_function,
@@ -248,7 +255,7 @@ def domain(spec: CaseSpec) -> Domain:
     background = coarse / spec.mesh_level.scale
     if spec.level == "smoke":
         surface = [max(0, s - 1) for s in surface]
-    cells = tuple(int(math.ceil((h - l) / background)) for l, h in zip(lo, hi, strict=True))
+    cells = tuple(int(math.ceil((high - low) / background)) for low, high in zip(lo, hi, strict=True))
     return Domain(lo, hi, cells, tuple(surface), background)
 
 
@@ -279,7 +286,16 @@ def _vec(v) -> list[float]:
 
 def _block_mesh(spec: CaseSpec, dom: Domain) -> dict:
     (x0, y0, z0), (x1, y1, z1) = dom.lo, dom.hi
-    vertices = [[x0, y0, z0], [x1, y0, z0], [x1, y1, z0], [x0, y1, z0], [x0, y0, z1], [x1, y0, z1], [x1, y1, z1], [x0, y1, z1]]
+    vertices = [
+        [x0, y0, z0],
+        [x1, y0, z0],
+        [x1, y1, z0],
+        [x0, y1, z0],
+        [x0, y0, z1],
+        [x1, y0, z1],
+        [x1, y1, z1],
+        [x0, y1, z1],
+    ]
     patches = [
         ("inlet", {"type": "patch", "faces": [[1, 2, 6, 5]]}),  # +x: the stream comes from ahead
         ("outlet", {"type": "patch", "faces": [[0, 4, 7, 3]]}),
@@ -316,14 +332,21 @@ def _snappy(spec: CaseSpec, dom: Domain) -> dict:
         # One level more where the surface curves more than 30 deg within a cell (the tips).
         surfaces[body.patch] = {"level": [level, level + 1], "patchInfo": {"type": "wall"}}
         near = body.diameter
-        regions[body.patch] = {"mode": "distance", "levels": [[0.5 * near, max(level - 1, 0)], [2 * near, max(level - 2, 0)]]}
+        regions[body.patch] = {
+            "mode": "distance",
+            "levels": [[0.5 * near, max(level - 1, 0)], [2 * near, max(level - 2, 0)]],
+        }
         layers[body.patch] = {"nSurfaceLayers": LAYERS}
     # The measured body's wake: one level below its surface level, half a length behind it, and
     # a box round it two levels below.
     body, level = spec.body, dom.surface_levels[0]
     lo, hi = body.bounds()
     pad = 0.5 * body.diameter
-    geometry["wake"] = {"type": "searchableBox", "min": _vec(lo - [0.5 * body.length, pad, 0.0]), "max": _vec(hi + [pad, pad, pad])}
+    geometry["wake"] = {
+        "type": "searchableBox",
+        "min": _vec(lo - [0.5 * body.length, pad, 0.0]),
+        "max": _vec(hi + [pad, pad, pad]),
+    }
     geometry["around"] = {
         "type": "searchableBox",
         "min": _vec(lo - [1.5 * body.length, 4 * pad, 0.0]),
@@ -454,7 +477,13 @@ FV_SCHEMES = {
 FV_SOLUTION = {
     "solvers": {
         "p": {"solver": "GAMG", "smoother": "GaussSeidel", "tolerance": 1e-7, "relTol": 0.1},
-        "(U|k|omega)": {"solver": "smoothSolver", "smoother": "symGaussSeidel", "tolerance": 1e-8, "relTol": 0.1, "nSweeps": 1},
+        "(U|k|omega)": {
+            "solver": "smoothSolver",
+            "smoother": "symGaussSeidel",
+            "tolerance": 1e-8,
+            "relTol": 0.1,
+            "nSweeps": 1,
+        },
     },
     "SIMPLE": {
         "nNonOrthogonalCorrectors": 0,
@@ -510,23 +539,60 @@ def _fields(spec: CaseSpec) -> dict[str, tuple[str, dict]]:
 
     dims = FoamFieldFile.DimensionSet
     fields = {
-        "U": ("volVectorField", dims(length=1, time=-1), u,
-              boundary({"type": "fixedValue", "value": u}, {"type": "inletOutlet", "inletValue": np.zeros(3), "value": u},
-                       {"type": "noSlip"}, u)),
-        "p": ("volScalarField", dims(length=2, time=-2), 0.0,
-              boundary({"type": "zeroGradient"}, {"type": "fixedValue", "value": 0.0}, {"type": "zeroGradient"}, 0.0)),
-        "k": ("volScalarField", dims(length=2, time=-2), k,
-              boundary({"type": "fixedValue", "value": k}, {"type": "inletOutlet", "inletValue": k, "value": k},
-                       {"type": "kqRWallFunction", "value": k}, k)),
-        "omega": ("volScalarField", dims(time=-1), omega,
-                  boundary({"type": "fixedValue", "value": omega}, {"type": "inletOutlet", "inletValue": omega, "value": omega},
-                           {"type": "omegaWallFunction", "value": omega}, omega)),
-        "nut": ("volScalarField", dims(length=2, time=-1), 0.0,
-                boundary({"type": "calculated", "value": 0.0}, {"type": "calculated", "value": 0.0},
-                         {"type": nut_wall, "value": 0.0}, 0.0)),
-    }  # fmt: skip
+        "U": (
+            "volVectorField",
+            dims(length=1, time=-1),
+            u,
+            boundary(
+                {"type": "fixedValue", "value": u},
+                {"type": "inletOutlet", "inletValue": np.zeros(3), "value": u},
+                {"type": "noSlip"},
+                u,
+            ),
+        ),
+        "p": (
+            "volScalarField",
+            dims(length=2, time=-2),
+            0.0,
+            boundary({"type": "zeroGradient"}, {"type": "fixedValue", "value": 0.0}, {"type": "zeroGradient"}, 0.0),
+        ),
+        "k": (
+            "volScalarField",
+            dims(length=2, time=-2),
+            k,
+            boundary(
+                {"type": "fixedValue", "value": k},
+                {"type": "inletOutlet", "inletValue": k, "value": k},
+                {"type": "kqRWallFunction", "value": k},
+                k,
+            ),
+        ),
+        "omega": (
+            "volScalarField",
+            dims(time=-1),
+            omega,
+            boundary(
+                {"type": "fixedValue", "value": omega},
+                {"type": "inletOutlet", "inletValue": omega, "value": omega},
+                {"type": "omegaWallFunction", "value": omega},
+                omega,
+            ),
+        ),
+        "nut": (
+            "volScalarField",
+            dims(length=2, time=-1),
+            0.0,
+            boundary(
+                {"type": "calculated", "value": 0.0},
+                {"type": "calculated", "value": 0.0},
+                {"type": nut_wall, "value": 0.0},
+                0.0,
+            ),
+        ),
+    }
     return {
-        name: (cls, {"dimensions": d, "internalField": v, "boundaryField": b}) for name, (cls, d, v, b) in fields.items()
+        name: (cls, {"dimensions": d, "internalField": v, "boundaryField": b})
+        for name, (cls, d, v, b) in fields.items()
     }
 
 
@@ -548,11 +614,15 @@ def write_case(spec: CaseSpec, folder, cores: int = 1) -> Path:
     _write(system / "controlDict", _control(spec))
     _write(system / "fvSchemes", _foam_entries(FV_SCHEMES))
     _write(system / "fvSolution", _foam_entries(FV_SOLUTION))
-    _write(system / "decomposeParDict", {"numberOfSubdomains": cores, "method": "hierarchical",
-                                         "coeffs": {"n": [cores, 1, 1]}})  # fmt: skip
+    _write(
+        system / "decomposeParDict",
+        {"numberOfSubdomains": cores, "method": "hierarchical", "coeffs": {"n": [cores, 1, 1]}},
+    )
     _write(folder / "constant" / "transportProperties", {"transportModel": "Newtonian", "nu": spec.nu})
-    _write(folder / "constant" / "turbulenceProperties",
-           {"simulationType": "RAS", "RAS": {"RASModel": "kOmegaSST", "turbulence": True, "printCoeffs": True}})  # fmt: skip
+    _write(
+        folder / "constant" / "turbulenceProperties",
+        {"simulationType": "RAS", "RAS": {"RASModel": "kOmegaSST", "turbulence": True, "printCoeffs": True}},
+    )
     for name, (cls, entries) in _fields(spec).items():
         _write(folder / "0.orig" / name, entries, field_class=cls)
     (folder / "case.json").write_text(json.dumps(spec.describe(), indent=1) + "\n")
@@ -582,11 +652,12 @@ def openfoam_environment() -> None:
 
 def openfoam_missing() -> str | None:
     """Why OpenFOAM cannot run here (one line), or None."""
+    install = "install Debian's package: apt-get install openfoam"
     for tool in ("blockMesh", "snappyHexMesh", "simpleFoam", "decomposePar", "mpiexec"):
         if shutil.which(tool) is None:
-            return f"OpenFOAM is not installed ({tool} not found); install Debian's package: apt-get install openfoam"
+            return f"OpenFOAM is not installed ({tool} not found); {install}"
     if not Path(OPENFOAM_DIR, "etc", "controlDict").is_file():
-        return f"OpenFOAM's etc/controlDict is missing under {OPENFOAM_DIR}; install Debian's package: apt-get install openfoam"
+        return f"OpenFOAM's etc/controlDict is missing under {OPENFOAM_DIR}; {install}"
     return None
 
 
@@ -728,8 +799,15 @@ def run_case(spec: CaseSpec, folder, cores: int = 1) -> Result:
     except CaseError as exc:
         failure = str(exc)
     solved = time.monotonic()
-    result = read_result(spec, folder, cells=cells, cores=cores, mesh_seconds=meshed - start,
-                         solve_seconds=solved - meshed, failure=failure)  # fmt: skip
+    result = read_result(
+        spec,
+        folder,
+        cells=cells,
+        cores=cores,
+        mesh_seconds=meshed - start,
+        solve_seconds=solved - meshed,
+        failure=failure,
+    )
     (folder / "result.json").write_text(json.dumps(result.to_json(), indent=1) + "\n")
     return result
 
@@ -807,8 +885,9 @@ def converged_by_residuals(log) -> bool:
         return False
 
 
-def verdict(coefficients: np.ndarray, residuals: dict[str, float], failure: str | None = None,
-            quarter: bool = False) -> tuple[Convergence, np.ndarray]:  # fmt: skip
+def verdict(
+    coefficients: np.ndarray, residuals: dict[str, float], failure: str | None = None, quarter: bool = False
+) -> tuple[Convergence, np.ndarray]:
     """The convergence verdict of a coefficient history (n, 3) and the mean over the last
     SPREAD_WINDOW of the iterations:
     - diverged: the solver stopped with an error, or a coefficient is not finite or beyond
@@ -840,7 +919,10 @@ def verdict(coefficients: np.ndarray, residuals: dict[str, float], failure: str 
     if over:
         text = ", ".join(f"{names[i]}' spreads {spread[i]:.2e} (limit {limits[i]:.2e})" for i in over)
         return make("not converged", f"over the last {window} of {n} iterations {text}")
-    return make("converged", f"spread within {SPREAD_RELATIVE:.0%} (or {SPREAD_ABSOLUTE:g}) over the last {window} of {n} iterations")
+    return make(
+        "converged",
+        f"spread within {SPREAD_RELATIVE:.0%} (or {SPREAD_ABSOLUTE:g}) over the last {window} of {n} iterations",
+    )
 
 
 def read_y_plus(folder) -> dict[str, dict[str, float]]:
@@ -866,8 +948,16 @@ def openfoam_version() -> str:
     return f"OpenFOAM {match.group(1)}" if match else "OpenFOAM"
 
 
-def read_result(spec: CaseSpec, folder, *, cells: int, cores: int, mesh_seconds: float, solve_seconds: float,
-                failure: str | None = None) -> Result:  # fmt: skip
+def read_result(
+    spec: CaseSpec,
+    folder,
+    *,
+    cells: int,
+    cores: int,
+    mesh_seconds: float,
+    solve_seconds: float,
+    failure: str | None = None,
+) -> Result:
     """The Result of a solved case folder: forces, coefficients and the convergence verdict."""
     folder = Path(folder)
     residuals = final_residuals(folder / "log.simpleFoam")
@@ -883,10 +973,16 @@ def read_result(spec: CaseSpec, folder, *, cells: int, cores: int, mesh_seconds:
         if body is spec.body:
             measured = history / coefficient_scale(spec, body)
         else:
-            window_mean = history[-max(1, int(round(SPREAD_WINDOW * len(history)))) :].mean(axis=0) if len(history) else None
-            forces[body.patch] = dict(zip(("X", "Y", "N"), map(float, window_mean), strict=True)) if window_mean is not None else {}
+            window_mean = (
+                history[-max(1, int(round(SPREAD_WINDOW * len(history)))) :].mean(axis=0) if len(history) else None
+            )
+            forces[body.patch] = (
+                dict(zip(("X", "Y", "N"), map(float, window_mean), strict=True)) if window_mean is not None else {}
+            )
     convergence, mean = verdict(measured, residuals, failure, spec.quarter)
-    forces = {spec.body.patch: dict(zip(("X", "Y", "N"), map(float, mean * coefficient_scale(spec, spec.body)), strict=True))} | forces
+    forces = {
+        spec.body.patch: dict(zip(("X", "Y", "N"), map(float, mean * coefficient_scale(spec, spec.body)), strict=True))
+    } | forces
     return Result(
         case_id=spec.case_id,
         kind=spec.kind,

@@ -182,7 +182,12 @@ def grid_convergence(fine: float, medium: float, coarse: float, ratio: float) ->
     observed order p, Richardson extrapolation, relative error and GCI_fine. p is NaN for
     oscillatory or non-monotone convergence (then GCI uses p = 2 is not claimed: NaN)."""
     e21, e32 = medium - fine, coarse - medium
-    out = {"p": math.nan, "extrapolated": math.nan, "error_fine": abs(e21 / fine) if fine else math.nan, "gci_fine": math.nan}
+    out = {
+        "p": math.nan,
+        "extrapolated": math.nan,
+        "error_fine": abs(e21 / fine) if fine else math.nan,
+        "gci_fine": math.nan,
+    }
     if e21 == 0 or e32 == 0 or e32 / e21 <= 0:
         return out  # oscillatory or converged to round-off: Celik's p is undefined
     p = abs(math.log(abs(e32 / e21))) / math.log(ratio)
@@ -205,12 +210,22 @@ def validation_rows(found: list[rans.Result]) -> dict:
         if r.kind == "suboff" and r.case_id.startswith("suboff-psi0.00"):
             x = r.forces["suboff"]["X"]
             err = _rel(x, rans.TABLE_3_1_EFD_X)
-            resistance.append({
-                "case": r.case_id, "level": r.level, "wall_function": r.wall_function, "y_plus_target": r.y_plus_target,
-                "y_plus_mean": r.y_plus.get("suboff", {}).get("mean", math.nan), "cells": r.cells,
-                "minutes": r.wall_seconds / 60, "X_N": x, "Xp": r.coefficients["X"], "error": err,
-                "status": r.convergence.status, "meets": abs(err) <= RESISTANCE_TARGET and r.convergence.usable,
-            })  # fmt: skip
+            resistance.append(
+                {
+                    "case": r.case_id,
+                    "level": r.level,
+                    "wall_function": r.wall_function,
+                    "y_plus_target": r.y_plus_target,
+                    "y_plus_mean": r.y_plus.get("suboff", {}).get("mean", math.nan),
+                    "cells": r.cells,
+                    "minutes": r.wall_seconds / 60,
+                    "X_N": x,
+                    "Xp": r.coefficients["X"],
+                    "error": err,
+                    "status": r.convergence.status,
+                    "meets": abs(err) <= RESISTANCE_TARGET and r.convergence.usable,
+                }
+            )
     gci = None
     levels = [by_id.get(f"suboff-psi0.00-{lv}") for lv in ("fine", "medium", "coarse")]
     if all(levels):
@@ -224,12 +239,22 @@ def validation_rows(found: list[rans.Result]) -> dict:
         ours = np.array([r.coefficients[k] for k in "XYN"]) * 1e3
         errors = ours / np.array(efd) - 1.0
         checked = [0, 2] + ([1] if psi in Y_TARGET_ANGLES else [])
-        drift.append({
-            "case": r.case_id, "psi": psi, "ours": ours.tolist(), "efd": list(efd), "thesis_cfd": cfd.tolist(),
-            "error": errors.tolist(), "cells": r.cells, "minutes": r.wall_seconds / 60, "status": r.convergence.status,
-            "meets": bool(all(abs(errors[i]) <= DRIFT_TARGET for i in checked) and r.convergence.usable)
-                     if psi in DRIFT_ANGLES else None,
-        })  # fmt: skip
+        drift.append(
+            {
+                "case": r.case_id,
+                "psi": psi,
+                "ours": ours.tolist(),
+                "efd": list(efd),
+                "thesis_cfd": cfd.tolist(),
+                "error": errors.tolist(),
+                "cells": r.cells,
+                "minutes": r.wall_seconds / 60,
+                "status": r.convergence.status,
+                "meets": bool(all(abs(errors[i]) <= DRIFT_TARGET for i in checked) and r.convergence.usable)
+                if psi in DRIFT_ANGLES
+                else None,
+            }
+        )
     return {"resistance": resistance, "gci": gci, "drift": drift}
 
 
@@ -238,11 +263,20 @@ def report_rows(found: list[rans.Result]) -> list[list[str]]:
     rows = []
     for r in sorted(found, key=lambda r: r.case_id):
         c = r.coefficients
-        rows.append([
-            r.case_id, r.convergence.status, f"{r.cells:,}", f"{r.wall_seconds / 60:.1f}", str(r.cores),
-            f"{r.convergence.iterations}", f"{c['X']:.4e}", f"{c['Y']:.4e}", f"{c['N']:.4e}",
-            f"{r.y_plus.get(r.case_id.startswith('suboff') and 'suboff' or 'uuv', {}).get('mean', math.nan):.0f}",
-        ])  # fmt: skip
+        rows.append(
+            [
+                r.case_id,
+                r.convergence.status,
+                f"{r.cells:,}",
+                f"{r.wall_seconds / 60:.1f}",
+                str(r.cores),
+                f"{r.convergence.iterations}",
+                f"{c['X']:.4e}",
+                f"{c['Y']:.4e}",
+                f"{c['N']:.4e}",
+                f"{r.y_plus.get(r.case_id.startswith('suboff') and 'suboff' or 'uuv', {}).get('mean', math.nan):.0f}",
+            ]
+        )
     return rows
 
 

@@ -1,0 +1,251 @@
+"""The RANS fidelity (common/hydro/rans*.py, `nearsub cfd`; docs/hydro/rans/README.md).
+
+Unit tests need no OpenFOAM. `test_smoke_case` meshes and solves a coarse SUBOFF on 2 cores end to
+end (about 15-40 s); the full validation (hours) runs with `pytest -m cfd`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from conftest import nearsub
+from nearsub.common.hydro import rans, rans_campaign
+from nearsub.common.hydro.rans_geometry import Body, enclosed_volume, open_edges, read_stl, write_stl
+from nearsub.common.physics.hull import SUBOFF_SCALE, suboff_properties
+
+DATA = Path(__file__).parent / "data" / "rans"
+
+
+def _foam(path):
+    from foamlib import FoamFile
+
+    return FoamFile(path)
+
+
+# --- geometry ------------------------------------------------------------------------------------
+
+
+def test_suboff_stl_is_closed_and_matches_the_profile(tmp_path):
+    body = Body("suboff", "suboff-model", rans.SUBOFF_MODEL_LENGTH, rans.SUBOFF_MODEL_DIAMETER)
+    triangles = body.triangles()
+    assert open_edges(triangles) == 0
+    volume = suboff_properties().volume / SUBOFF_SCALE**3  # the profile's own volume at model scale
+    assert enclosed_volume(triangles) == pytest.approx(volume, rel=2e-3)
+    lo, hi = triangles.reshape(-1, 3).min(axis=0), triangles.reshape(-1, 3).max(axis=0)
+    assert hi[0] - lo[0] == pytest.approx(4.3561, rel=1e-4)  # Groves, Huang & Chang (1989)
+    assert hi[1] - lo[1] == pytest.approx(0.508, rel=2e-3)
+    write_stl(tmp_path / "s.stl", triangles, "suboff")
+    assert np.allclose(read_stl(tmp_path / "s.stl"), triangles, atol=1e-6)
+    # No vertex on a symmetry plane (snappyHexMesh misses intersections in a facet's plane).
+    assert np.min(np.abs(triangles[..., 2][np.abs(triangles[..., 2]) > 0])) > 1e-4
+
+
+def test_placed_uuv_ends_follow_its_heading():
+    body = Body("uuv", "explorer", 4.0, 0.5, x=10.0, y=7.0, psi=math.radians(5.0))
+    bow, stern = body.ends()
+    axis = (bow - stern) / np.linalg.norm(bow - stern)
+    assert axis[:2] == pytest.approx([math.cos(math.radians(5)), math.sin(math.radians(5))], abs=1e-9)
+    assert np.linalg.norm(bow - stern) == pytest.approx(4.0, rel=1e-6)
+    assert open_edges(body.triangles(80, 24)) == 0
+
+
+# --- case dictionaries ---------------------------------------------------------------------------
+
+
+def test_suboff_case_dictionaries(tmp_path):
+    spec = rans.suboff_case(0.0, "coarse")
+    folder = rans.write_case(spec, tmp_path / "c", cores=2)
+    control = _foam(folder / "system/controlDict")
+    forces = control["functions"]["forces_suboff"]
+    assert forces["type"] == "forces" and list(forces["patches"]) == ["suboff"]
+    assert forces["rhoInf"] == pytest.approx(997.0)  # thesis section 3.2
+    assert control["application"] == "simpleFoam"
+    blocks = _foam(folder / "system/blockMeshDict")
+    patches = [p[0] for p in blocks["boundary"]]
+    assert "symmetryY" in patches and "symmetryZ" in patches  # quarter domain at zero drift
+    assert _foam(folder / "system/decomposeParDict")["method"] == "hierarchical"
+    layers = _foam(folder / "system/snappyHexMeshDict")["addLayersControls"]
+    assert layers["firstLayerThickness"] == pytest.approx(rans.first_layer_thickness(spec), rel=1e-3)
+    assert layers["layers"]["suboff"]["nSurfaceLayers"] == rans.LAYERS
+    turbulence = _foam(folder / "constant/turbulenceProperties")
+    assert turbulence["RAS"]["RASModel"] == "kOmegaSST"
+    u = _foam(folder / "0.orig/U")
+    assert np.allclose(u["internalField"], [-3.05, 0.0, 0.0])  # uniform start, stream -x
+    assert _foam(folder / "0.orig/nut")["boundaryField"]["suboff"]["type"] == "nutkWallFunction"
+    assert rans.load_spec(folder) == spec
+
+
+def test_drift_case_is_a_half_domain_with_the_chosen_wall_function(tmp_path):
+    spec = rans.suboff_case(4.07, "medium", "spalding", 30.0)
+    assert not spec.quarter and spec.case_id == "suboff-psi4.07-medium-spalding-yp30"
+    folder = rans.write_case(spec, tmp_path / "d", cores=1)
+    patches = [p[0] for p in _foam(folder / "system/blockMeshDict")["boundary"]]
+    assert "symmetryY" not in patches and "sideNear" in patches
+    assert _foam(folder / "0.orig/nut")["boundaryField"]["suboff"]["type"] == "nutUSpaldingWallFunction"
+    # A smaller y+ gives a thinner first layer.
+    assert rans.first_layer_thickness(spec) == pytest.approx(rans.first_layer_thickness(rans.suboff_case(4.07)) * 0.6)
+
+
+def test_mesh_levels_refine_by_a_constant_ratio():
+    sizes = [rans.domain(rans.suboff_case(0.0, lv)).background for lv in ("coarse", "medium", "fine")]
+    assert sizes[0] / sizes[1] == pytest.approx(math.sqrt(2)) and sizes[1] / sizes[2] == pytest.approx(math.sqrt(2))
+    levels = {rans.domain(rans.suboff_case(0.0, lv)).surface_levels for lv in ("coarse", "medium", "fine")}
+    assert len(levels) == 1  # same levels, so every cell is refined by the same ratio
+
+
+def test_two_body_case_places_the_uuv_from_the_row(tmp_path):
+    spec = rans.two_body_case([0.2, 0.08, 3.5, 2.0, 20.0, 8.0], "coarse")
+    uuv, sub = spec.bodies
+    assert uuv.x == pytest.approx(0.2 * 88.86, rel=1e-3) and uuv.y == pytest.approx(0.08 * 88.86, rel=1e-3)
+    assert uuv.psi == pytest.approx(math.radians(2.0)) and uuv.length == pytest.approx(8 * uuv.diameter)
+    assert spec.rho == 1025.0 and spec.speed == pytest.approx(3.5 * 1852 / 3600)
+    folder = rans.write_case(spec, tmp_path / "t")
+    functions = _foam(folder / "system/controlDict")["functions"]
+    assert np.allclose(functions["forces_uuv"]["CofR"], [uuv.x, uuv.y, 0.0], atol=1e-6)
+    assert "forces_submarine" in functions
+
+
+# --- forces, nondimensionalisation, verdict ------------------------------------------------------
+
+
+def test_force_parsing_of_a_recorded_history(tmp_path):
+    shutil.copytree(DATA / "forces_suboff", tmp_path / "postProcessing" / "forces_suboff")
+    iterations, force, moment = rans.force_history(tmp_path, "suboff")
+    assert len(iterations) == 40 and iterations[0] == 1 and iterations[-1] == 40
+    assert force[-1] == pytest.approx([-2.00272276e01, 2.53772751e02, 2.53754807e02])
+    assert moment[0] == pytest.approx([5.48606343e-03, 4.43211327e02, -4.27766784e02])
+
+
+def test_half_and_quarter_domains_scale_the_forces():
+    half = rans.suboff_case(4.07)
+    force = np.array([[-40.0, 3.0, 7.0]])
+    moment = np.array([[1.0, 2.0, 5.0]])
+    psi = math.radians(4.07)
+    xyz = rans.body_axes_history(half, half.body, force, moment)[0]
+    assert xyz[0] == pytest.approx(2 * (-40 * math.cos(psi) + 3 * math.sin(psi)))
+    assert xyz[1] == pytest.approx(2 * (40 * math.sin(psi) + 3 * math.cos(psi)))
+    assert xyz[2] == pytest.approx(10.0)
+    quarter = rans.suboff_case(0.0)
+    assert rans.body_axes_history(quarter, quarter.body, force, moment)[0] == pytest.approx([-160.0, 0.0, 0.0])
+
+
+def test_nondimensionalisation_reproduces_table_3_1():
+    spec = rans.suboff_case(0.0)
+    x_prime = rans.TABLE_3_1_EFD_X / rans.coefficient_scale(spec, spec.body)[0]
+    assert x_prime == pytest.approx(rans.TABLE_3_1_EFD_XPRIME, rel=5e-3)  # -87.4 N <-> -9.95e-4
+
+
+def _history(n=300, final=(-1e-3, 4e-4, 9e-4), wobble=0.0):
+    t = np.arange(n)[:, None]
+    return np.array(final) * (1 - np.exp(-t / 30.0)) + wobble * np.sin(t / 3.0)
+
+
+def test_verdict_converged_not_converged_diverged():
+    ok, mean = rans.verdict(_history(), {"p": 1e-5})
+    assert ok.status == "converged" and ok.usable and mean == pytest.approx([-1e-3, 4e-4, 9e-4], rel=1e-3)
+    wobbly, _ = rans.verdict(_history(wobble=2e-5), {})
+    assert wobbly.status == "not converged" and not wobbly.usable and "X'" in wobbly.reason
+    crashed, _ = rans.verdict(_history(), {}, failure="simpleFoam failed (exit 1): Maximum number of iterations")
+    assert crashed.status == "diverged" and "simpleFoam" in crashed.reason
+    history = _history()
+    history[-1, 1] = np.nan
+    assert rans.verdict(history, {})[0].status == "diverged"
+    history[-1, 1] = 3.0
+    assert rans.verdict(history, {})[0].status == "diverged"
+    assert rans.verdict(np.zeros((0, 3)), {})[0].status == "diverged"
+
+
+def test_grid_convergence_index_of_a_second_order_sequence():
+    r, exact = math.sqrt(2), -1.0e-3
+    f = [exact + 4e-5 * h**2 for h in (1.0, r, 2.0)]  # fine, medium, coarse
+    g = rans_campaign.grid_convergence(*f, ratio=r)
+    assert g["p"] == pytest.approx(2.0) and g["extrapolated"] == pytest.approx(exact)
+    assert g["gci_fine"] == pytest.approx(1.25 * abs((f[1] - f[0]) / f[0]) / (r**2 - 1))
+    assert math.isnan(rans_campaign.grid_convergence(1.0, 2.0, 1.5, r)["p"])  # oscillatory
+
+
+# --- bad input -----------------------------------------------------------------------------------
+
+
+def test_bad_configurations_are_refused():
+    with pytest.raises(rans.CaseError, match="clearance"):
+        rans.two_body_case([0.0, 0.05, 3.5, 0.0, 20.0, 8.0])  # inside the submarine
+    with pytest.raises(rans.CaseError, match="--level"):
+        rans.suboff_case(0.0, "huge")
+    with pytest.raises(rans.CaseError, match="u_kn"):
+        rans.two_body_case([0.0, 0.08, 0.0, 0.0, 20.0, 8.0])
+    with pytest.raises(rans.CaseError, match="--suite"):
+        rans_campaign.suite("everything")
+
+
+def test_cli_bad_input_is_one_line_exit_2(tmp_path):
+    touching = nearsub("cfd", "case", "--config", "0", "0.05", "3.5", "0", "20", "8", "-o", str(tmp_path / "x"))
+    assert touching.returncode == 2 and "clearance" in touching.stderr and "Traceback" not in touching.stderr
+    assert len(touching.stderr.strip().splitlines()) == 1
+    (tmp_path / "full").mkdir()
+    (tmp_path / "full" / "keep").write_text("mine")
+    busy = nearsub("cfd", "case", "-o", str(tmp_path / "full"))
+    assert busy.returncode == 2 and "not empty" in busy.stderr and (tmp_path / "full" / "keep").read_text() == "mine"
+    commit = nearsub("cfd", "run", "--commit", "--work-dir", str(tmp_path / "w"))
+    assert commit.returncode == 2 and "--export" in commit.stderr
+
+
+def test_missing_openfoam_is_one_line(monkeypatch):
+    monkeypatch.setenv("PATH", "/nonexistent")
+    assert "apt-get install openfoam" in rans.openfoam_missing()
+
+
+# --- end to end ----------------------------------------------------------------------------------
+
+
+def _need_openfoam():
+    missing = rans.openfoam_missing()
+    if missing and shutil.which("apt-get") is None:
+        pytest.skip(f"{missing}, and apt-get is not available to install it")
+    assert missing is None, f"{missing} (tools/test.sh installs it)"
+
+
+def test_smoke_case(tmp_path):
+    """Mesh, solve and read a coarse SUBOFF on 2 cores: the resistance has the sign and order of
+    thesis table 3.1's EFD (X' = -9.95e-4), the case converges, and the artefacts are small."""
+    _need_openfoam()
+    spec = rans_campaign.suite("smoke")[0]
+    outcomes = rans_campaign.run_cases([spec], tmp_path / "work", cores=2, export_dir=tmp_path / "kept")
+    assert "error" not in outcomes[0], outcomes[0]
+    result = rans.Result.from_json(outcomes[0])
+    assert result.convergence.status == "converged", result.convergence.reason
+    assert 5_000 < result.cells < 200_000
+    assert -2e-3 < result.coefficients["X"] < -5e-4  # EFD -9.95e-4 (thesis table 3.1)
+    assert result.forces["suboff"]["X"] == pytest.approx(result.coefficients["X"] * 0.5 * 997 * 3.05**2 * 4.3561**2)
+    assert result.convergence.residuals["p"] < 1e-2 and result.y_plus["suboff"]["mean"] > 0
+    kept = tmp_path / "kept" / spec.case_id
+    assert (kept / "postProcessing/forces_suboff/0/force.dat").is_file() and (kept / "system/controlDict").is_file()
+    assert not list(kept.rglob("polyMesh")) and not list(kept.rglob("*.stl"))
+    assert sum(f.stat().st_size for f in kept.rglob("*") if f.is_file()) < 2_000_000
+    # Finished: a second run skips it.
+    assert rans_campaign.run_cases([spec], tmp_path / "work", cores=2, export_dir=tmp_path / "kept") == []
+    report = nearsub("cfd", "report", "--from", str(tmp_path / "kept"), "--json")
+    assert json.loads(report.stdout)[0]["case_id"] == spec.case_id
+
+
+@pytest.mark.cfd
+def test_suboff_validation():
+    """The SUBOFF validation (hours on 2 cores): resistance within 2 % of thesis table 3.1's EFD
+    on the medium mesh, X' and N' within 10 % of table 3.2's EFD at 2.08, 4.07 and 6.03 deg, Y'
+    at 4.07 and 6.03. Reuses finished cases in NEARSUB_CFD_WORK_DIR (default ./cfd-runs)."""
+    _need_openfoam()
+    work = Path(os.environ.get("NEARSUB_CFD_WORK_DIR", "cfd-runs"))
+    rans_campaign.run_cases(rans_campaign.suite("suboff-validation"), work, cores=2)
+    table = rans_campaign.validation_rows(rans_campaign.results([work]))
+    medium = next(r for r in table["resistance"] if r["case"] == "suboff-psi0.00-medium")
+    assert medium["meets"], f"resistance {medium['X_N']:.1f} N, {medium['error']:+.1%} against EFD"
+    for row in table["drift"]:
+        if row["psi"] in rans_campaign.DRIFT_ANGLES:
+            assert row["meets"], f"drift {row['psi']}: errors {row['error']}"
