@@ -39,12 +39,12 @@ def suite(name: str) -> list[rans.CaseSpec]:
         return [
             rans.suboff_case(0.0, "medium"),
             *(rans.suboff_case(psi, "medium") for psi in DRIFT_ANGLES),
-            rans.suboff_case(0.0, "coarse"),
-            rans.suboff_case(0.0, "fine"),
+            rans.suboff_case(0.0, "medium", "spalding"),
             rans.suboff_case(0.0, "medium", "nutk", 30.0),
             rans.suboff_case(0.0, "medium", "nutk", 100.0),
-            rans.suboff_case(0.0, "medium", "spalding"),
             rans.suboff_case(0.0, "medium", "spalding", 10.0),
+            rans.suboff_case(0.0, "coarse"),
+            rans.suboff_case(0.0, "fine"),
             rans.two_body_case(TWO_BODY_CHECK, "medium"),
             *(rans.suboff_case(psi, "medium") for psi in MORE_DRIFT_ANGLES),
         ]
@@ -100,6 +100,7 @@ def export_artefacts(case_folder: Path, destination: Path) -> Path:
 def commit_artefacts(folder: Path, message: str, attempts: int = 30) -> bool:
     """`git add` and commit only `folder` in the repository that holds it (other staged work is
     left alone), retrying while another git command holds the index lock. False if git failed."""
+    folder = Path(folder).resolve()
     cwd = folder.parent
     for _ in range(attempts):
         add = subprocess.run(["git", "add", "--", str(folder)], cwd=cwd, capture_output=True, text=True)
