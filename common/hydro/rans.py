@@ -128,9 +128,13 @@ class CaseSpec:
         return out
 
 
-def _check_choice(name: str, value: str, choices) -> None:
-    if value not in choices:
-        raise CaseError(f"{name} {value!r}: choose one of {', '.join(choices)}")
+def _check_options(level: str, wall_function: str, y_plus: float) -> None:
+    """The mesh level, wall function and target y+ of any case."""
+    for name, value, choices in (("--level", level, MESH_LEVELS), ("--wall-function", wall_function, WALL_FUNCTIONS)):
+        if value not in choices:
+            raise CaseError(f"{name} {value!r}: choose one of {', '.join(choices)}")
+    if not (math.isfinite(y_plus) and 1.0 <= y_plus <= 300.0):
+        raise CaseError(f"--y-plus {y_plus!r}: wall functions need a first-cell y+ of about 1 to 300")
 
 
 def _case_suffix(level: str, wall_function: str, y_plus: float) -> str:
@@ -151,12 +155,9 @@ def suboff_case(
 ) -> CaseSpec:
     """The model-scale SUBOFF bare hull alone at drift angle psi_deg in the tow-tank conditions of
     thesis tables 3.1/3.2 (3.05 m/s, fresh water, nu = 8.899e-4/997): the validation case."""
-    _check_choice("--level", level, MESH_LEVELS)
-    _check_choice("--wall-function", wall_function, WALL_FUNCTIONS)
+    _check_options(level, wall_function, y_plus)
     if not (math.isfinite(psi_deg) and 0.0 <= psi_deg <= 20.0):
         raise CaseError(f"--psi {psi_deg!r}: the validation covers drift angles 0 to 20 deg")
-    if not (math.isfinite(y_plus) and 1.0 <= y_plus <= 300.0):
-        raise CaseError(f"--y-plus {y_plus!r}: wall functions need a first-cell y+ of about 1 to 300")
     hull = Body("suboff", "suboff-model", SUBOFF_MODEL_LENGTH, SUBOFF_MODEL_DIAMETER, psi=math.radians(psi_deg))
     return CaseSpec(
         case_id=f"suboff-psi{psi_deg:.2f}" + _case_suffix(level, wall_function, y_plus),
@@ -178,8 +179,7 @@ def two_body_case(
 ) -> CaseSpec:
     """The full-scale submarine and the Explorer UUV at a configuration row [R_long, R_lat, u_kn,
     psi_deg, d_ratio, ld_ratio] (thesis table 4.2), in sea water (docs/hydro/README.md)."""
-    _check_choice("--level", level, MESH_LEVELS)
-    _check_choice("--wall-function", wall_function, WALL_FUNCTIONS)
+    _check_options(level, wall_function, y_plus)
     row = np.asarray(row, dtype=float).reshape(-1)
     if row.shape != (len(CONFIGURATION),) or not np.all(np.isfinite(row)):
         raise CaseError(f"configuration {row.tolist()}: needs 6 finite values {', '.join(CONFIGURATION)}")

@@ -180,8 +180,8 @@ def results(folders: Iterable[Path]) -> list[rans.Result]:
 def grid_convergence(fine: float, medium: float, coarse: float, ratio: float) -> dict[str, float]:
     """Grid convergence index of the fine solution from three meshes with a constant refinement
     ratio (Celik et al. 2008, J. Fluids Eng. 130, 078001, eqs. 1-7; Roache 1998, safety factor 1.25):
-    observed order p, Richardson extrapolation, relative error and GCI_fine. p is NaN for
-    oscillatory or non-monotone convergence (then GCI uses p = 2 is not claimed: NaN)."""
+    observed order p, Richardson extrapolation, relative error and GCI_fine. For oscillatory
+    convergence (or differences of zero) p is undefined and p, the extrapolation and GCI are NaN."""
     e21, e32 = medium - fine, coarse - medium
     out = {
         "p": math.nan,
