@@ -84,7 +84,7 @@ class MeshLevel:
 
 
 MESH_LEVELS = {
-    "smoke": MeshLevel("smoke", 1.0, 150),  # the coarse background, one surface level less
+    "smoke": MeshLevel("smoke", 1.0, 100),  # the coarse background, one surface level less
     "coarse": MeshLevel("coarse", 1.0, 600),
     "medium": MeshLevel("medium", math.sqrt(2.0), 800),
     "fine": MeshLevel("fine", 2.0, 1000),
