@@ -124,14 +124,16 @@ def validate_command(args) -> int:
         "Y' within 10 % at 4.07 and 6.03 deg)"
     )
     print(
-        "| psi | X' | Y' | N' | EFD X' | Y' | N' | err X' | Y' | N' | thesis CFD X' | Y' | N' | cells | min | verdict |"
+        "| case | psi | X' | Y' | N' | EFD X' | Y' | N' | err X' | Y' | N' | thesis CFD X' | Y' | N' "
+        "| cells | min | verdict |"
     )
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in table["drift"]:
         o, e, err, c = r["ours"], r["efd"], r["error"], r["thesis_cfd"]
         meets = {True: ", meets", False: ", misses", None: ""}[r["meets"]]
         print(
-            f"| {r['psi']:.2f} | {o[0]:.3f} | {o[1]:.3f} | {o[2]:.3f} | {e[0]:.3f} | {e[1]:.3f} | {e[2]:.3f} | "
+            f"| {r['case']} | {r['psi']:.2f} | {o[0]:.3f} | {o[1]:.3f} | {o[2]:.3f} | "
+            f"{e[0]:.3f} | {e[1]:.3f} | {e[2]:.3f} | "
             f"{err[0]:+.1%} | {err[1]:+.1%} | {err[2]:+.1%} | {c[0]:.3f} | {c[1]:.3f} | {c[2]:.3f} | "
             f"{r['cells']:,} | {r['minutes']:.1f} | {r['status']}{meets} |"
         )
