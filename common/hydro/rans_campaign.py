@@ -46,6 +46,7 @@ def suite(name: str) -> list[rans.CaseSpec]:
             rans.suboff_case(0.0, "coarse"),
             rans.suboff_case(0.0, "fine"),
             rans.two_body_case(TWO_BODY_CHECK, "medium"),
+            *(rans.suboff_case(psi, "medium", "spalding") for psi in DRIFT_ANGLES),
             *(rans.suboff_case(psi, "medium") for psi in MORE_DRIFT_ANGLES),
         ]
     if name == "smoke":
