@@ -10,6 +10,7 @@ import json
 import math
 import os
 import shutil
+import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -256,3 +257,25 @@ def test_suboff_validation():
     for row in table["drift"]:
         if row["psi"] in rans_campaign.DRIFT_ANGLES:
             assert row["meets"], f"drift {row['psi']}: errors {row['error']}"
+
+
+def test_commit_artefacts_commits_only_its_folder(tmp_path, monkeypatch):
+    """The runner commits a finished case's folder alone: work staged by someone else stays staged."""
+    git = ["git", "-c", "user.name=t", "-c", "user.email=t@t"]
+    subprocess.run([*git, "init", "-q", str(tmp_path)], check=True)
+    subprocess.run([*git, "commit", "-q", "--allow-empty", "-m", "start"], cwd=tmp_path, check=True)
+    (tmp_path / "other.txt").write_text("staged by someone else")
+    subprocess.run([*git, "add", "other.txt"], cwd=tmp_path, check=True)
+    case = tmp_path / "cases" / "suboff-psi0.00-medium"
+    case.mkdir(parents=True)
+    (case / "result.json").write_text("{}")
+    for who in ("AUTHOR", "COMMITTER"):
+        monkeypatch.setenv(f"GIT_{who}_NAME", "t")
+        monkeypatch.setenv(f"GIT_{who}_EMAIL", "t@t")
+    assert rans_campaign.commit_artefacts(case, "rans: a case")
+
+    def names(*args):
+        return subprocess.run(["git", *args], cwd=tmp_path, capture_output=True, text=True).stdout.split()
+
+    assert names("show", "--name-only", "--format=") == ["cases/suboff-psi0.00-medium/result.json"]
+    assert names("diff", "--cached", "--name-only") == ["other.txt"]
