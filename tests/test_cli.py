@@ -24,6 +24,7 @@ LIGHT_TOOLS = (
     "envelope",
     "validate",
     "foxglove",
+    "cfd",
 )
 
 
