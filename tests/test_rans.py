@@ -111,6 +111,12 @@ def test_two_body_case_places_the_uuv_from_the_row(tmp_path):
     functions = _foam(folder / "system/controlDict")["functions"]
     assert np.allclose(functions["forces_uuv"]["CofR"], [uuv.x, uuv.y, 0.0], atol=1e-6)
     assert "forces_submarine" in functions
+    layers = _foam(folder / "system/snappyHexMeshDict")["addLayersControls"]["layers"]
+    assert layers["uuv"]["firstLayerThickness"] == pytest.approx(rans.first_layer_thickness(spec), rel=1e-3)
+    assert layers["submarine"]["firstLayerThickness"] > 5 * layers["uuv"]["firstLayerThickness"]  # y+ 300
+    # The UUV is thinner than a background cell: a shell at its surface level carries it there.
+    shells = _foam(folder / "system/snappyHexMeshDict")["castellatedMeshControls"]["refinementRegions"]
+    assert shells["uuv"]["levels"][0][1] == rans.domain(spec).surface_levels[0]
 
 
 # --- forces, nondimensionalisation, verdict ------------------------------------------------------

@@ -57,6 +57,10 @@ INFLOW_VISCOSITY_RATIO = 10.0
 LAYERS = 8
 LAYER_EXPANSION = 1.25
 WALL_FUNCTIONS = {"nutk": "nutkWallFunction", "spalding": "nutUSpaldingWallFunction"}
+# The submarine beside a UUV is not measured: its first cell sits at y+ 300, still inside the log
+# layer of its boundary layer (about 1 m thick at the stern at full scale, thesis (3.10)), so that
+# its 8 layers reach its surface cells (0.3-0.5 m) without cells a hundred times smaller beside them.
+OTHER_BODY_Y_PLUS = 300.0
 
 # Convergence verdict: the spread (max - min) of each coefficient over the last 20 % of the
 # iterations must stay within 1 % of its mean or 5e-6, whichever is larger (5e-6 is 4 % of the
@@ -219,12 +223,15 @@ def two_body_case(
 # --- the case's numbers ------------------------------------------------------------------------
 
 
-def first_layer_thickness(spec: CaseSpec) -> float:
-    """First boundary-layer cell height [m] for the target y+ at its centre: u_tau from the ITTC-57
-    mean friction coefficient of the measured body, u_tau = U sqrt(C_F / 2)."""
-    cf = float(ittc57(spec.speed * spec.body.length / spec.nu))
+def first_layer_thickness(spec: CaseSpec, body: Body | None = None) -> float:
+    """First boundary-layer cell height [m] of a body (default: the measured one) for its target
+    y+ at the cell centre: the case's y+ on the measured body, OTHER_BODY_Y_PLUS on the others;
+    u_tau = U sqrt(C_F / 2) from the body's ITTC-57 mean friction coefficient."""
+    body = body or spec.body
+    y_plus = spec.y_plus if body is spec.body else OTHER_BODY_Y_PLUS
+    cf = float(ittc57(spec.speed * body.length / spec.nu))
     u_tau = spec.speed * math.sqrt(0.5 * cf)
-    return 2.0 * spec.y_plus * spec.nu / u_tau
+    return 2.0 * y_plus * spec.nu / u_tau
 
 
 @dataclass(frozen=True)
@@ -332,11 +339,19 @@ def _snappy(spec: CaseSpec, dom: Domain) -> dict:
         # One level more where the surface curves more than 30 deg within a cell (the tips).
         surfaces[body.patch] = {"level": [level, level + 1], "patchInfo": {"type": "wall"}}
         near = body.diameter
-        regions[body.patch] = {
-            "mode": "distance",
-            "levels": [[0.5 * near, max(level - 1, 0)], [2 * near, max(level - 2, 0)]],
+        shells = [[0.5 * near, max(level - 1, 0)], [2 * near, max(level - 2, 0)]]
+        if body.diameter < dom.background:
+            # Refinement by surface intersection loses a body thinner than a background cell as
+            # the cells shrink (edges stop cutting it); a thin shell at the surface level carries
+            # it to its level.
+            shells.insert(0, [0.15 * near, level])
+        regions[body.patch] = {"mode": "distance", "levels": shells}
+        first = first_layer_thickness(spec, body)
+        layers[body.patch] = {
+            "nSurfaceLayers": LAYERS,
+            "firstLayerThickness": float(f"{first:.4g}"),
+            "minThickness": float(f"{0.1 * first:.4g}"),
         }
-        layers[body.patch] = {"nSurfaceLayers": LAYERS}
     # The measured body's wake: one level below its surface level, half a length behind it, and
     # a box round it two levels below.
     body, level = spec.body, dom.surface_levels[0]
