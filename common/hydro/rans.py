@@ -900,6 +900,15 @@ def converged_by_residuals(log) -> bool:
         return False
 
 
+def spread_window(iterations: int) -> int:
+    """The last iterations a case's value and spread are taken over (SPREAD_WINDOW of them)."""
+    return max(1, int(round(SPREAD_WINDOW * iterations)))
+
+
+def _named(values) -> dict[str, float]:
+    return dict(zip(("X", "Y", "N"), map(float, values), strict=True))
+
+
 def verdict(
     coefficients: np.ndarray, residuals: dict[str, float], failure: str | None = None, quarter: bool = False
 ) -> tuple[Convergence, np.ndarray]:
@@ -911,12 +920,12 @@ def verdict(
       (or SPREAD_ABSOLUTE, whichever is larger);
     - converged otherwise."""
     n = len(coefficients)
-    window = max(1, int(round(SPREAD_WINDOW * n)))
+    window = spread_window(n)
     tail = coefficients[-window:] if n else np.full((1, 3), np.nan)
     mean = tail.mean(axis=0)
     spread = tail.max(axis=0) - tail.min(axis=0)
     names = ("X", "Y", "N")
-    spreads = {k: float(v) for k, v in zip(names, spread, strict=True)}
+    spreads = _named(spread)
 
     def make(status, reason):
         return Convergence(status, reason, n, window, spreads, residuals), mean
@@ -976,28 +985,18 @@ def read_result(
     """The Result of a solved case folder: forces, coefficients and the convergence verdict."""
     folder = Path(folder)
     residuals = final_residuals(folder / "log.simpleFoam")
-    forces: dict[str, dict[str, float]] = {}
-    measured = np.full((0, 3), np.nan)
-    window_mean = None
+    histories = {}
     for body in spec.bodies:
         try:
             _, force, moment = force_history(folder, body.patch)
         except (CaseError, OSError):
             force = moment = np.zeros((0, 3))
-        history = body_axes_history(spec, body, force, moment)
-        if body is spec.body:
-            measured = history / coefficient_scale(spec, body)
-        else:
-            window_mean = (
-                history[-max(1, int(round(SPREAD_WINDOW * len(history)))) :].mean(axis=0) if len(history) else None
-            )
-            forces[body.patch] = (
-                dict(zip(("X", "Y", "N"), map(float, window_mean), strict=True)) if window_mean is not None else {}
-            )
-    convergence, mean = verdict(measured, residuals, failure, spec.quarter)
-    forces = {
-        spec.body.patch: dict(zip(("X", "Y", "N"), map(float, mean * coefficient_scale(spec, spec.body)), strict=True))
-    } | forces
+        histories[body.patch] = body_axes_history(spec, body, force, moment)
+    measured = histories.pop(spec.body.patch)
+    scale = coefficient_scale(spec, spec.body)
+    convergence, mean = verdict(measured / scale, residuals, failure, spec.quarter)
+    forces = {spec.body.patch: _named(mean * scale)}
+    forces |= {patch: _named(h[-spread_window(len(h)) :].mean(axis=0)) for patch, h in histories.items() if len(h)}
     return Result(
         case_id=spec.case_id,
         kind=spec.kind,
@@ -1008,7 +1007,7 @@ def read_result(
         cores=int(cores),
         mesh_seconds=float(mesh_seconds),
         solve_seconds=float(solve_seconds),
-        coefficients=dict(zip(("X", "Y", "N"), map(float, mean), strict=True)),
+        coefficients=_named(mean),
         forces=forces,
         convergence=convergence,
         y_plus=read_y_plus(folder),
