@@ -1,6 +1,6 @@
 """`nearsub cfd case|run|validate|report`: the RANS fidelity on OpenFOAM (docs/hydro/rans/README.md).
 
-    nearsub cfd case --suboff --psi 4.07 -o ./suboff-4            # write one case folder
+    nearsub cfd case --psi 4.07 -o ./suboff-4                     # write one case folder (SUBOFF)
     nearsub cfd run --suite suboff-validation --cores 2 --work-dir ./cfd-runs \\
         --export docs/hydro/rans/cases --commit                    # resumable; --scheduler for Dask
     nearsub cfd validate --from docs/hydro/rans/cases             # thesis tables 3.1/3.2
@@ -61,7 +61,7 @@ def run_command(args) -> int:
     export_dir = output_folder(Path(args.export), "--export") if args.export else None
     if args.commit and export_dir is None:
         raise InputError("--commit: needs --export (the folder in the repository the artefacts go to)")
-    pending = [s.case_id for s in specs if rans_campaign.finished(s.case_id, work_dir, export_dir) is None]
+    pending = [s.case_id for s in rans_campaign.unfinished(specs, work_dir, export_dir)]
     print(
         f"{len(specs) - len(pending)} of {len(specs)} case(s) finished; running {len(pending)}: {', '.join(pending)}",
         flush=True,
@@ -78,9 +78,18 @@ def run_command(args) -> int:
             refused.append(case_id)
         print(result.line() + ("" if result.convergence.usable else f" ({result.convergence.reason})"), flush=True)
 
-    rans_campaign.run_cases(
-        specs, work_dir, args.cores, scheduler=args.scheduler, export_dir=export_dir, commit=args.commit, on_done=done
-    )
+    try:
+        rans_campaign.run_cases(
+            specs,
+            work_dir,
+            args.cores,
+            scheduler=args.scheduler,
+            export_dir=export_dir,
+            commit=args.commit,
+            on_done=done,
+        )
+    except OSError as exc:  # a scheduler that cannot be reached, a work folder that cannot be written
+        raise InputError(str(exc)) from None
     return 2 if refused else 0
 
 

@@ -76,6 +76,11 @@ def finished(case_id: str, work_dir: Path, export_dir: Path | None) -> rans.Resu
     return None
 
 
+def unfinished(specs: Iterable[rans.CaseSpec], work_dir: Path, export_dir: Path | None) -> list[rans.CaseSpec]:
+    """The cases still to run, in order."""
+    return [s for s in specs if finished(s.case_id, work_dir, export_dir) is None]
+
+
 def export_artefacts(case_folder: Path, destination: Path) -> Path:
     """Copy what is kept of a finished case: its dictionaries (system/, constant/ without the mesh
     and the STL, 0.orig/), the force histories (postProcessing/forces_*/), y+, the solver log's
@@ -146,7 +151,7 @@ def run_cases(
     from nearsub.common.runtime.processes import completed, task_client
 
     work_dir.mkdir(parents=True, exist_ok=True)
-    todo = [s for s in specs if finished(s.case_id, work_dir, export_dir) is None]
+    todo = unfinished(specs, work_dir, export_dir)
     jobs = [(s, str(work_dir / s.case_id), cores) for s in todo]
     out = []
     with task_client(None, scheduler) as client:
