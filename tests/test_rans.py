@@ -285,3 +285,14 @@ def test_commit_artefacts_commits_only_its_folder(tmp_path, monkeypatch):
 
     assert names("show", "--name-only", "--format=") == ["cases/suboff-psi0.00-medium/result.json"]
     assert names("diff", "--cached", "--name-only") == ["other.txt"]
+
+
+def test_a_rank_killed_by_a_floating_point_exception_is_named(tmp_path):
+    log = tmp_path / "log.simpleFoam"
+    log.write_text(
+        "Time = 12\n[vm:1] Signal: Floating point exception (8)\n"
+        "--------------------------------------------------------------------------\n"
+        "mpiexec noticed that process rank 1 with PID 0 on node vm exited on signal 8 (Floating point exception).\n"
+        "--------------------------------------------------------------------------\n"
+    )
+    assert rans._fatal_line(log) == "exited on signal 8 (Floating point exception)."

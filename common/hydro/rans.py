@@ -745,14 +745,18 @@ def _run(case, cmd: list[str], cores: int, parallel: bool) -> None:
 
 
 def _fatal_line(log: Path) -> str:
-    """The first line after OpenFOAM's 'FOAM FATAL' banner, or the log's last line."""
+    """What stopped a tool: the line after OpenFOAM's 'FOAM FATAL' banner, or a signal an MPI rank
+    died of (a floating-point exception when the solution blew up), or the log's last words."""
     try:
-        lines = [ln.strip() for ln in log.read_text(errors="replace").splitlines() if ln.strip()]
+        lines = [ln.strip() for ln in log.read_text(errors="replace").splitlines() if ln.strip(" -\n")]
     except OSError:
         return "no log"
     for i, ln in enumerate(lines):
         if "FOAM FATAL" in ln:
             return " ".join(lines[i + 1 : i + 3])[:300]
+    for ln in lines:
+        if "exited on signal" in ln:
+            return ln[ln.index("exited on signal") :][:300]
     return lines[-1][:300] if lines else "empty log"
 
 
