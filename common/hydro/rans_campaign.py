@@ -30,10 +30,6 @@ MORE_DRIFT_ANGLES = (8.00, 10.05)  # the rest of table 3.2
 RESISTANCE_TARGET = 0.02
 DRIFT_TARGET = 0.10
 Y_TARGET_ANGLES = (4.07, 6.03)
-# Midbody, 1.6 m gap, the HF README's example UUV: the two-body check (`cfd run --config ...`). On
-# the coarse mesh simpleFoam blew up at iteration 12 (docs/hydro/rans/README.md), so it stays out of
-# the validation suite until the two-body recipe is fixed.
-TWO_BODY_CHECK = (0.0, 0.08, 3.5, 0.0, 20.0, 8.0)
 
 
 def suite(name: str) -> list[rans.CaseSpec]:
