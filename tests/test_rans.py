@@ -296,3 +296,15 @@ def test_a_rank_killed_by_a_floating_point_exception_is_named(tmp_path):
         "--------------------------------------------------------------------------\n"
     )
     assert rans._fatal_line(log) == "exited on signal 8 (Floating point exception)."
+
+
+def test_a_case_without_its_boundary_layers_is_refused(tmp_path):
+    """snappyHexMesh's last layer summary decides: under half of the layers is a bad mesh."""
+    summary = "patch faces layers overall thickness\n-----\n{} 5553 {} 7.6e-06 0.246\n"
+    (tmp_path / "log.snappyHexMesh").write_text(summary.format("suboff", "7.8") + summary.format("suboff", "0.00972"))
+    assert rans.layers_added(tmp_path / "log.snappyHexMesh", "suboff") == pytest.approx(0.00972)
+    shutil.copytree(DATA / "forces_suboff", tmp_path / "postProcessing" / "forces_suboff")
+    spec = rans.suboff_case(0.0, "smoke")
+    result = rans.read_result(spec, tmp_path, cells=1, cores=1, mesh_seconds=0.0, solve_seconds=0.0)
+    assert result.convergence.status == "bad mesh" and not result.convergence.usable
+    assert "0.0097 of 8 boundary layers" in result.convergence.reason

@@ -68,6 +68,9 @@ OTHER_BODY_Y_PLUS = 300.0
 SPREAD_WINDOW = 0.2
 SPREAD_RELATIVE = 0.01
 SPREAD_ABSOLUTE = 5e-6
+# A case whose measured body got fewer than half of its boundary layers is refused ("bad mesh"): its
+# wall function then sits at whatever y+ the outer cells give.
+MIN_LAYER_SHARE = 0.5
 DIVERGED_COEFFICIENT = 0.1  # |X'|, |Y'| or |N'| above this is no flow round a hull (EFD: about 1e-3)
 
 
@@ -678,7 +681,7 @@ def openfoam_missing() -> str | None:
 
 @dataclass
 class Convergence:
-    status: str  # "converged", "not converged" or "diverged"
+    status: str  # "converged", "not converged", "diverged" or "bad mesh"
     reason: str
     iterations: int
     window: int
@@ -904,6 +907,16 @@ def converged_by_residuals(log) -> bool:
         return False
 
 
+def layers_added(log, patch: str) -> float | None:
+    """The mean number of boundary layers snappyHexMesh added on a patch (its last summary)."""
+    try:
+        text = Path(log).read_text(errors="replace")
+    except OSError:
+        return None
+    found = re.findall(rf"^{re.escape(patch)}\s+\d+\s+([\d.eE+-]+)\s", text, flags=re.M)
+    return float(found[-1]) if found else None
+
+
 def spread_window(iterations: int) -> int:
     """The last iterations a case's value and spread are taken over (SPREAD_WINDOW of them)."""
     return max(1, int(round(SPREAD_WINDOW * iterations)))
@@ -999,6 +1012,10 @@ def read_result(
     measured = histories.pop(spec.body.patch)
     scale = coefficient_scale(spec, spec.body)
     convergence, mean = verdict(measured / scale, residuals, failure, spec.quarter)
+    layers = layers_added(folder / "log.snappyHexMesh", spec.body.patch)
+    if convergence.status != "diverged" and layers is not None and layers < MIN_LAYER_SHARE * LAYERS:
+        convergence.status = "bad mesh"
+        convergence.reason = f"snappyHexMesh added {layers:.2g} of {LAYERS} boundary layers on {spec.body.patch}"
     forces = {spec.body.patch: _named(mean * scale)}
     forces |= {patch: _named(h[-spread_window(len(h)) :].mean(axis=0)) for patch, h in histories.items() if len(h)}
     return Result(
