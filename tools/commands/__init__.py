@@ -22,4 +22,5 @@ modules only when it runs.
 - completion: shell completion scripts.
 - moos: nearsub in a MOOS-IvP community (the sim as a MOOS app).
 - lf_field: tabulate the low fidelity's submarine field.
+- cfd: RANS CFD on OpenFOAM: cases, runs, the SUBOFF validation and its report.
 """

@@ -15,10 +15,10 @@ import json
 import sys
 from pathlib import Path
 
-from .arguments import integer, number
-from .errors import InputError
-from .outputs import output_folder
-from .schedulers import scheduler_address
+from ..support.arguments import integer, number
+from ..support.errors import InputError
+from ..support.outputs import output_folder
+from ..support.schedulers import scheduler_address
 
 DEFAULT_WORK_DIR = Path("cfd-runs")
 DEFAULT_ARTEFACTS = Path("docs") / "hydro" / "rans" / "cases"
@@ -152,7 +152,7 @@ def validate_command(args) -> int:
 def report_command(args) -> int:
     from nearsub.common.hydro import rans_campaign
 
-    from .tables import console
+    from ..support.tables import console
 
     found = _found(args)
     if args.json:
