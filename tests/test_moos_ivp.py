@@ -33,7 +33,16 @@ ALPHA_APPS = (
     "pLogger",
 )
 ALPHA_WARP = 10.0
+TRACK_LINE_Y = 5.89  # m: the overtake's start and waypoint (missions/moos/overtake.bhv)
 ALPHA_DURATION = 700.0  # simulated seconds: MOOS-IvP's alpha completes in about 450 (uSimMarineV22, warp 1)
+
+
+OVERTAKE_DURATION = 400.0  # simulated seconds: the SDV reaches its waypoint after 240 s
+
+
+def flight_budget(duration: float) -> float:
+    """Wall seconds `fly` may take: start-up, `duration` at ALPHA_WARP, and pAntler's stop."""
+    return 2 * WAIT + duration / ALPHA_WARP + 1.0
 
 
 def need(*programs: str) -> None:
@@ -174,6 +183,7 @@ def distances_to_path(points: np.ndarray, path: np.ndarray) -> np.ndarray:
     return np.sqrt(((points[:, None, :] - nearest) ** 2).sum(axis=2)).min(axis=1)
 
 
+@pytest.mark.timeout(2 * flight_budget(ALPHA_DURATION))
 def test_moos_ivps_alpha_completes_with_nearsubs_sim_and_its_path_is_compared_with_usimmarine(tmp_path):
     need(*ALPHA_APPS)
     ours, ours_last = fly(tmp_path / "nearsub", "alpha", "nearsub", ALPHA_DURATION)
@@ -189,6 +199,7 @@ def test_moos_ivps_alpha_completes_with_nearsubs_sim_and_its_path_is_compared_wi
     assert distance.max() < 25.0 and distance.mean() < 5.0, (distance.mean(), distance.max())
 
 
+@pytest.mark.timeout(2 * flight_budget(OVERTAKE_DURATION) + WAIT)  # two flights and nearsub's own run
 def test_the_moos_stern_overtake_ends_as_the_nearsub_mission_does(tmp_path):
     """missions/moos/overtake (pHelmIvP, pMarinePIDV22) against missions/overtake_stern_standard.toml
     (nearsub's helm and pid, in process): both collide near the stern. The autonomy differs (MOOS's
@@ -199,10 +210,21 @@ def test_the_moos_stern_overtake_ends_as_the_nearsub_mission_does(tmp_path):
 
     reference = run_mission(load_mission(MOOS_MISSIONS.parent / "overtake_stern_standard.toml"))
     collision = next(m for _, _, m in reference.messages if getattr(m, "kind", None) == "collision")
-    _, last = fly(tmp_path / "overtake", "overtake", "nearsub", 400.0)
+    ours, last = fly(tmp_path / "overtake", "overtake", "nearsub", OVERTAKE_DURATION)
     assert "NEARSUB_COLLISION" in last, f"no collision in MOOS: {last}"
     where = re.search(r"\(([-\d.]+), ([-\d.]+)\)", last["NEARSUB_COLLISION"]).groups()
     x_moos, y_moos = (float(v) for v in where)
     theirs = f"({collision.data['x']:.2f}, {collision.data['y']:.2f}) at t = {collision.t:.2f} s"
     print(f"stern overtake: MOOS {last['NEARSUB_COLLISION']} ({last['NEARSUB_END']}); nearsub's mission {theirs}")
     assert abs(x_moos - collision.data["x"]) < 15.0 and abs(y_moos - collision.data["y"]) < 2.0
+    # The same community on uSimMarineV22 feels nothing: it holds its track-line past the hull
+    # and completes, where nearsub's sim pulls it off the line into the hull.
+    theirs_track, theirs_last = fly(tmp_path / "usim", "overtake", "uSimMarineV22", OVERTAKE_DURATION)
+    line = TRACK_LINE_Y
+    print(
+        f"track-line y = {line} m: nearsub's sim came to y = {ours[:, 1].min():.2f} m; uSimMarineV22 stayed within "
+        f"{np.abs(theirs_track[:, 1] - line).max():.2f} m of it, ending at x = {theirs_track[-1, 0]:.1f} m"
+    )
+    assert theirs_last.get("MISSION") == "complete", f"uSimMarineV22's overtake did not complete: {theirs_last}"
+    assert np.abs(theirs_track[:, 1] - line).max() < 0.5
+    assert line - ours[:, 1].min() > 1.5
