@@ -4,7 +4,7 @@ MOOS community (docs/moos.md). The MOOSDB client is pymoos2's (the `moos` extra)
 
 Every AppTick (in MOOS time, so MOOSTimeWarp speeds it up) it reads the DESIRED_* mail, runs the
 steps MOOS time has made due, and posts NAV_*, the NEARSUB_* forces and events, the submarine's
-NODE_REPORT and VIEW_POLYGON; it posts an APPCAST every few seconds of MOOS time and on request.
+NODE_REPORT and its hull's VIEW_SEGLIST; it posts an APPCAST every few seconds of MOOS time and on request.
 The MOOSDB going away ends it with one line and exit 1: MOOS's C++ apps reconnect, but a vehicle
 whose actuators were unheard meanwhile would jump ahead on reconnection, so the sim stops and
 its process watcher (uProcessWatch) reports it gone."""

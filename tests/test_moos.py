@@ -149,14 +149,14 @@ def test_the_moving_frame_on_the_moos_grid():
     assert placement.from_moos(*placement.to_moos(3.0, 4.0, 7.0), 7.0) == pytest.approx((3.0, 4.0))
 
 
-def test_node_report_and_view_polygon_read_as_moos_writes_them():
+def test_node_report_and_hull_seglist_read_as_moos_writes_them():
     placement = bridge.Placement((0.0, 0.0), 1.5)
-    report = bridge.submarine_report(20.0, 1020.0, placement, hull.L_SUB)
+    report = bridge.submarine_report(20.0, 1020.0, placement)
     fields = dict(part.split("=", 1) for part in report.split(","))
     assert fields["NAME"] == "submarine" and float(fields["X"]) == pytest.approx(30.0)
     assert float(fields["HDG"]) == 90.0 and float(fields["SPD"]) == 1.5 and float(fields["TIME"]) == 1020.0
-    polygon = bridge.view_polygon([0.0, 10.0, 10.0], [0.0, 0.0, 5.0], 2.0, placement)
-    assert polygon.startswith("pts={3.00,0.00:13.00,0.00:13.00,5.00},label=submarine_hull")
+    outline = bridge.hull_seglist([0.0, 10.0, 10.0], [0.0, 0.0, 5.0], 2.0, placement)
+    assert outline.startswith("pts={3.00,0.00:13.00,0.00:13.00,5.00},label=submarine_hull")
 
 
 def test_the_appcast_string_has_moos_separators_and_the_warnings_counts():
@@ -200,7 +200,7 @@ def test_a_collision_with_the_submarine_is_posted_and_ends_the_stepping():
     mission = sim_mission(config)
     sim = MoosSim(mission, config, t0=0.0)
     posts = sim.report()
-    assert {"NODE_REPORT", "VIEW_POLYGON"} <= {key for key, _ in posts}
+    assert {"NODE_REPORT", "VIEW_SEGLIST"} <= {key for key, _ in posts}
     sim.receive("DESIRED_THRUST", 100.0)
     found = dict(sim.advance(60.0))
     assert "NEARSUB_COLLISION" in found and found["NEARSUB_END"].startswith("collision")

@@ -25,7 +25,7 @@ from nearsub.common.moos.config import Datum
 
 EARTH_RADIUS = 6378137.0  # WGS-84 equatorial radius [m] (NIMA TR8350.2, 2000, table 3.1)
 
-HULL_STATIONS = 40  # per side of the hull's VIEW_POLYGON: its outline to a few centimetres, a short post
+HULL_STATIONS = 40  # per side of the hull's outline: its outline to a few centimetres, a short post
 ACTUATOR_VARIABLES = ("DESIRED_THRUST", "DESIRED_RUDDER", "DESIRED_ELEVATOR")
 
 
@@ -121,26 +121,29 @@ def nav_variables(state, t: float, placement: Placement, datum: Datum | None, pr
 
 
 def node_report(
-    name: str, x: float, y: float, heading: float, speed: float, t: float, kind: str, length: float, color: str = ""
+    name: str, x: float, y: float, heading: float, speed: float, t: float, kind: str, length: float | None, color: str = ""
 ) -> str:
-    """A NODE_REPORT line as pNodeReporter writes it (NodeRecord::getSpec)."""
+    """A NODE_REPORT line as pNodeReporter writes it (NodeRecord::getSpec); no LENGTH if None."""
     text = f"NAME={name},X={x:.2f},Y={y:.2f},SPD={speed:.2f},HDG={heading:.2f},DEP=0,TYPE={kind},TIME={t:.2f}"
-    text += f",LENGTH={length:g}"
+    text += "" if length is None else f",LENGTH={length:g}"
     return text + (f",COLOR={color}" if color else "")
 
 
-def submarine_report(t: float, moos_time: float, placement: Placement, length: float) -> str:
+def submarine_report(t: float, moos_time: float, placement: Placement) -> str:
     """The submarine as a contact at sim time t, stamped `moos_time`: its CB, heading east (90),
-    at u_sub."""
+    at u_sub. No LENGTH: pMarineViewer would draw its own ship icon that long, about three times
+    the hull's beam, over the hull's outline; without it the icon is a marker at the CB."""
     x, y = placement.to_moos(0.0, 0.0, t)
-    return node_report("submarine", x, y, 90.0, placement.u_sub, moos_time, "ship", length, "gray")
+    return node_report("submarine", x, y, 90.0, placement.u_sub, moos_time, "ship", None, "gray")
 
 
-def view_polygon(xs, ys, t: float, placement: Placement, label: str = "submarine_hull") -> str:
-    """A VIEW_POLYGON of an outline given in nearsub's frame, placed on the MOOS grid at t."""
+def hull_seglist(xs, ys, t: float, placement: Placement, label: str = "submarine_hull") -> str:
+    """A closed outline given in nearsub's frame as a VIEW_SEGLIST, placed on the MOOS grid at t.
+    Not a VIEW_POLYGON: pMarineViewer drops non-convex polygons, and SUBOFF's afterbody is
+    concave (its convex hull is 1 % larger, off by most at the stern, where the overtakes collide)."""
     placed = (placement.to_moos(a, b, t) for a, b in zip(xs, ys, strict=True))
     points = ":".join(f"{px:.2f},{py:.2f}" for px, py in placed)
-    return f"pts={{{points}}},label={label},edge_color=gray,vertex_size=0"
+    return f"pts={{{points}}},label={label},edge_color=white,edge_size=2,vertex_size=0"
 
 
 def forces_variables(forces) -> dict:

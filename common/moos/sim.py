@@ -115,8 +115,8 @@ class MoosSim:
             posts += bridge.forces_variables(self.forces).items()
         if self.submarine:
             moos_time = self.clock.t0 + t
-            posts.append(("NODE_REPORT", bridge.submarine_report(t, moos_time, self.placement, hull.L_SUB)))
-            posts.append(("VIEW_POLYGON", bridge.view_polygon(*self.outline, t, self.placement)))
+            posts.append(("NODE_REPORT", bridge.submarine_report(t, moos_time, self.placement)))
+            posts.append(("VIEW_SEGLIST", bridge.hull_seglist(*self.outline, t, self.placement)))
         return posts
 
     def lag(self, moos_now: float) -> float:

@@ -55,8 +55,8 @@ class MissionWatch:
         every vehicle's waypoints and track (posted again every few seconds)."""
         t, posts = self.t, []
         if self.submarine:
-            posts.append(("NODE_REPORT", bridge.submarine_report(t, self.clock(), self.placement, hull.L_SUB)))
-            posts.append(("VIEW_POLYGON", bridge.view_polygon(*self.outline, t, self.placement)))
+            posts.append(("NODE_REPORT", bridge.submarine_report(t, self.clock(), self.placement)))
+            posts.append(("VIEW_SEGLIST", bridge.hull_seglist(*self.outline, t, self.placement)))
         for name, member in self.members.items():
             track = [(member.start.x, member.start.y)]
             for leg in member.apps.helm.legs:
