@@ -450,6 +450,13 @@ class GaussianProcess:
             std = std[:, 0] if std is not None else None
         return (mean, std) if return_std else mean
 
+    def scale_std(self, factor: float) -> None:
+        """Multiply the posterior std by `factor`, the mean unchanged (to rounding): the signal and
+        noise variances both times factor^2 (common/surrogate/calibration.py)."""
+        theta = self.theta_.copy()
+        theta[-2:] += 2.0 * math.log(factor)
+        self._condition(theta)
+
     # ---------------------------------------------------------- likelihood
     def log_marginal_likelihood(self, theta: Any = None, eval_gradient: bool = True):
         """LML of the standardised training data at log hyperparameters theta (default: fitted).
@@ -616,6 +623,12 @@ class MultiOutputGP:
         else:
             mean, std = self._predictor.batch(X, return_std)
         return (mean, std) if return_std else mean
+
+    def scale_std(self, factors: Any) -> None:
+        """Multiply each output's posterior std by its factor (see `GaussianProcess.scale_std`)."""
+        for gp, factor in zip(self.gps, np.asarray(factors, dtype=float), strict=True):
+            gp.scale_std(float(factor))
+        self._predictor = _Predictor(self.gps)
 
     def predict_rows(self, X: Any, return_std: bool = False):
         """Like `predict`, but each row's mean has the same bits whatever the batch size (see

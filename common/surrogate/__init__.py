@@ -10,6 +10,7 @@
 - sweeps: heading and lateral sweeps of the interaction increment (HF, LF, applied).
 - maps: the thesis section 4.5 colour maps as data.
 - validation: MAE against the high fidelity in the form of thesis table 4.3.
+- calibration: the predicted std scaled so its two-sigma band covers the leave-one-out errors.
 - sampling: posterior function samples of the residual GP, consistent along a trajectory.
 - sampling_kernel: the compiled kernels of `sampling`.
 - query: the surrogate server's query and reply messages.

@@ -29,16 +29,18 @@ from nearsub.common.learning.gp import GaussianProcess, MultiOutputGP
 from nearsub.common.runtime import keys
 from nearsub.common.runtime.bus import Bus, app_endpoints, app_runtime, free_tcp_port
 from nearsub.common.runtime.processes import single_blas_thread, spawn_app, stop
+from nearsub.common.surrogate import calibration
 from nearsub.common.surrogate.domain import BOUNDS, CONSTRAINT_NAMES, INPUT_NAMES, constraint_values, sample_feasible
 from nearsub.common.surrogate.model import (
     Surrogate,
     analytic_coefficients,
     decode_reply,
+    default_model_path,
     encode_query,
     load_surrogate,
     surrogate_key,
 )
-from nearsub.common.surrogate.modelfile import ModelFileError, lf_hash, lf_identity, load_model
+from nearsub.common.surrogate.modelfile import ModelFileError, lf_hash, lf_identity, load_model, save_model
 from nearsub.common.surrogate.validation import (
     HELD_OUT_SEED,
     THESIS_TEST_POINTS,
@@ -435,6 +437,60 @@ def validate_command(args) -> int:
     return 0
 
 
+def calibrate_command(args) -> int:
+    """Scale each output's std by the factor its leave-one-out z-scores ask for; write a new file."""
+    source = Path(args.model) if args.model else default_model_path()
+    out = output_file(args.out, "-o", source=source, source_is="the model it reads")
+    if not 0.5 < args.coverage < 1.0:
+        print(
+            f"nearsub surrogate calibrate: --coverage {args.coverage}: expected a share between 0.5 and 1",
+            file=sys.stderr,
+        )
+        return 2
+    try:
+        loaded = load_model(source)
+    except (ModelFileError, OSError) as exc:
+        print(f"nearsub surrogate calibrate: {exc}", file=sys.stderr)
+        return 2
+    gps = getattr(loaded.model, "delta", loaded.model).gps
+    before = [calibration.loo_z_scores(gp) for gp in gps]
+    factors = [calibration.std_factor(z, args.coverage) for z in before]
+    getattr(loaded.model, "delta", loaded.model).scale_std(factors)
+    after = [calibration.loo_z_scores(gp) for gp in gps]
+    rows = [
+        {
+            "output": name,
+            "factor": c,
+            "loo_coverage_before": calibration.coverage(z0),
+            "loo_coverage_after": calibration.coverage(z1),
+        }
+        for name, c, z0, z1 in zip(loaded.output_names, factors, before, after, strict=True)
+    ]
+    provenance = dict(loaded.provenance)
+    provenance["std_calibration"] = {
+        "method": "leave-one-out z-scores of the residual GP (common/surrogate/calibration.py)",
+        "target_coverage": args.coverage,
+        "calibrated_from": str(source),
+        "outputs": rows,
+    }
+    save_model(
+        out,
+        loaded.model,
+        input_names=loaded.input_names,
+        output_names=loaded.output_names,
+        units=loaded.units,
+        bounds=loaded.bounds,
+        constraints=loaded.constraints,
+        provenance=provenance,
+    )
+    print(f"{'output':8} {'factor':>7} {'LOO 2-sigma coverage':>22}")
+    for row in rows:
+        before_after = f"{row['loo_coverage_before']:.1%} -> {row['loo_coverage_after']:.1%}"
+        print(f"{row['output']:8} {row['factor']:7.3f} {before_after:>22}")
+    print(f"wrote {out}")
+    return 0
+
+
 # --------------------------------------------------------------------------------- bench
 def _times(call: Callable[[], object], repeats: int) -> np.ndarray:
     """Wall seconds of each of `repeats` calls."""
@@ -587,7 +643,7 @@ def sweep_command(args) -> int:
 
 
 def add_parser(subparsers) -> None:
-    """Register `surrogate info`, `predict`, `validate` and `sweep` on the `nearsub` command line."""
+    """Register `surrogate info`, `predict`, `validate`, `sweep` and `calibrate` on the `nearsub` command line."""
     p = subparsers.add_parser("surrogate", help="inspect and query a surrogate model file")
     sub = p.add_subparsers(dest="surrogate_command", required=True)
     t = sub.add_parser("info", help="inputs, bounds, training size, hyperparameters and provenance")
@@ -643,6 +699,22 @@ def add_parser(subparsers) -> None:
         help="take the HF increments from an earlier sweeps.csv at the same panels instead of running the HF",
     )
     t.set_defaults(func=sweep_command)
+    t = sub.add_parser(
+        "calibrate",
+        help="scale the predicted std so its two-sigma band covers the leave-one-out errors (a new file)",
+        description="Scale each output's std by one factor, chosen so that --coverage of the residual GP's "
+        "leave-one-out errors fall within two std; the mean is unchanged. Writes a new model file.",
+    )
+    t.add_argument("model", nargs="?", help="model file (default: the shipped model)")
+    t.add_argument("-o", "--out", required=True, help="the calibrated model file to write (never the input)")
+    t.add_argument(
+        "--coverage",
+        type=float,
+        default=calibration.TARGET_COVERAGE,
+        help=f"two-sigma coverage of the leave-one-out errors to aim at (default {calibration.TARGET_COVERAGE}, "
+        "a Gaussian's)",
+    )
+    t.set_defaults(func=calibrate_command)
 
 
 def add_bench_parser(bench_subparsers) -> None:
