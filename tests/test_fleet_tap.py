@@ -1,8 +1,12 @@
 """`nearsub tap` and `nearsub log play` on a mission of two vehicles: a replay of the two-vehicle log
 (`logsample.write_fleet_log`), found by name. Timeouts come from the mission's own start-up and
-step timeouts."""
+step timeouts, and each test's pytest timeout is the sum of those of its waits (the module's log
+counts as one step), so that a slow wait fails with its own message, not pytest's."""
 
 import json
+import select
+import subprocess
+import sys
 from concurrent.futures import ThreadPoolExecutor
 
 import pytest
@@ -20,31 +24,50 @@ def fleet_log(tmp_path_factory):
     return path
 
 
+def listing_taps(community: str) -> list[tuple[str, ...]]:
+    """The taps that list the replay, rate alfa's keys and refuse an unknown vehicle."""
+    return [
+        ("tap", "list", "--community", community, "--json"),
+        ("tap", "hz", f"nearsub/{community}/**", "--vehicle", "alfa", "--community", community, "--duration", "2",
+         "--json"),
+        ("tap", "list", "--community", community, "--vehicle", "alfa", "--json"),
+        ("tap", "list", "--community", community, "--vehicle", "zulu"),
+        ("tap", "echo", f"nearsub/{community}/*/state", "--vehicle", "zulu", "--community", community,
+         "--count", "1", "--timeout", "2"),
+        ("tap", "hz", f"nearsub/{community}/**", "--vehicle", "zulu", "--community", community, "--duration", "1"),
+    ]  # fmt: skip
+
+
+# The listing taps run at once, each its own process: one start-up timeout per concurrent process.
+LISTING_TIMEOUT = len(listing_taps("c")) * STARTUP + STEP
+
+
+@pytest.mark.timeout(STEP + STARTUP + STARTUP + LISTING_TIMEOUT + STEP + STEP)  # the last: the two stops
 def test_tap_lists_the_vehicles_and_echoes_one_of_them(fleet_log, runtime_dir, community):
-    # At warp 1 the 60 s log outlasts the taps below (bravo's half of it too).
+    # The player starts at the first subscriber: bravo's echo, so that it hears bravo's half of
+    # the log (30 s at warp 1) however long the others take to start; the 60 s log outlasts them.
     player = start_player(fleet_log, "--warp", 1, "--community", community, "--wait", STARTUP)
     try:
         wait_registered(community, player)
-        calls = [
-            ("tap", "echo", f"nearsub/{community}/*/state", "--vehicle", "bravo", "--community", community,
-             "--count", "5", "--json"),
-            ("tap", "list", "--community", community, "--json"),
-            ("tap", "hz", f"nearsub/{community}/**", "--vehicle", "alfa", "--community", community, "--duration", "2",
-             "--json"),
-            ("tap", "list", "--community", community, "--vehicle", "alfa", "--json"),
-            ("tap", "list", "--community", community, "--vehicle", "zulu"),
-            ("tap", "echo", f"nearsub/{community}/*/state", "--vehicle", "zulu", "--community", community,
-             "--count", "1", "--timeout", "2"),
-            ("tap", "hz", f"nearsub/{community}/**", "--vehicle", "zulu", "--community", community, "--duration", "1"),
-        ]  # fmt: skip
-        # The taps run at once, each its own process: one start-up timeout per concurrent process.
-        with ThreadPoolExecutor(len(calls)) as pool:
-            runs = pool.map(lambda call: nearsub(*call, timeout=len(calls) * STARTUP + STEP), calls)
-            echo, listed, hz, only, unknown, unknown_echo, unknown_hz = runs
+        argv = ("tap", "echo", f"nearsub/{community}/*/state", "--vehicle", "bravo", "--community", community,
+                "--count", "5", "--json")  # fmt: skip
+        # Unbuffered: its first line read here, the rest by communicate.
+        echo = subprocess.Popen([sys.executable, "-m", "nearsub", *argv], stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, bufsize=0)  # fmt: skip
+        try:
+            assert select.select([echo.stdout], [], [], STARTUP)[0], f"no message of bravo within {STARTUP:g} s"
+            first = echo.stdout.readline()
+            calls = listing_taps(community)
+            with ThreadPoolExecutor(len(calls)) as pool:
+                runs = pool.map(lambda call: nearsub(*call, timeout=LISTING_TIMEOUT), calls)
+                listed, hz, only, unknown, unknown_echo, unknown_hz = runs
+            rest, echo_err = echo.communicate(timeout=STEP)
+        finally:
+            stop([echo])
     finally:
         stop([player])
-    assert echo.returncode == 0, echo.stderr
-    lines = [json.loads(line) for line in echo.stdout.splitlines()]
+    assert echo.returncode == 0, echo_err.decode()
+    lines = [json.loads(line) for line in (first + rest).splitlines()]
     assert len(lines) == 5 and all(line["key"] == f"nearsub/{community}/bravo/state" for line in lines)
     assert all(line["vehicle"] == "bravo" for line in lines)
     assert hz.returncode == 0, hz.stderr
@@ -62,22 +85,25 @@ def test_tap_lists_the_vehicles_and_echoes_one_of_them(fleet_log, runtime_dir, c
         ), refused.stderr
 
 
+@pytest.mark.timeout(STEP + STARTUP + (2 * STARTUP + STEP) + (STARTUP + STEP) + STARTUP)
 def test_play_of_one_vehicle_replays_its_keys_and_the_mission_wide_ones(fleet_log, runtime_dir, community):
     player = start_player(fleet_log, "--warp", 0, "--vehicle", "bravo", "--community", community, "--wait", STARTUP)
     try:
         wait_registered(community, player)
-        # The player names its message count before it waits for a subscriber: the tap stops at the
-        # last one (delivery is lossless) instead of listening out its whole --timeout.
+        # The player names its message count before it waits for a subscriber. Asked for one more,
+        # the tap gets them all (delivery is lossless) and stops when the replay ends.
         count = played_count(player)
         tap = nearsub(
-            "tap", "echo", f"nearsub/{community}/**", "--community", community, "--count", str(count),
-            "--timeout", str(STARTUP), "--json", timeout=2 * STARTUP + STEP,
+            "tap", "echo", f"nearsub/{community}/**", "--community", community, "--count", str(count + 1),
+            "--json", timeout=2 * STARTUP + STEP,
         )  # fmt: skip
         player.communicate(timeout=STARTUP + STEP)
     finally:
         stop([player])
     assert tap.returncode == 0, tap.stderr
     assert len(tap.stdout.splitlines()) == count
+    ended = f"before mission {community} ended"
+    assert tap.stderr == f"nearsub tap echo: {count} of {count + 1} messages on nearsub/{community}/** {ended}\n"
     keys = {json.loads(line)["key"] for line in tap.stdout.splitlines()}
     assert f"nearsub/{community}/bravo/state" in keys and f"nearsub/{community}/clock/end" in keys
     assert not any("/alfa/" in key for key in keys)
@@ -93,6 +119,7 @@ def played_count(player) -> int:
     raise AssertionError(f"the player ended without a playing line: {player.communicate()}")
 
 
+@pytest.mark.timeout(STEP + STARTUP + (2 * STARTUP + STEP) + (STARTUP + STEP) + 2 * STARTUP)
 def test_a_short_key_stands_for_that_topic_of_every_vehicle(fleet_log, runtime_dir, community, capsys):
     """`tap echo state` (a new user's first try) follows every vehicle's state of the running
     mission; `log export --topic state` selects them in a log; a word that is no short key is
@@ -122,6 +149,7 @@ def test_a_short_key_stands_for_that_topic_of_every_vehicle(fleet_log, runtime_d
         assert "stat: not a short key (state, desired, input, helm, forces, poke, events, end)" in refused.stderr
 
 
+@pytest.mark.timeout(STEP + STARTUP + (2 * STARTUP + STEP))
 def test_tap_watch_keeps_the_newest_value_of_each_key_in_columns(fleet_log, runtime_dir, community):
     """uXMS: several keys and several fields; each key's newest message, a field another topic
     lacks left empty; `tap echo` keeps every --field too (it kept only the last)."""

@@ -32,7 +32,7 @@ def add_parser(subparsers) -> None:
         "--field", action="append", help="print only this field (dotted path); given again, a map of the fields"
     )
     t.add_argument("--count", type=integer(minimum=1), help="stop after N messages")
-    t.add_argument("--timeout", type=number(above=0.0), help="stop after S wall seconds")
+    t.add_argument("--timeout", type=number(above=0.0), help="stop after S wall seconds (or at the mission end)")
     t.add_argument("--json", action="store_true", help="JSON lines (the default when piped)")
     t.add_argument("--vehicle", metavar="NAME", help="only the keys of this vehicle (nearsub/<c>/NAME/...)")
     add_connect_arguments(t)
@@ -49,7 +49,9 @@ def add_parser(subparsers) -> None:
     t.add_argument("keys", nargs="+", metavar="KEY", help=KEY_HELP)
     t.add_argument("--field", action="append", help="a column: this field (dotted path); default: the whole value")
     t.add_argument("--vehicle", metavar="NAME", help="only the keys of this vehicle (nearsub/<c>/NAME/...)")
-    t.add_argument("--timeout", type=number(above=0.0), help="stop after S wall seconds (default: at Ctrl-C)")
+    t.add_argument(
+        "--timeout", type=number(above=0.0), help="stop after S wall seconds (default: at Ctrl-C or the mission end)"
+    )
     t.add_argument("--json", action="store_true", help="at the end, one JSON line per key (the default when piped)")
     add_connect_arguments(t)
     t.set_defaults(func=tap_watch)
@@ -126,6 +128,31 @@ def check_key(key: str) -> None:
 
     if problem := key_problem(key):
         raise InputError(f"{key!r} is not a key expression: {problem}")
+
+
+class MissionWatch:
+    """The running mission's apps, followed by their liveliness tokens in a tap's own mailbox
+    ("alive" and "gone" mail, in order with its messages): the mission has ended once its last
+    token has gone. A replay's player and a launch's launcher hold theirs until everything they
+    publish is out, so the mission's messages are in the mailbox before that last "gone". With
+    no community (a router given by --connect and no mission named) nothing is followed."""
+
+    def __init__(self, bus, community: str | None, mailbox) -> None:
+        from nearsub.common.runtime import keys
+
+        self.tokens: set[str] = set()
+        self.ended = False
+        if community is not None:
+            bus.watch_liveliness(keys.all_alive(community), mailbox, history=True)
+
+    def took(self, mail) -> bool:
+        """Whether `mail` was a token's news (then it is no message for the tap)."""
+        if mail.kind == "alive":
+            self.tokens.add(mail.key)
+        elif mail.kind == "gone":
+            self.tokens.discard(mail.key)
+            self.ended = not self.tokens
+        return mail.kind in ("alive", "gone")
 
 
 def other_vehicle(args, key: str) -> bool:
@@ -215,12 +242,13 @@ def tap_echo(args) -> int:
             check_vehicle(args, publishing_vehicles(bus, community))
         mailbox = Mailbox()
         bus.subscribe(key, mailbox)
-        while args.count is None or printed < args.count:
+        mission = MissionWatch(bus, community, mailbox)
+        while not mission.ended and (args.count is None or printed < args.count):
             remaining = None if deadline is None else deadline - time.monotonic()
             if remaining is not None and remaining <= 0:
                 break
             mail = mailbox.get(timeout=0.5 if remaining is None else min(0.5, remaining))
-            if mail is None or other_vehicle(args, mail.key):
+            if mail is None or mission.took(mail) or other_vehicle(args, mail.key):
                 continue
             value, error = _decode_any(mail.key, mail.payload)
             if error:
@@ -239,8 +267,10 @@ def tap_echo(args) -> int:
             print(json.dumps(line) if as_json else terminal_line(line), flush=True)
             printed += 1
     if args.count is not None and printed < args.count:
-        got = f"{printed} of {args.count} messages"
-        print(f"nearsub tap echo: {got} on {key} within {args.timeout:g} s", file=sys.stderr)
+        when = f"before mission {community} ended" if mission.ended else f"within {args.timeout:g} s"
+        print(f"nearsub tap echo: {printed} of {args.count} messages on {key} {when}", file=sys.stderr)
+    elif mission.ended:
+        print(f"nearsub tap echo: mission {community} ended", file=sys.stderr)
     return 0 if printed or args.count is None else 1
 
 
@@ -255,7 +285,8 @@ def terminal_line(line: dict) -> str:
 def tap_watch(args) -> int:
     """The newest message on each key the key expressions match (uXMS): on a terminal a table
     refreshed four times a second, its columns the `--field`s (a field a message lacks is "-");
-    piped or with --json, one JSON line per key at the end. Ctrl-C is the way to stop it."""
+    piped or with --json, one JSON line per key at the end. It stops at Ctrl-C, --timeout or the
+    mission end."""
     for pattern in args.keys:
         check_key(topic_key(pattern))
     bus, community = open_bus(args, args.keys[0])
@@ -271,12 +302,13 @@ def tap_watch(args) -> int:
         mailbox = Mailbox()
         for pattern in patterns:
             bus.subscribe(pattern, mailbox)
+        mission = MissionWatch(bus, community, mailbox)
         screen = _watch_screen(args.field, latest) if live else None
         try:
-            while deadline is None or time.monotonic() < deadline:
+            while not mission.ended and (deadline is None or time.monotonic() < deadline):
                 mail = mailbox.get(timeout=0.25)
                 while mail is not None:
-                    if not other_vehicle(args, mail.key):
+                    if not mission.took(mail) and not other_vehicle(args, mail.key):
                         latest[mail.key] = _watch_row(mail.key, mail.payload, args.field)
                     mail = mailbox.get(timeout=0)
                 if screen is not None:
