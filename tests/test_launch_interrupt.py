@@ -1,7 +1,8 @@
 """Ctrl-C while a launch starts up: whenever it comes (the router started, the first app forked,
 the lock-stepped apps forked), the launch ends with one line, exit code 130, no traceback from
 any process, and nothing of it left running. The points are the launcher's own progress lines, so
-the test keeps its order on a loaded machine."""
+the test keeps its order on a loaded machine. And the launcher's policy once interrupted: an
+interrupt wins over a normal end it drains after it."""
 
 from __future__ import annotations
 
@@ -15,6 +16,12 @@ import pytest
 
 from conftest import ROOT
 from helpers import STARTUP_TIMEOUT, processes_under, wait_until
+from nearsub.common.mission.schema import load_mission
+from nearsub.common.runtime import keys
+from nearsub.common.runtime.bus import Mail
+from nearsub.common.runtime.messages import MissionEnd, encode
+from nearsub.tools.launcher.status import exit_code
+from nearsub.tools.launcher.supervision import Launcher
 
 MISSION = ROOT / "missions" / "overtake_stern_nuv.toml"  # near the submarine: the surrogate server too
 STOP_LADDER = 2 * 5.0  # SIGINT, then SIGTERM, then SIGKILL, 5 s apart (tools/launcher)
@@ -57,3 +64,23 @@ def test_ctrl_c_during_start_up_is_one_line_and_exit_130(launches, community, pr
     for output in launches.log_dir.rglob("*.out"):  # no app printed a traceback either
         assert "Traceback" not in output.read_text(), output
     wait_until(lambda: not processes_under(launches.log_dir), STARTUP_TIMEOUT, "processes of the launch left")
+
+
+INTERRUPTED = MissionEnd(step=40, t=2.0, source="launcher", outcome="interrupted", reason="stopped by the user")
+NORMAL = MissionEnd(step=41, t=2.05, source="clock", outcome="time_limit", reason="time limit reached")
+
+
+@pytest.mark.parametrize(
+    "ends, outcome",
+    [([NORMAL], "time_limit"), ([INTERRUPTED, NORMAL], "interrupted"), ([NORMAL, INTERRUPTED], "interrupted")],
+    ids=["normal", "interrupt-first", "clock-first"],
+)
+def test_an_interrupt_wins_over_a_normal_end_in_the_mailbox(tmp_path, ends, outcome):
+    """After Ctrl-C the launcher drains its mailbox, where the clock's normal end may lie beside
+    the launcher's own interrupted one, in either order: the launch stays interrupted (exit 130)."""
+    launcher = Launcher(load_mission(ROOT / "missions" / "alpha.toml", []), None, str(tmp_path), quiet=True)
+    for end in ends:
+        assert launcher.handle(Mail("sample", keys.mission_end(launcher.community), encode(end)))
+    summary = launcher.summary
+    assert summary.outcome == outcome and exit_code(summary) == (130 if outcome == "interrupted" else 0)
+    assert summary.steps == ends[-1].step  # the step is the last end's

@@ -8,7 +8,7 @@ import time
 from collections import Counter
 from dataclasses import dataclass, field
 
-from nearsub.common.runtime.messages import Event, MessageError, decode, model_for_key
+from nearsub.common.runtime.messages import Event, MessageError, MissionEnd, decode, model_for_key
 
 NORMAL_OUTCOMES = ("completed", "time_limit", "collision")
 STATUS_INTERVAL = 1.0  # wall seconds between two updates of the terminal status line
@@ -33,6 +33,14 @@ class Summary:
     shutdown_time: float = 0.0  # mission end until every process has gone
     cpu: dict[str, float] = field(default_factory=dict)  # CPU seconds of each process at the end
     vehicles: dict[str, dict] = field(default_factory=dict)  # a fleet: waypoints and events per vehicle
+
+    def record_end(self, end: MissionEnd) -> None:
+        """The mission end's step, time, outcome and reason. An interrupt always wins: an app's
+        normal end can still be in the launcher's mailbox, or on its way, when Ctrl-C stops the
+        mission, and it must not turn the launch's exit 130 into 0."""
+        self.steps, self.sim_time = end.step, end.t
+        if self.outcome != "interrupted":
+            self.outcome, self.reason = end.outcome, end.reason
 
     def record_vehicle_event(self, vehicle: str, kind: str) -> None:
         mine = self.vehicles.get(vehicle)

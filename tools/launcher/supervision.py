@@ -187,6 +187,8 @@ class Launcher:
     # -- supervision --------------------------------------------------------------------------
     def supervise(self) -> None:
         while True:
+            if self.interrupted():  # the handler's KeyboardInterrupt is lost if it lands in a finalizer (__del__)
+                raise KeyboardInterrupt
             if self.console.status_due():
                 self.console.show_status(self.caller, self.latest_state, self.mission.fleet)
             mail = self.mailbox.get(timeout=0.05)
@@ -277,10 +279,7 @@ class Launcher:
             self.ended_at = time.monotonic()
             self.summary.run_wall_time = self.ended_at - self.clock_started
             self.summary.cpu = self.processes.cpu_now()
-            self.summary.outcome = message.outcome
-            self.summary.reason = message.reason
-            self.summary.steps = message.step
-            self.summary.sim_time = message.t
+            self.summary.record_end(message)
             return True
         if isinstance(message, Event):
             self.summary.events[message.kind] += 1
