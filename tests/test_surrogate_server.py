@@ -19,7 +19,10 @@ from nearsub.common.surrogate import model as sg
 from nearsub.common.surrogate.modelfile import load_model
 from nearsub.tools.commands.surrogate import child_env, local_server, write_analytic_model
 
-pytestmark = pytest.mark.timeout(90)
+MISSION = load_mission(ALPHA)
+STARTUP, STEP = MISSION.startup_timeout, MISSION.step_timeout
+# The slowest test, run alone: the module's server starts, a second one starts, answers and leaves.
+pytestmark = pytest.mark.timeout(3 * STARTUP + STEP)
 
 
 @pytest.fixture(scope="module")
@@ -35,14 +38,14 @@ def community():
 @pytest.fixture(scope="module")
 def server(model_path, community):
     """(client bus, router endpoint); the router and server processes are killed at teardown."""
-    with local_server(model_path, community) as handle:
+    with local_server(model_path, community, timeout=STARTUP) as handle:
         yield handle
 
 
 @pytest.fixture(scope="module")
 def querier(server, community):
     bus, _ = server
-    return bus.querier(sg.surrogate_key(community), timeout=5.0)
+    return bus.querier(sg.surrogate_key(community), timeout=STEP)
 
 
 @pytest.fixture(scope="module")
@@ -53,7 +56,7 @@ def surrogate(model_path):
 def test_liveliness_token_is_visible(server, community):
     bus, _ = server
     # An upper bound only (the router answers at once): on a loaded machine 1 s was too short.
-    alive = bus.alive(keys.alive(community, "surrogate", "*"), timeout=load_mission(ALPHA).step_timeout)
+    alive = bus.alive(keys.alive(community, "surrogate", "*"), timeout=STEP)
     assert alive == [f"nearsub/{community}/alive/surrogate/surrogate"]
 
 
@@ -121,15 +124,15 @@ def test_a_second_instance_from_a_run_file_and_clean_sigterm(server, model_path,
         [*argv, "--instance", "second"], env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
     )
     try:
-        end = time.monotonic() + 30
+        end = time.monotonic() + STARTUP
         while not bus.alive(keys.alive(other, "surrogate", "second")):
             assert process.poll() is None and time.monotonic() < end, "the second server did not start"
             time.sleep(0.05)
-        querier = bus.querier(sg.surrogate_key(other), timeout=10.0)
+        querier = bus.querier(sg.surrogate_key(other), timeout=STEP)
         reply = sg.decode_reply(querier.ask(sg.encode_query(domain.sample_feasible(1))))
         assert reply.source == "second"
         process.terminate()
-        code = process.wait(timeout=20)
+        code = process.wait(timeout=STARTUP)  # leaving a session, under load, as long as opening one
         output = process.stdout.read()
         assert code == 128 + 15, output  # SystemExit from the SIGTERM handler: the session closed
         assert "ANALYTIC TEST FIXTURE" in output  # says which model it serves
@@ -207,7 +210,7 @@ def test_a_dead_server_ends_the_wait_by_its_liveliness_not_the_timeout(server, m
         [*argv, "--community", other, "--connect", endpoint], env=child_env(), stdout=subprocess.DEVNULL
     )
     try:
-        end = time.monotonic() + 30
+        end = time.monotonic() + STARTUP
         while not bus.alive(keys.alive(other, "surrogate", "*")):
             assert process.poll() is None and time.monotonic() < end, "the server did not start"
             time.sleep(0.05)
