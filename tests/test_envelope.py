@@ -150,6 +150,7 @@ def test_thesis_figure_set():
     assert len(env.unique_configs(figures)) == 29  # figures share their uncompensated panels
 
 
+@pytest.mark.slow  # every figure: 29 configurations; the default run draws one figure and reuses another's
 @pytest.mark.timeout(300)
 def test_thesis_figures_command(tmp_path):
     done = nearsub("envelope", "--thesis-figures", "--grid", "3x2", "--duration", "1", "-o", str(tmp_path), timeout=280)
@@ -200,20 +201,16 @@ def test_workers_option_starts_and_closes_a_local_cluster():
     assert "distributed" in sys.modules
 
 
-def test_thesis_figures_subset_and_unknown_figure(tmp_path):
-    done = nearsub(
-        "envelope", "--thesis-figures", "--figure", "5-11", "--grid", "3x2", "--duration", "1", "-o", str(tmp_path)
-    )
+def test_thesis_figures_subset_reuse_and_unknown_figure(tmp_path):
+    """--figure draws those figures only; --reuse flies only the configurations missing from
+    the folder; an unknown figure is refused."""
+    small = ("--grid", "3x2", "--duration", "1", "-o", str(tmp_path))
+    done = nearsub("envelope", "--thesis-figures", "--figure", "5-11", *small)
     assert done.returncode == 0, done.stderr
     assert [p.name for p in tmp_path.glob("figure-*.png")] == ["figure-5-11.png"]
     assert len(list((tmp_path / "data").glob("*.json"))) == 3
     bad = nearsub("envelope", "--thesis-figures", "--figure", "5-99", "-o", str(tmp_path))
     assert bad.returncode == 2 and "5-99" in bad.stderr
-
-
-def test_thesis_figures_reuse_flies_only_the_missing_configurations(tmp_path):
-    small = ("--grid", "3x2", "--duration", "1", "-o", str(tmp_path))
-    assert nearsub("envelope", "--thesis-figures", "--figure", "5-11", *small).returncode == 0
     deleted = tmp_path / "data" / "remus100_waypoints_dlead1L_ss0-50m.json"
     deleted.unlink()
     stored = {p.name: p.read_text() for p in (tmp_path / "data").glob("*.json")}
