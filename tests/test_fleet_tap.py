@@ -25,11 +25,12 @@ def fleet_log(tmp_path_factory):
 
 
 def listing_taps(community: str) -> list[tuple[str, ...]]:
-    """The taps that list the replay, rate alfa's keys and refuse an unknown vehicle."""
+    """The taps that list the replay, rate alfa's keys and refuse an unknown vehicle. The rates are
+    measured over a step timeout: under load the replay may hear of a new subscriber seconds late."""
     return [
         ("tap", "list", "--community", community, "--json"),
-        ("tap", "hz", f"nearsub/{community}/**", "--vehicle", "alfa", "--community", community, "--duration", "2",
-         "--json"),
+        ("tap", "hz", f"nearsub/{community}/**", "--vehicle", "alfa", "--community", community, "--duration",
+         str(STEP), "--json"),
         ("tap", "list", "--community", community, "--vehicle", "alfa", "--json"),
         ("tap", "list", "--community", community, "--vehicle", "zulu"),
         ("tap", "echo", f"nearsub/{community}/*/state", "--vehicle", "zulu", "--community", community,
