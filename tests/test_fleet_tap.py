@@ -153,12 +153,13 @@ def test_a_short_key_stands_for_that_topic_of_every_vehicle(fleet_log, runtime_d
 @pytest.mark.timeout(STEP + STARTUP + (2 * STARTUP + STEP))
 def test_tap_watch_keeps_the_newest_value_of_each_key_in_columns(fleet_log, runtime_dir, community):
     """uXMS: several keys and several fields; each key's newest message, a field another topic
-    lacks left empty; `tap echo` keeps every --field too (it kept only the last)."""
+    lacks left empty; `tap echo` keeps every --field too (it kept only the last). The watch lasts
+    a step timeout: under load the replay may hear of a new subscriber seconds late."""
     player = start_player(fleet_log, "--warp", 1, "--community", community, "--wait", STARTUP)
     try:
         wait_registered(community, player)
         calls = [
-            ("tap", "watch", "state", "desired", "--field", "x", "--field", "u_d", "--timeout", "2",
+            ("tap", "watch", "state", "desired", "--field", "x", "--field", "u_d", "--timeout", str(STEP),
              "--community", community),
             ("tap", "echo", "state", "--field", "x", "--field", "y", "--count", "2", "--community", community),
         ]  # fmt: skip
