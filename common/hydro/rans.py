@@ -72,6 +72,11 @@ SPREAD_ABSOLUTE = 5e-6
 # wall function then sits at whatever y+ the outer cells give.
 MIN_LAYER_SHARE = 0.5
 DIVERGED_COEFFICIENT = 0.1  # |X'|, |Y'| or |N'| above this is no flow round a hull (EFD: about 1e-3)
+# A two-body case starts with first-order upwind for U over its first iterations, then continues
+# with linearUpwind from there: from a uniform start at full scale (Re_sub about 1e8) linearUpwind
+# blew up in the layer cells at the submarine's bow stagnation point within 10 iterations, under
+# every relaxation tried (docs/hydro/rans/README.md, "The two-body divergence").
+FIRST_ORDER_START = 50
 
 
 class CaseError(Exception):
@@ -128,6 +133,12 @@ class CaseSpec:
     @property
     def end_iteration(self) -> int:
         return self.iterations or self.mesh_level.iterations
+
+    @property
+    def start_iterations(self) -> int:
+        """Iterations solved with first-order upwind for U before the case's own schemes (two-body
+        cases only: the SUBOFF cases are stable without, and their validation was run so)."""
+        return min(FIRST_ORDER_START, self.end_iteration // 4) if self.kind == "two-body" else 0
 
     def describe(self) -> dict:
         out = asdict(self)
@@ -440,7 +451,9 @@ def _snappy(spec: CaseSpec, dom: Domain) -> dict:
     }
 
 
-def _control(spec: CaseSpec) -> dict:
+def _control(spec: CaseSpec, end: int | None = None, restart: bool = False) -> dict:
+    """controlDict: run to `end` (default the case's last iteration), from the latest time with
+    `restart` (the second stage after a first-order start)."""
     functions = {}
     for body in spec.bodies:
         functions[f"forces_{body.patch}"] = {
@@ -455,10 +468,10 @@ def _control(spec: CaseSpec) -> dict:
             "log": False,
         }
     functions["yPlus"] = {"type": "yPlus", "libs": ["libfieldFunctionObjects.so"], "writeControl": "writeTime"}
-    n = spec.end_iteration
+    n = end or spec.end_iteration
     return {
         "application": "simpleFoam",
-        "startFrom": "startTime",
+        "startFrom": "latestTime" if restart else "startTime",
         "startTime": 0,
         "stopAt": "endTime",
         "endTime": n,
@@ -490,6 +503,11 @@ FV_SCHEMES = {
     "interpolationSchemes": {"default": "linear"},
     "snGradSchemes": {"default": "limited corrected 0.33"},
     "wallDist": {"method": "meshWave"},
+}
+
+# The first-order start (FIRST_ORDER_START): upwind for U as well.
+FIRST_ORDER_SCHEMES = FV_SCHEMES | {
+    "divSchemes": FV_SCHEMES["divSchemes"] | {"div(phi,U)": "bounded Gauss upwind"},
 }
 
 FV_SOLUTION = {
@@ -789,6 +807,26 @@ def mesh_case(folder, cores: int = 1) -> int:
     return cells
 
 
+def solve(spec: CaseSpec, folder, cores: int = 1) -> None:
+    """simpleFoam on a meshed case: first spec.start_iterations with first-order upwind for U
+    (their log kept as log.simpleFoam.start), then on from there with the case's own schemes."""
+    from foamlib import FoamCase
+
+    folder = Path(folder)
+    case = FoamCase(folder)
+    system = folder / "system"
+    if spec.start_iterations:
+        _write(system / "fvSchemes", _foam_entries(FIRST_ORDER_SCHEMES))
+        _write(system / "controlDict", _control(spec, end=spec.start_iterations))
+        try:
+            _run(case, ["simpleFoam"], cores, cores > 1)
+        finally:
+            _write(system / "fvSchemes", _foam_entries(FV_SCHEMES))
+            _write(system / "controlDict", _control(spec, restart=True))
+        shutil.move(folder / "log.simpleFoam", folder / "log.simpleFoam.start")
+    _run(case, ["simpleFoam"], cores, cores > 1)
+
+
 def cell_count(folder) -> int:
     """Cells of the (possibly decomposed) mesh, from the owner files' headers."""
     folder = Path(folder)
@@ -805,7 +843,6 @@ def run_case(spec: CaseSpec, folder, cores: int = 1) -> Result:
     """Write, mesh and solve one case; the Result (convergence verdict included) is also saved as
     result.json in the folder. A solver that stops with an error gives a diverged Result, not an
     exception; a case that cannot be meshed raises CaseError."""
-    from foamlib import FoamCase
 
     missing = openfoam_missing()
     if missing:
@@ -817,7 +854,7 @@ def run_case(spec: CaseSpec, folder, cores: int = 1) -> Result:
     meshed = time.monotonic()
     failure = None
     try:
-        _run(FoamCase(folder), ["simpleFoam"], cores, cores > 1)
+        solve(spec, folder, cores)
     except CaseError as exc:
         failure = str(exc)
     solved = time.monotonic()
@@ -856,13 +893,25 @@ def force_history(folder, patch: str) -> tuple[np.ndarray, np.ndarray, np.ndarra
     """(iterations, total force (n, 3) [N], total moment about the CofR (n, 3) [N m]) of one
     patch, in the case frame and for the half (or quarter) of the body inside the domain."""
     base = Path(folder) / "postProcessing" / f"forces_{patch}"
-    starts = sorted(base.glob("*"), key=lambda p: float(p.name) if re.fullmatch(r"[\d.eE+-]+", p.name) else -1)
+    starts = _time_folders(base)
     if not starts:
         raise CaseError(f"no forces written for patch {patch} under {base}")
-    force = read_table(starts[-1] / "force.dat")
-    moment = read_table(starts[-1] / "moment.dat")
+    # A case solved in stages (a first-order start) has one folder per stage, named by its start.
+    force, moment = (_stacked([read_table(start / name) for start in starts]) for name in ("force.dat", "moment.dat"))
     n = min(len(force), len(moment))
     return force[:n, 0], force[:n, 1:4], moment[:n, 1:4]
+
+
+def _stacked(tables: list[np.ndarray]) -> np.ndarray:
+    """The rows of several tables of one width, in order (empty ones skipped)."""
+    tables = [t for t in tables if t.size]
+    return np.concatenate(tables) if tables else np.zeros((0, 10))
+
+
+def _time_folders(base: Path) -> list[Path]:
+    """A function object's output folders (one per solver start), in time order."""
+    found = [p for p in Path(base).glob("*") if p.is_dir() and re.fullmatch(r"[\d.eE+-]+", p.name)]
+    return sorted(found, key=lambda p: float(p.name))
 
 
 def body_axes_history(spec: CaseSpec, body: Body, force: np.ndarray, moment: np.ndarray) -> np.ndarray:
@@ -969,7 +1018,9 @@ def verdict(
 def read_y_plus(folder) -> dict[str, dict[str, float]]:
     """min / max / mean y+ per wall patch at the last write, from the yPlus function object."""
     out: dict[str, dict[str, float]] = {}
-    for path in sorted((Path(folder) / "postProcessing" / "yPlus").glob("*/yPlus.dat")):
+    for path in (start / "yPlus.dat" for start in _time_folders(Path(folder) / "postProcessing" / "yPlus")):
+        if not path.is_file():
+            continue
         for line in path.read_text().splitlines():
             parts = line.split()
             if len(parts) == 5 and not line.startswith("#"):
