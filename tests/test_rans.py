@@ -308,3 +308,99 @@ def test_a_case_without_its_boundary_layers_is_refused(tmp_path):
     result = rans.read_result(spec, tmp_path, cells=1, cores=1, mesh_seconds=0.0, solve_seconds=0.0)
     assert result.convergence.status == "bad mesh" and not result.convergence.usable
     assert "0.0097 of 8 boundary layers" in result.convergence.reason
+
+
+# --- two-body suite and the side-by-side comparison ------------------------------------------------
+
+
+def test_two_body_suite_has_24_buildable_stations_8_held_out():
+    from nearsub.common.hydro.low_fidelity import input_columns
+    from nearsub.common.physics.proximity import closest_distance
+
+    stations = rans_campaign.TWO_BODY_STATIONS
+    specs = rans_campaign.suite("two-body")  # two_body_case refuses what the mesher cannot build
+    assert len(specs) == len(stations) >= 24 and len({s.case_id for s in specs}) == len(specs)
+    assert sum(s.held_out for s in stations) >= 8 and all(s.level == "medium" for s in specs)
+    rows = np.array([s.row for s in stations])
+    x, y, _, psi, diameter, length = input_columns(rows)
+    gaps = closest_distance(x, y, psi, length[0], diameter[0])  # every SDV row shares its size
+    sdv = (rows[:, 4] == rans_campaign.SDV_RATIOS[0]) & (rows[:, 5] == rans_campaign.SDV_RATIOS[1])
+    stern = [i for i, s in enumerate(stations) if s.name.startswith("stern -0.") and "gap" in s.name]
+    assert len(stern) == 9 and all(sdv[stern])
+    expected = np.tile(rans_campaign.STERN_GAPS_M, 3)
+    assert np.allclose(np.asarray(gaps)[stern], expected, atol=0.01)  # the overtake's 0.15-1.3 m
+    assert np.any(np.abs(rows[:, 3]) == 5.0)  # one beyond table 4.2's heading
+    from nearsub.common.surrogate.domain import constraint_values
+
+    assert np.any(constraint_values(rows)[:, 1] < 0)  # stations beyond (4.5)
+    grid = rans_campaign.suite("two-body-grid")
+    assert [s.level for s in grid] == ["coarse", "medium", "fine"] and grid[1] in specs
+    assert rans_campaign.station_of(stations[4].row) == stations[4] and rans_campaign.station_of(None) is None
+
+
+def test_two_body_cases_start_first_order_and_suboff_does_not():
+    assert rans.two_body_case(rans_campaign.TWO_BODY_STATIONS[0].row, "medium").start_iterations == 50
+    assert rans.suboff_case(2.08).start_iterations == 0
+    assert rans.two_body_case(rans_campaign.TWO_BODY_STATIONS[0].row, "medium", iterations=40).start_iterations == 10
+
+
+def test_force_history_joins_the_stages_of_a_case(tmp_path):
+    """A first-order start writes forces into postProcessing/forces_*/0 and /<start>: one history."""
+    recorded = DATA / "forces_suboff" / "0"
+    for start, rows in (("0", slice(0, 15)), ("15", slice(15, None))):
+        folder = tmp_path / "postProcessing" / "forces_suboff" / start
+        folder.mkdir(parents=True)
+        for name in ("force.dat", "moment.dat"):
+            lines = (recorded / name).read_text().splitlines()
+            header = [ln for ln in lines if ln.startswith("#")]
+            body = [ln for ln in lines if ln.strip() and not ln.startswith("#")]
+            (folder / name).write_text("\n".join(header + body[rows]) + "\n")
+    iterations, force, _ = rans.force_history(tmp_path, "suboff")
+    assert len(iterations) == 40 and list(iterations) == list(range(1, 41))
+    assert force[-1] == pytest.approx([-2.00272276e01, 2.53772751e02, 2.53754807e02])
+
+
+def _result(inputs, coefficients, status="converged"):
+    return rans.Result(
+        case_id="tb-" + "_".join(f"{v:g}" for v in inputs) + "-medium",
+        kind="two-body",
+        level="medium",
+        wall_function="nutk",
+        y_plus_target=50.0,
+        cells=400_000,
+        cores=2,
+        mesh_seconds=300.0,
+        solve_seconds=900.0,
+        coefficients=dict(zip("XYN", coefficients, strict=True)),
+        forces={},
+        convergence=rans.Convergence(status, "", 800, 160, {}, {}),
+        inputs=tuple(inputs),
+    )
+
+
+def test_comparison_table_arithmetic():
+    stations = rans_campaign.TWO_BODY_STATIONS
+    held = next(s for s in stations if s.held_out)
+    kept = next(s for s in stations if not s.held_out)
+    results = rans_campaign.two_body_converged(
+        [
+            _result(held.row, (-1.0e-3, -4.0e-4, 2.0e-4)),
+            _result(kept.row, (-2.0e-3, 1.0e-4, -1.0e-4)),
+            _result(kept.row[:1] + (0.099,) + kept.row[2:], (9.0, 9.0, 9.0), status="not converged"),
+        ]
+    )
+    assert len(results) == 2 and results[0].inputs[0] <= results[1].inputs[0]
+    order = [1 if r.inputs == held.row else 0 for r in results]
+    hf = np.array([[-1.5e-3, 2.0e-4, -1.0e-4], [-1.2e-3, -2.0e-4, 3.0e-4]])
+    rows = rans_campaign.comparison_rows(results, {"panel HF": hf})
+    by_held = {r["held_out"]: r for r in rows}
+    assert by_held[True]["station"] == held.name and by_held[False]["station"] == kept.name
+    i_held = order.index(1)
+    assert by_held[True]["panel HF - RANS"] == pytest.approx((hf[i_held] - [-1.0e-3, -4.0e-4, 2.0e-4]).tolist())
+    assert by_held[True]["panel HF rel"][1] == pytest.approx((hf[i_held][1] + 4.0e-4) / 4.0e-4)
+    summary = rans_campaign.comparison_summary(rows, ["panel HF"])["panel HF"]
+    diffs = np.abs(np.array([r["panel HF - RANS"] for r in rows]))
+    assert summary["mae"] == pytest.approx(diffs.mean(axis=0).tolist())
+    assert summary["mae_held_out"] == pytest.approx(np.abs(by_held[True]["panel HF - RANS"]).tolist())
+    signs = np.mean(np.sign(np.array([r["panel HF"] for r in rows])) == np.sign(np.array([r["RANS"] for r in rows])), 0)
+    assert summary["sign_agrees"] == pytest.approx(signs.tolist())

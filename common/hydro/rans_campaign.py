@@ -14,6 +14,7 @@ import shutil
 import subprocess
 import time
 from collections.abc import Callable, Iterable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -30,6 +31,83 @@ MORE_DRIFT_ANGLES = (8.00, 10.05)  # the rest of table 3.2
 RESISTANCE_TARGET = 0.02
 DRIFT_TARGET = 0.10
 Y_TARGET_ANGLES = (4.07, 6.03)
+
+
+@dataclass(frozen=True)
+class Station:
+    """One two-body configuration of the `two-body` suite: what it tests, its row [R_long, R_lat,
+    u_kn, psi_deg, d_ratio, ld_ratio], and whether it is held out (never to be used in training:
+    the stations the shipped interaction is judged on against RANS, issue item 4)."""
+
+    name: str
+    row: tuple[float, float, float, float, float, float]
+    held_out: bool = False
+
+
+# The SDV of the stern overtakes (missions/overtake_stern_*.toml; physics/vehicles.py: L 5.3 m,
+# D 0.53 m, so D_sub/D_uuv 19.55 and L/D 10) at the overtake's 1.75 m/s = 3.4 kn through the water.
+SDV_RATIOS = (19.55, 10.0)
+SDV_KNOTS = 3.4
+# Its band inside (4.4)-(4.5) beside the parallel midbody is R_lat 0.0624-0.0702; two lateral
+# distances in it, 0.24 m and 0.77 m between the hulls there (0.0624 leaves 0.10 m, below what
+# the mesher builds: a fifth of a UUV diameter).
+SDV_NEAR, SDV_FAR = 0.064, 0.070
+
+
+def _sdv(r_long: float, r_lat: float, psi: float = 0.0) -> tuple[float, ...]:
+    return (r_long, r_lat, SDV_KNOTS, psi, *SDV_RATIOS)
+
+
+# Stern stations at the gaps the overtake flies in its last 10 s (0-1.3 m between the hulls, in
+# the submarine's boundary layer): R_lat for a 0.15, 0.5 and 1.3 m clearance
+# (physics/proximity.closest_distance), rounded to 1e-4. All lie below table 4.2's R_lat 0.059,
+# where the product flies the LF alone.
+STERN_GAPS_M = (0.15, 0.5, 1.3)
+STERN_R_LAT = {-0.39: (0.0538, 0.0579, 0.0671), -0.45: (0.0349, 0.0391, 0.0486), -0.50: (0.0184, 0.0225, 0.0319)}
+
+TWO_BODY_STATIONS = (
+    # the stern, where the overtakes collide (R_long -0.39) and the stern tip pushes away (-0.45, -0.50)
+    *(
+        Station(f"stern {r_long:+.2f}, gap {gap:g} m", _sdv(r_long, r_lat), held_out=gap == 0.5)
+        for r_long, lats in STERN_R_LAT.items()
+        for gap, r_lat in zip(STERN_GAPS_M, lats, strict=True)
+    ),
+    # bow shoulder, bow, midbody and stern shoulder at two lateral distances inside (4.4)-(4.5)
+    Station("bow shoulder, near", _sdv(0.35, SDV_NEAR)),
+    Station("bow shoulder, far", _sdv(0.35, SDV_FAR), held_out=True),
+    Station("bow, near", _sdv(0.42, SDV_NEAR)),
+    Station("bow, far", _sdv(0.42, SDV_FAR)),
+    Station("midbody, near", _sdv(0.0, SDV_NEAR)),
+    Station("midbody, far", _sdv(0.0, SDV_FAR), held_out=True),
+    Station("stern shoulder, near", _sdv(-0.30, SDV_NEAR), held_out=True),
+    Station("stern shoulder, far", _sdv(-0.30, SDV_FAR)),
+    # headings: 5 deg (beyond table 4.2's 2 deg) at the collision station and beside the midbody,
+    # and the box's +-2 deg
+    Station("stern -0.39, psi 5", _sdv(-0.39, 0.0579, 5.0)),
+    Station("midbody far, psi 5", _sdv(0.0, SDV_FAR, 5.0), held_out=True),
+    Station("midbody near, psi +2", _sdv(0.0, SDV_NEAR, 2.0)),
+    Station("bow shoulder far, psi -2", _sdv(0.35, SDV_FAR, -2.0)),
+    # beyond (4.5), where only the LF acts today
+    Station("midbody, beyond (4.5)", _sdv(0.0, 0.085)),
+    Station("stern -0.39, beyond (4.5)", _sdv(-0.39, 0.085), held_out=True),
+    Station("midbody, 1.6 m gap, Explorer D/20 L/D 8", (0.0, 0.08, 3.5, 0.0, 20.0, 8.0)),
+    # thesis figure 4-4's UUV (D_sub/D_uuv 10, L/D 8) at R_lat 0.075: the sign-pattern table of
+    # docs/hydro/README.md ("The interaction sign pattern"), positive surge at -0.4
+    Station("fig. 4-4 UUV, -0.4 (positive surge)", (-0.4, 0.075, 3.5, 0.0, 10.0, 8.0)),
+    Station("fig. 4-4 UUV, midbody", (0.0, 0.075, 3.5, 0.0, 10.0, 8.0), held_out=True),
+    Station("fig. 4-4 UUV, +0.4 (bow shoulder)", (0.4, 0.075, 3.5, 0.0, 10.0, 8.0)),
+)
+# The station of the two-body grid study (coarse, medium, fine; Celik et al. 2008): the SDV beside
+# the midbody, where the suction is large and the flow steady.
+GRID_STATION = TWO_BODY_STATIONS[[s.name for s in TWO_BODY_STATIONS].index("midbody, near")]
+
+
+def station_of(inputs) -> Station | None:
+    """The suite's station with this configuration row, if any."""
+    if inputs is None:
+        return None
+    key = tuple(round(float(v), 6) for v in inputs)
+    return next((s for s in TWO_BODY_STATIONS if tuple(round(v, 6) for v in s.row) == key), None)
 
 
 def suite(name: str) -> list[rans.CaseSpec]:
@@ -49,12 +127,16 @@ def suite(name: str) -> list[rans.CaseSpec]:
             *(rans.suboff_case(psi, "medium", "spalding") for psi in DRIFT_ANGLES),
             *(rans.suboff_case(psi, "medium") for psi in MORE_DRIFT_ANGLES),
         ]
+    if name == "two-body":
+        return [rans.two_body_case(s.row, "medium") for s in TWO_BODY_STATIONS]
+    if name == "two-body-grid":
+        return [rans.two_body_case(GRID_STATION.row, level) for level in ("coarse", "medium", "fine")]
     if name == "smoke":
         return [rans.suboff_case(0.0, "smoke")]
     raise rans.CaseError(f"--suite {name!r}: choose one of {', '.join(SUITES)}")
 
 
-SUITES = ("suboff-validation", "smoke")
+SUITES = ("suboff-validation", "two-body", "two-body-grid", "smoke")
 
 
 # --- finished cases and their artefacts ----------------------------------------------------------
@@ -289,3 +371,83 @@ def report_rows(found: list[rans.Result]) -> list[list[str]]:
 
 
 REPORT_COLUMNS = ["case", "verdict", "cells", "wall min", "cores", "iterations", "X'", "Y'", "N'", "mean y+"]
+
+
+# --- two-body stations side by side: RANS against the panel HF, the LF and the shipped model ------
+
+OUTPUTS = ("X", "Y", "N")
+# The other fidelities at a station, against RANS: the panel HF (high_fidelity, MEDIUM panels),
+# the LF, the shipped surrogate's prediction (LF + delta at the point, as `nearsub surrogate`
+# answers), and what the product flies (LF + w delta(x_c): interaction.discrepancy_weight, 0 beyond
+# (4.5) and outside table 4.2's box).
+FIDELITIES = ("panel HF", "LF", "model", "flown")
+
+
+def two_body_converged(found: Iterable[rans.Result]) -> list[rans.Result]:
+    """The converged two-body results (the only ones compared), by R_long then the case id."""
+    kept = [r for r in found if r.kind == "two-body" and r.convergence.usable and r.inputs is not None]
+    return sorted(kept, key=lambda r: (r.inputs[0], r.case_id))
+
+
+def fidelity_values(rows: np.ndarray) -> dict[str, np.ndarray]:
+    """[X', Y', N'] (n, 3) of each of FIDELITIES at configuration rows (n, 6)."""
+    from nearsub.common.hydro.high_fidelity import MEDIUM, hf_coefficients
+    from nearsub.common.hydro.low_fidelity import lf_coefficients
+    from nearsub.common.surrogate import interaction
+    from nearsub.common.surrogate.model import load_surrogate
+
+    rows = np.atleast_2d(np.asarray(rows, dtype=float))
+    lf = np.asarray(lf_coefficients(rows), dtype=float)
+    surrogate = load_surrogate()
+    model = np.asarray(surrogate.predict(rows, return_std=False).mean, dtype=float)
+    delta, _ = surrogate.discrepancy(interaction.discrepancy_inputs(rows.copy()), return_std=False)
+    flown = lf + interaction.discrepancy_weight(rows)[:, None] * np.asarray(delta, dtype=float)
+    hf = np.asarray(hf_coefficients(rows, panels=MEDIUM), dtype=float)
+    return {"panel HF": hf, "LF": lf, "model": model, "flown": flown}
+
+
+def comparison_rows(results: list[rans.Result], values: dict[str, np.ndarray]) -> list[dict]:
+    """One row per RANS result: its station, X', Y', N', and for each fidelity in `values` (arrays
+    (n, 3) in the order of `results`) its X', Y', N', the difference from RANS (other - RANS) and
+    that difference relative to |RANS|."""
+    out = []
+    for i, r in enumerate(results):
+        station = station_of(r.inputs)
+        rans_values = np.array([r.coefficients[k] for k in OUTPUTS])
+        row = {
+            "case": r.case_id,
+            "station": station.name if station else "",
+            "held_out": bool(station and station.held_out),
+            "inputs": list(r.inputs),
+            "level": r.level,
+            "cells": r.cells,
+            "minutes": r.wall_seconds / 60,
+            "RANS": rans_values.tolist(),
+        }
+        for name, table in values.items():
+            other = np.asarray(table, dtype=float)[i]
+            difference = other - rans_values
+            row[name] = other.tolist()
+            row[f"{name} - RANS"] = difference.tolist()
+            with np.errstate(divide="ignore", invalid="ignore"):
+                row[f"{name} rel"] = (difference / np.abs(rans_values)).tolist()
+        out.append(row)
+    return out
+
+
+def comparison_summary(rows: list[dict], fidelities: Iterable[str] = FIDELITIES) -> dict[str, dict[str, list[float]]]:
+    """Per fidelity: the mean absolute difference from RANS of X', Y', N' over all rows and over
+    the held-out rows (NaN where there are none), and how often the sign of each output agrees."""
+    out = {}
+    for name in fidelities:
+        if not rows or name not in rows[0]:
+            continue
+        diff = np.array([r[f"{name} - RANS"] for r in rows], dtype=float)
+        held = np.array([r["held_out"] for r in rows], dtype=bool)
+        signs = np.sign(np.array([r[name] for r in rows])) == np.sign(np.array([r["RANS"] for r in rows]))
+        out[name] = {
+            "mae": np.nanmean(np.abs(diff), axis=0).tolist(),
+            "mae_held_out": (np.nanmean(np.abs(diff[held]), axis=0) if held.any() else np.full(3, np.nan)).tolist(),
+            "sign_agrees": signs.mean(axis=0).tolist(),
+        }
+    return out

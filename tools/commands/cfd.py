@@ -5,6 +5,7 @@
         --export docs/hydro/rans/cases --commit                    # resumable; --scheduler for Dask
     nearsub cfd validate --from docs/hydro/rans/cases             # thesis tables 3.1/3.2
     nearsub cfd report --from ./cfd-runs
+    nearsub cfd compare --from docs/hydro/rans/cases -o ./compare    # RANS vs panel HF, LF, model
 
 The logic is in common/hydro/rans*.py; this module parses and prints.
 """
@@ -14,6 +15,8 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
+
+import numpy as np
 
 from ..support.arguments import integer, number
 from ..support.errors import InputError
@@ -167,10 +170,151 @@ def report_command(args) -> int:
     return 0
 
 
+COMPARE_FILES = ("two-body-compare.md", "two-body-compare.csv", "two-body-compare.png")
+
+
+def _compare_markdown(rows: list[dict], summary: dict, fidelities) -> list[str]:
+    """The side-by-side table (x 1e-3) and the summary as markdown lines."""
+    head = "| station | R_long | R_lat | psi | D/d | L/D | held out | cells | min | out | RANS | "
+    head += " | ".join(f"{f} | {f} - RANS" for f in fidelities) + " |"
+    lines = [head, "|" + "---|" * (head.count("|") - 1)]
+    for r in rows:
+        r_long, r_lat, _, psi, d_ratio, ld_ratio = r["inputs"]
+        for k, out in enumerate(("X'", "Y'", "N'")):
+            lead = (
+                f"| {r['station'] or r['case']} | {r_long:g} | {r_lat:g} | {psi:g} | {d_ratio:g} | {ld_ratio:g} | "
+                f"{'yes' if r['held_out'] else ''} | {r['cells']:,} | {r['minutes']:.0f} |"
+                if k == 0
+                else "| | | | | | | | | |"
+            )
+            cells = " | ".join(f"{r[f][k] * 1e3:+.3f} | {r[f + ' - RANS'][k] * 1e3:+.3f}" for f in fidelities)
+            lines.append(f"{lead} {out} | {r['RANS'][k] * 1e3:+.3f} | {cells} |")
+    lines += [
+        "",
+        "| fidelity | MAE X' | Y' | N' | held out: X' | Y' | N' | sign agrees X' | Y' | N' |",
+        "|---" * 10 + "|",
+    ]
+    for name, s in summary.items():
+        mae, held, sign = (np.array(s[k]) * f for k, f in (("mae", 1e3), ("mae_held_out", 1e3), ("sign_agrees", 1)))
+        lines.append(
+            f"| {name} | "
+            + " | ".join(f"{v:.3f}" for v in (*mae, *held))
+            + " | "
+            + " | ".join(f"{v:.0%}" for v in sign)
+            + " |"
+        )
+    return lines
+
+
+def _compare_figure(rows: list[dict], fidelities, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(3, 1, figsize=(max(8, 0.45 * len(rows) + 3), 9), sharex=True)
+    x = np.arange(len(rows))
+    markers = {
+        "RANS": ("k", "o"),
+        "panel HF": ("tab:blue", "s"),
+        "LF": ("tab:green", "^"),
+        "model": ("tab:orange", "D"),
+        "flown": ("tab:red", "x"),
+    }
+    for k, (ax, out) in enumerate(zip(axes, ("X'", "Y'", "N'"), strict=True)):
+        for name in ("RANS", *fidelities):
+            colour, marker = markers[name]
+            ax.plot(x, [r[name][k] * 1e3 for r in rows], marker, color=colour, label=name, ls="none", mfc="none")
+        ax.axhline(0.0, color="0.7", lw=0.5)
+        ax.set_ylabel(f"{out} x 1e3")
+        ax.grid(alpha=0.3)
+    axes[0].legend(ncol=len(fidelities) + 1, fontsize=8)
+    axes[-1].set_xticks(
+        x,
+        [(r["station"] or r["case"]) + (" *" if r["held_out"] else "") for r in rows],
+        rotation=70,
+        ha="right",
+        fontsize=7,
+    )
+    axes[0].set_title(
+        "Two-body stations: RANS (OpenFOAM) against the panel HF, the LF and the shipped model (* held out)"
+    )
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def compare_command(args) -> int:
+    import csv
+
+    from nearsub.common.hydro import rans_campaign
+
+    out = output_folder(Path(args.out), "-o")
+    targets = [out / name for name in COMPARE_FILES]
+    if not args.force and (busy := [t for t in targets if t.exists()]):
+        raise InputError(f"-o {out}: {busy[0].name} exists; give a new folder or --force")
+    found = _found(args)
+    results = rans_campaign.two_body_converged(found)
+    if not results:
+        raise InputError(f"--from {' '.join(map(str, args.sources or []))}: no converged two-body case to compare")
+    fidelities = rans_campaign.FIDELITIES
+    values = rans_campaign.fidelity_values(np.array([r.inputs for r in results]))
+    rows = rans_campaign.comparison_rows(results, values)
+    summary = rans_campaign.comparison_summary(rows, fidelities)
+    out.mkdir(parents=True, exist_ok=True)
+    skipped = sorted(r.case_id for r in found if r.kind == "two-body" and not r.convergence.usable)
+    lines = _compare_markdown(rows, summary, fidelities)
+    if skipped:
+        lines += ["", "Not compared (not converged): " + ", ".join(skipped)]
+    targets[0].write_text("\n".join(lines) + "\n")
+    with targets[1].open("w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(
+            [
+                "case",
+                "station",
+                "held_out",
+                *rans_campaign.rans.CONFIGURATION,
+                "level",
+                "cells",
+                "minutes",
+                "output",
+                "RANS",
+                *(c for name in fidelities for c in (name, f"{name} - RANS")),
+            ]
+        )
+        for r in rows:
+            for k, o in enumerate(rans_campaign.OUTPUTS):
+                writer.writerow(
+                    [
+                        r["case"],
+                        r["station"],
+                        r["held_out"],
+                        *r["inputs"],
+                        r["level"],
+                        r["cells"],
+                        f"{r['minutes']:.1f}",
+                        f"{o}'",
+                        f"{r['RANS'][k]:.6e}",
+                        *(f"{r[c][k]:.6e}" for name in fidelities for c in (name, f"{name} - RANS")),
+                    ]
+                )
+    _compare_figure(rows, fidelities, targets[2])
+    print("\n".join(lines))
+    print(f"wrote {', '.join(str(t) for t in targets)}")
+    return 0
+
+
 def cfd_command(args) -> int:
     from nearsub.common.hydro.rans import CaseError
 
-    commands = {"case": case_command, "run": run_command, "validate": validate_command, "report": report_command}
+    commands = {
+        "case": case_command,
+        "run": run_command,
+        "validate": validate_command,
+        "report": report_command,
+        "compare": compare_command,
+    }
     try:
         return commands[args.cfd_command](args)
     except CaseError as exc:
@@ -194,7 +338,7 @@ def _case_arguments(p, suite: bool = False) -> None:
         help="a two-body configuration in the project's order (thesis table 4.2)",
     )
     if suite:
-        which.add_argument("--suite", help="a named set of cases: suboff-validation, smoke")
+        which.add_argument("--suite", help="a named set of cases: suboff-validation, two-body, two-body-grid, smoke")
     p.add_argument("--level", default="medium", help="mesh: smoke, coarse, medium (default), fine")
     p.add_argument("--wall-function", default="nutk", help="nutk (default) or spalding")
     p.add_argument(
@@ -233,4 +377,13 @@ def add_parser(subparsers) -> None:
             help=f"folders of finished cases (default {DEFAULT_WORK_DIR} and {DEFAULT_ARTEFACTS})",
         )
         t.add_argument("--json", action="store_true")
+    t = sub.add_parser("compare", help="two-body stations: RANS against the panel HF, the LF and the shipped model")
+    t.add_argument(
+        "--from",
+        dest="sources",
+        nargs="+",
+        help=f"folders of finished cases (default {DEFAULT_WORK_DIR} and {DEFAULT_ARTEFACTS})",
+    )
+    t.add_argument("-o", "--out", required=True, help="folder for the table (.md, .csv) and the figure (.png)")
+    t.add_argument("--force", action="store_true", help="replace the files of an earlier comparison in --out")
     p.set_defaults(func=cfd_command)
