@@ -404,3 +404,10 @@ def test_comparison_table_arithmetic():
     assert summary["mae_held_out"] == pytest.approx(np.abs(by_held[True]["panel HF - RANS"]).tolist())
     signs = np.mean(np.sign(np.array([r["panel HF"] for r in rows])) == np.sign(np.array([r["RANS"] for r in rows])), 0)
     assert summary["sign_agrees"] == pytest.approx(signs.tolist())
+
+
+def test_compare_without_a_converged_two_body_case_is_one_line(tmp_path):
+    (tmp_path / "cases").mkdir()
+    out = nearsub("cfd", "compare", "--from", str(tmp_path / "cases"), "-o", str(tmp_path / "out"))
+    assert out.returncode == 2 and "no converged two-body case" in out.stderr and "Traceback" not in out.stderr
+    assert not (tmp_path / "out").exists()
