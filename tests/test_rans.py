@@ -411,3 +411,21 @@ def test_compare_without_a_converged_two_body_case_is_one_line(tmp_path):
     out = nearsub("cfd", "compare", "--from", str(tmp_path / "cases"), "-o", str(tmp_path / "out"))
     assert out.returncode == 2 and "no converged two-body case" in out.stderr and "Traceback" not in out.stderr
     assert not (tmp_path / "out").exists()
+
+
+def test_sustained_inflow_turbulence_is_its_own_case(tmp_path):
+    spec = rans.suboff_case(0.0, "medium", sustain_inflow=True)
+    assert spec.case_id == "suboff-psi0.00-medium-sust" and rans.suboff_case(0.0).case_id == "suboff-psi0.00-medium"
+    folder = rans.write_case(spec, tmp_path / "s")
+    coeffs = _foam(folder / "constant/turbulenceProperties")["RAS"]["kOmegaSSTCoeffs"]
+    k, omega = rans.inflow_turbulence(spec)
+    assert (
+        coeffs["decayControl"] is True
+        and coeffs["kInf"] == pytest.approx(k)
+        and coeffs["omegaInf"] == pytest.approx(omega)
+    )
+    assert rans.load_spec(folder) == spec
+    refused = nearsub(
+        "cfd", "case", "--config", "0", "0.08", "3.5", "0", "20", "8", "--sustain-inflow", "-o", str(tmp_path / "x")
+    )
+    assert refused.returncode == 2 and "--sustain-inflow" in refused.stderr

@@ -51,6 +51,9 @@ TABLE_3_1_CFD_X = -85.6  # [N]
 # settings (nearsub's choice; their effect on the forces is not studied here).
 INFLOW_INTENSITY = 0.01
 INFLOW_VISCOSITY_RATIO = 10.0
+# With `sustain_inflow`, k-omega SST's sustaining terms keep the inflow's k and omega from decaying
+# on their way to the body (Spalart & Rumsey 2007, AIAA J. 45(10) 2544-2553; kOmegaSST's
+# `decayControl` in OpenFOAM v1912): the bow then sees the inflow's 1 %, not about 0.2 %.
 # Boundary layers: the first layer from a target y+ (at its cell centre) with u_tau from the
 # ITTC-57 mean friction; 8 layers growing by 1.25 (the thesis grows its prism layers by 1.2,
 # section 3.3.3.3; 1.25 reaches the outer cells with 8 layers).
@@ -121,6 +124,7 @@ class CaseSpec:
     quarter: bool = False  # a second symmetry plane y = 0 (axisymmetric body at zero drift)
     inputs: tuple[float, ...] | None = None  # the project's row for a two-body case
     iterations: int | None = None  # default: the level's
+    sustain_inflow: bool = False  # SST's sustaining terms for the inflow turbulence (Spalart & Rumsey 2007)
 
     @property
     def body(self) -> Body:
@@ -170,6 +174,7 @@ def suboff_case(
     wall_function: str = "nutk",
     y_plus: float = 50.0,
     iterations: int | None = None,
+    sustain_inflow: bool = False,
 ) -> CaseSpec:
     """The model-scale SUBOFF bare hull alone at drift angle psi_deg in the tow-tank conditions of
     thesis tables 3.1/3.2 (3.05 m/s, fresh water, nu = 8.899e-4/997): the validation case."""
@@ -178,7 +183,9 @@ def suboff_case(
         raise CaseError(f"--psi {psi_deg!r}: the validation covers drift angles 0 to 20 deg")
     hull = Body("suboff", "suboff-model", SUBOFF_MODEL_LENGTH, SUBOFF_MODEL_DIAMETER, psi=math.radians(psi_deg))
     return CaseSpec(
-        case_id=f"suboff-psi{psi_deg:.2f}" + _case_suffix(level, wall_function, y_plus),
+        case_id=f"suboff-psi{psi_deg:.2f}"
+        + _case_suffix(level, wall_function, y_plus)
+        + ("-sust" if sustain_inflow else ""),
         kind="suboff",
         bodies=(hull,),
         speed=SUBOFF_TEST_SPEED,
@@ -189,6 +196,7 @@ def suboff_case(
         y_plus=y_plus,
         quarter=psi_deg == 0.0,
         iterations=iterations,
+        sustain_inflow=sustain_inflow,
     )
 
 
@@ -655,10 +663,11 @@ def write_case(spec: CaseSpec, folder, cores: int = 1) -> Path:
         {"numberOfSubdomains": cores, "method": "hierarchical", "coeffs": {"n": [cores, 1, 1]}},
     )
     _write(folder / "constant" / "transportProperties", {"transportModel": "Newtonian", "nu": spec.nu})
-    _write(
-        folder / "constant" / "turbulenceProperties",
-        {"simulationType": "RAS", "RAS": {"RASModel": "kOmegaSST", "turbulence": True, "printCoeffs": True}},
-    )
+    ras = {"RASModel": "kOmegaSST", "turbulence": True, "printCoeffs": True}
+    if spec.sustain_inflow:
+        k, omega = inflow_turbulence(spec)
+        ras["kOmegaSSTCoeffs"] = {"decayControl": True, "kInf": k, "omegaInf": omega}
+    _write(folder / "constant" / "turbulenceProperties", {"simulationType": "RAS", "RAS": ras})
     for name, (cls, entries) in _fields(spec).items():
         _write(folder / "0.orig" / name, entries, field_class=cls)
     (folder / "case.json").write_text(json.dumps(spec.describe(), indent=1) + "\n")

@@ -33,8 +33,12 @@ def _specs(args):
     if getattr(args, "suite", None):
         return rans_campaign.suite(args.suite)
     if args.config is not None:
+        if args.sustain_inflow:
+            raise InputError("--sustain-inflow: only for a SUBOFF case (--psi)")
         return [rans.two_body_case(args.config, args.level, args.wall_function, args.y_plus, args.iterations)]
-    return [rans.suboff_case(args.psi, args.level, args.wall_function, args.y_plus, args.iterations)]
+    return [
+        rans.suboff_case(args.psi, args.level, args.wall_function, args.y_plus, args.iterations, args.sustain_inflow)
+    ]
 
 
 def case_command(args) -> int:
@@ -348,6 +352,11 @@ def _case_arguments(p, suite: bool = False) -> None:
         help="target y+ of the first cell (default 50)",
     )
     p.add_argument("--iterations", type=integer(minimum=10), help="SIMPLE iterations at most (default: the level's)")
+    p.add_argument(
+        "--sustain-inflow",
+        action="store_true",
+        help="SUBOFF: keep the inflow turbulence from decaying before the bow (SST sustaining terms)",
+    )
     p.add_argument("--cores", type=integer(minimum=1, maximum=1024), default=1, help="MPI ranks per case (default 1)")
 
 
