@@ -179,9 +179,13 @@ COMPARE_FILES = ("two-body-compare.md", "two-body-compare.csv", "two-body-compar
 
 def _compare_markdown(rows: list[dict], summary: dict, fidelities) -> list[str]:
     """The side-by-side table (x 1e-3) and the summary as markdown lines."""
+    note = (
+        "Values x 1e-3; differences are the fidelity minus RANS. X' > 0 forward, Y' > 0 away from the submarine, "
+        "N' > 0 bow away; the mean absolute differences (MAE) below are x 1e-3 too."
+    )
     head = "| station | R_long | R_lat | psi | D/d | L/D | held out | cells | min | out | RANS | "
     head += " | ".join(f"{f} | {f} - RANS" for f in fidelities) + " |"
-    lines = [head, "|" + "---|" * (head.count("|") - 1)]
+    lines = [note, "", head, "|" + "---|" * (head.count("|") - 1)]
     for r in rows:
         r_long, r_lat, _, psi, d_ratio, ld_ratio = r["inputs"]
         for k, out in enumerate(("X'", "Y'", "N'")):
