@@ -22,7 +22,7 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from scipy.linalg.blas import dtrmm, dtrmv
+from scipy.linalg.blas import dtrmm
 from scipy.linalg.lapack import dpotrf, dpotri, dpotrs, dtrtri
 from scipy.optimize import minimize
 
@@ -55,9 +55,6 @@ _RANDOM_SIGNAL_VARIANCE = (0.1, 10.0)
 _RANDOM_NOISE_VARIANCE = (1e-6, 1.0)
 # Rows per block in batch prediction: bounds the (rows, n) temporaries.
 _BATCH_ROWS = 4096
-# Rows per chunk in `_Predictor.rows`: its (m, rows, n) temporaries (3 x 64 x 300 doubles, 460 kB for
-# the shipped model) then stay in a core's L2; 800 rows, measured: 16 ms against 23 ms with 256.
-_ROW_CHUNK = 64
 _LOG_2PI = math.log(2.0 * math.pi)
 
 
@@ -168,11 +165,13 @@ class _Predictor:
         self.alpha_s = stack([gp._alpha * gp.signal_variance for gp in gps])  # (m, n)
         self.Linv_s = stack([gp._L_inv * gp.signal_variance for gp in gps])  # (m, n, n)
         self.LinvT_s = np.ascontiguousarray(self.Linv_s.transpose(0, 2, 1))
+        # The columns of each L^-1 packed from the diagonal down (`gp_kernel.posterior_rows`).
+        self.linv_columns = stack([self.LinvT_s[j][np.triu_indices(self.Z.shape[1])] for j in range(len(gps))])
         self.y_mean = np.array([gp.y_mean_ for gp in gps])
         self.y_std = np.array([gp.y_std_ for gp in gps])
         # Load (the first time after an install, compile) the kernel of `rows` with the model, so
         # that a server's or a sim's first prediction costs no more than the next.
-        _kernel().neg_sq_distances(np.empty((0, self.A.shape[1])), self.A, self.B, self.ZT)
+        self.rows(np.zeros((0, self.A.shape[1])), True)
 
     def point(self, x: np.ndarray, return_std: bool) -> tuple[np.ndarray, np.ndarray | None]:
         """Mean and std (m,) at one point x (d,): the hot path, ~a dozen small numpy calls."""
@@ -190,37 +189,19 @@ class _Predictor:
 
     def rows(self, X: np.ndarray, return_std: bool) -> tuple[np.ndarray, np.ndarray | None]:
         """Mean and std (N, m) with per-row arithmetic that does not depend on how many rows are
-        asked together: one vehicle and a batch of vehicles get the same bits for the same point
-        (element-wise operations and last-axis sums only; the std uses BLAS and may differ in
-        the last digits). Squared distances are formed from differences, without the cancelling
+        asked together: one vehicle and a batch of vehicles get the same bits for the same point,
+        mean and std (`gp_kernel.posterior_rows`, compiled: the shipped model's delta at one row,
+        with its std, 78-87 -> 42 us of CPU, against exp in numpy and a BLAS triangular product per
+        output). Squared distances are formed from differences, without the cancelling
         |z|^2 + |z_i|^2 - 2 z.z_i expansion of `batch`."""
-        N, m = X.shape[0], self.s2.shape[0]
-        mean = np.empty((N, m))
-        std = np.empty((N, m)) if return_std else None
-        for start in range(0, N, _ROW_CHUNK):
-            Xb = np.ascontiguousarray(X[start : start + _ROW_CHUNK])
-            e = np.exp(_kernel().neg_sq_distances(Xb, self.A, self.B, self.ZT))  # (m, a, n)
-            mean[start : start + _ROW_CHUNK] = (np.sum(e * self.alpha_s[:, None, :], axis=-1)).T  # thesis (2.6)
-            if std is not None:
-                for j in range(m):
-                    std[start : start + _ROW_CHUNK, j] = self._rows_std(e[j], j)
-        mean *= self.y_std
-        mean += self.y_mean
-        if std is not None:
-            std *= self.y_std
-        return mean, std
-
-    def _rows_std(self, e: np.ndarray, j: int) -> np.ndarray:
-        """Latent std (a,) of output j from kernel rows e (a, n), which it may overwrite: L^-1 is
-        triangular, so a triangular product (BLAS trmv for the one row of a vehicle-step,
-        `_batch_std`'s trmm for more) reads half of it. A sim asks about one row every step; with
-        the general product over the whole (n, n) matrix, the shipped model's delta at one row
-        took 122 us, now 64 us."""
-        if len(e) > 1:
-            return self._batch_std(e, j)
-        v = dtrmv(self.LinvT_s[j].T, e[0], lower=1)  # (n,), L^-1 e
-        var = self.s2[j] - np.array([v @ v])  # thesis (2.7), diagonal
-        return np.sqrt(np.maximum(var, 0.0))
+        X = np.ascontiguousarray(X, dtype=float)
+        mean = np.empty((X.shape[0], self.s2.shape[0]))
+        std = np.empty_like(mean) if return_std else np.empty((0, 0))
+        _kernel().posterior_rows(
+            X, self.A, self.B, self.ZT, self.alpha_s, self.linv_columns, self.s2, self.y_mean, self.y_std, return_std,
+            mean, std,
+        )  # fmt: skip
+        return mean, (std if return_std else None)
 
     def batch(self, X: np.ndarray, return_std: bool) -> tuple[np.ndarray, np.ndarray | None]:
         """Mean and std (N, m) at many points; BLAS matrix products on row blocks."""

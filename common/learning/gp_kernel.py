@@ -1,12 +1,14 @@
 """Compiled kernels of `gp`: the ARD RBF kernel matrix and the sums of its log-likelihood
-gradient (`gp._lml`), and the row-wise distances of `gp._Predictor.rows`.
+gradient (`gp._lml`), and the row-wise posterior of `gp._Predictor.rows` (`posterior_rows`).
 
-`neg_sq_distances` repeats the numpy loop it replaced (scaled row z = x A + B, then the squared
-differences summed over the inputs in their order, from zero), element by element, no fastmath:
-the same bits (tests/test_gp.py). exp and the weighted sums stay in numpy, whose exp rounds
-differently from the C library's. The likelihood kernels replace numpy expressions over a
-(d, n^2) array of squared differences, so they agree with them to rounding only. Imported on
-first use (`gp._kernel`); compiled once per install into numba's cache, like `hydro.lf_kernel`.
+`posterior_rows` is the surrogate's GP mean and std for one query point, compiled, that every
+process which predicts runs: the surrogate server, a sim or helm with the model in process, and
+the batch engine for its rows (docs/architecture.md, "The interaction kernel"). No fastmath: the
+arithmetic is IEEE, in the order written; exp is the C library's, which rounds differently from
+numpy's, so it agrees with the numpy formulas to rounding only (tests/test_gp.py). The
+likelihood kernels replace numpy expressions over a (d, n^2) array of squared differences, so
+they agree with them to rounding only. Imported on first use (`gp._kernel`); compiled once per
+install into numba's cache, like `hydro.lf_kernel`.
 """
 
 from __future__ import annotations
@@ -15,27 +17,6 @@ import math
 
 import numpy as np
 from numba import njit
-
-
-@njit(cache=True)
-def neg_sq_distances(X, A, B, ZT):
-    """-|z_a - z_i|^2 (m, rows, n) of rows X (rows, d) scaled per output j as X A[j] + B[j], to the
-    scaled training inputs ZT (m, d, n)."""
-    m, d, n = ZT.shape
-    rows = X.shape[0]
-    out = np.empty((m, rows, n))
-    z = np.empty(d)
-    for j in range(m):
-        for a in range(rows):
-            for k in range(d):
-                z[k] = X[a, k] * A[j, k] + B[j, k]
-            for i in range(n):
-                sq = 0.0
-                for k in range(d):
-                    diff = ZT[j, k, i] - z[k]
-                    sq += diff * diff
-                out[j, a, i] = -sq
-    return out
 
 
 @njit(cache=True)
@@ -76,3 +57,47 @@ def lml_gradient_sums(U, K, s2, alpha, Kinv_low):
                 diff = U[i, k] - U[j, k]
                 out[k] += wk * diff * diff
     return out
+
+
+@njit(cache=True)
+def posterior_rows(X, A, B, ZT, alpha_s, linv_columns, s2, y_mean, y_std, with_std, mean, std):
+    """Posterior mean (thesis (2.6)) and, with `with_std`, latent std (thesis (2.7)) (rows, m) of
+    rows X (rows, d) into mean and std: one row at a time, in a fixed order, so a row's bits do
+    not depend on how many rows are asked together (the sim's one vehicle, the surrogate server's
+    query, the batch engine's hundreds). Per output j: z = x A[j] + B[j], e_i = exp(-|z - z_i|^2)
+    (the squared differences summed over the inputs in their order, from zero), the mean sum_i e_i alpha_i y_std + y_mean;
+    v = L^-1 e from `linv_columns` (m, n (n + 1) / 2), the columns of the lower-triangular L^-1
+    (scaled by s2) packed one after the other from their diagonal down, added to v in column
+    order (element-wise, so each v_i is the same sum however the loop is vectorised; a third
+    less CPU than BLAS trmv on the full matrix), and the variance s2 - v.v clipped at zero."""
+    m, d, n = ZT.shape
+    z = np.empty(d)
+    e = np.empty(n)
+    v = np.empty(n)
+    for a in range(X.shape[0]):
+        for j in range(m):
+            for k in range(d):
+                z[k] = X[a, k] * A[j, k] + B[j, k]
+            total = 0.0
+            for i in range(n):
+                sq = 0.0
+                for k in range(d):
+                    diff = ZT[j, k, i] - z[k]
+                    sq += diff * diff
+                e[i] = math.exp(-sq)
+                total += e[i] * alpha_s[j, i]
+            mean[a, j] = total * y_std[j] + y_mean[j]
+            if with_std:
+                v[:] = 0.0
+                start = 0
+                for k in range(n):
+                    ek = e[k]
+                    column = linv_columns[j, start : start + n - k]
+                    below = v[k:]
+                    for i in range(n - k):
+                        below[i] += column[i] * ek
+                    start += n - k
+                sum_sq = 0.0
+                for i in range(n):
+                    sum_sq += v[i] * v[i]
+                std[a, j] = math.sqrt(max(s2[j] - sum_sq, 0.0)) * y_std[j]
