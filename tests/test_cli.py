@@ -4,6 +4,7 @@ tools' parsers load no numerical or transport library, and bad input gets one li
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -51,14 +52,14 @@ def test_a_light_tools_parser_loads_no_heavy_module(command):
 def test_tap_list_with_nothing_running_says_so_without_loading_zenoh(runtime_dir):
     code = (
         "from nearsub.tools.cli import main\n"
-        "assert main(['tap', 'list']) == 2, 'exit code'"  # the registry is empty
+        "assert main(['tap', 'list', 'alpha']) == 2, 'exit code'"  # the registry is empty
     )
     env_code = f"import os\nos.environ['NEARSUB_RUNTIME_DIR'] = {str(runtime_dir)!r}\n{code}"
     assert loaded_after(env_code) == []
-    done = nearsub("tap", "list")
+    done = nearsub("tap", "list", "alpha")
     assert done.returncode == 2
     assert done.stderr.strip() == (
-        "nearsub tap list: no mission is running (start one with `nearsub launch`, or pass --connect)"
+        "nearsub tap list: no running mission named 'alpha' (none is running; start one with `nearsub launch`)"
     )
 
 
@@ -92,8 +93,8 @@ def test_an_unknown_subcommand_is_named():
         *(
             (argv, f"nearsub {argv[0]}: {role} endpoint 'garbage' is not <protocol>/<address>, e.g. tcp/127.0.0.1:7447")
             for argv, role in [
-                (["tap", "list", "--connect", "garbage"], "connect"),
-                (["tap", "echo", "nearsub/alpha/**", "--connect", "garbage"], "connect"),
+                (["tap", "list", "alpha", "--connect", "garbage"], "connect"),
+                (["tap", "echo", "alpha", "nearsub/alpha/**", "--connect", "garbage"], "connect"),
                 (["clock", "alpha", "status", "--connect", "garbage"], "connect"),
                 (["poke", "alpha", "x=1", "--vehicle", "v", "--connect", "garbage"], "connect"),
                 (["view", "alpha", "--connect", "garbage"], "connect"),
@@ -104,7 +105,7 @@ def test_an_unknown_subcommand_is_named():
             ]
         ),
         # A port out of range, refused at once (was: 30 s of retries before "cannot reach").
-        (["tap", "list", "--connect", "tcp/127.0.0.1:99999"], "nearsub tap: connect endpoint 'tcp/127.0.0.1:99999' "),
+        (["tap", "list", "alpha", "--connect", "tcp/127.0.0.1:99999"], "nearsub tap: connect endpoint 'tcp/127.0.0.1:99999' "),
         (["router", "--credentials", "/nonexistent/x.cred"], "nearsub router: --credentials /nonexistent/x.cred: "),
         (["router", "--credentials", "/"], "nearsub router: --credentials /: is a directory"),
         (["launch", str(ALPHA), "--log", str(ALPHA)], f"nearsub launch: --log {ALPHA}: cannot make a folder there"),
@@ -112,17 +113,23 @@ def test_an_unknown_subcommand_is_named():
         # Finite but beyond what a mission can count or pace: named as typed, not as a --set.
         (["launch", str(ALPHA), "--until", "1e307"], "nearsub launch: --until 1e+307: field 'time_limit' = 1e+307: "),
         (["launch", str(ALPHA), "--warp", "1e300"], "nearsub launch: --warp 1e+300: field 'warp' = 1e+300: "),
-        (["tap", "pub", "nearsub/a/v/desired", "{}", "--raw-hex", "zz"], "nearsub tap pub: --raw-hex 'zz': not hex"),
-        (["tap", "pub", "nearsub/a/v/desired", "[1,2]"], "nearsub tap pub: value '[1,2]': not a JSON object"),
+        (["tap", "pub", "a", "v/desired", "{}", "--raw-hex", "zz"], "nearsub tap pub: --raw-hex 'zz': not hex"),
+        (["tap", "pub", "a", "nearsub/a/v/desired", "[1,2]"], "nearsub tap pub: value '[1,2]': not a JSON object"),
+        (["tap", "pub", "a", "desired", "{}"], "nearsub tap pub: key desired: a message goes to one key; name the"),
+        (["tap", "pub", "a", "nearsub/b/v/desired", "{}"], "nearsub tap pub: key nearsub/b/v/desired: not a key of"),
         (
-            ["tap", "pub", "nearsub/alpha/clock/tick", '{"step": 999999999}'],
+            ["tap", "pub", "alpha", "clock/tick", '{"step": 999999999}'],
             "nearsub tap pub: nearsub/alpha/clock/tick: a Tick is the lock-step's own",
         ),
         (["clock", "alpha", "warp", "1e308"], "nearsub clock: warp needs a number from 0 to 1e+06"),
         (["poke", "alpha", "X=nan", "--vehicle", "v"], "nearsub poke: 'X=nan': nan is not a finite number"),
         (["poke", "alpha", "=5", "--vehicle", "v"], "nearsub poke: '=5': variable name '' is not letters"),
-        (["tap", "echo", "//bad"], "nearsub tap echo: '//bad' is not a key expression: empty chunks"),
-        (["tap", "hz", "a/b*c"], "nearsub tap hz: 'a/b*c' is not a key expression: `*` may only"),
+        (["tap", "echo", "alpha", "//bad"], "nearsub tap echo: 'nearsub/alpha///bad' is not a key expression: empty"),
+        (["tap", "hz", "alpha", "a/b*c"], "nearsub tap hz: 'nearsub/alpha/a/b*c' is not a key expression: `*` may"),
+        (["tap", "echo", "alpha", "stat"], "nearsub tap echo: key stat: not a short key (state, "),
+        # A mission file stands for its name; a name that is not running names the running ones.
+        (["clock", str(ALPHA), "status"], "nearsub clock: no running mission named 'alpha' (none is running"),
+        (["clock", "missing.toml", "status"], "nearsub clock: MISSION missing.toml: "),
     ],
 )
 def test_bad_input_gets_one_line_and_exit_2(runtime_dir, argv, message):
@@ -140,14 +147,14 @@ def test_bad_input_gets_one_line_and_exit_2(runtime_dir, argv, message):
         (["log", "play", "x.mcap", "--from", "inf"], "argument --from: wants a finite number >= 0, got 'inf'"),
         (["log", "play", "x.mcap", "--to", "inf"], "argument --to: wants a finite number >= 0, got 'inf'"),
         (["log", "play", "x.mcap", "--warp", "-1"], "argument --warp: wants a finite number >= 0, got '-1'"),
-        (["tap", "hz", "k", "--window", "-3"], "argument --window: wants a whole number >= 2, got '-3'"),
-        (["tap", "hz", "k", "--window", "0"], "argument --window: wants a whole number >= 2, got '0'"),
-        (["tap", "hz", "k", "--duration", "-1"], "argument --duration: wants a finite number > 0, got '-1'"),
-        (["tap", "echo", "k", "--count", "-1"], "argument --count: wants a whole number >= 1, got '-1'"),
-        (["tap", "echo", "k", "--count", "0"], "argument --count: wants a whole number >= 1, got '0'"),
-        (["tap", "echo", "k", "--timeout", "-1"], "argument --timeout: wants a finite number > 0, got '-1'"),
-        (["tap", "list", "--sample", "-1"], "argument --sample: wants a finite number >= 0, got '-1'"),
-        (["tap", "list", "--sample", "nan"], "argument --sample: wants a finite number >= 0, got 'nan'"),
+        (["tap", "hz", "alpha", "k", "--window", "-3"], "argument --window: wants a whole number >= 2, got '-3'"),
+        (["tap", "hz", "alpha", "k", "--window", "0"], "argument --window: wants a whole number >= 2, got '0'"),
+        (["tap", "hz", "alpha", "k", "--duration", "-1"], "argument --duration: wants a finite number > 0, got '-1'"),
+        (["tap", "echo", "alpha", "k", "--count", "-1"], "argument --count: wants a whole number >= 1, got '-1'"),
+        (["tap", "echo", "alpha", "k", "--count", "0"], "argument --count: wants a whole number >= 1, got '0'"),
+        (["tap", "echo", "alpha", "k", "--timeout", "-1"], "argument --timeout: wants a finite number > 0, got '-1'"),
+        (["tap", "list", "alpha", "--sample", "-1"], "argument --sample: wants a finite number >= 0, got '-1'"),
+        (["tap", "list", "alpha", "--sample", "nan"], "argument --sample: wants a finite number >= 0, got 'nan'"),
         (["clock", "alpha", "pause", "--at-step", "-5"], "argument --at-step: wants a whole number >= 1"),
         (["clock", "alpha", "pause", "--at-step", "1" + "0" * 30], "argument --at-step: wants a whole number >= 1"),
         (["swap", "alpha", "helm", "--at-step", "1" + "0" * 30], "argument --at-step: wants a whole number >= 1"),
@@ -175,10 +182,12 @@ def test_version_prints_the_package_version():
     assert result.returncode == 0 and result.stdout.strip() == f"nearsub {__version__}"
 
 
-def test_bash_completion_completes_subcommands_and_choices():
-    """`nearsub completion bash` as bash runs it: the subcommands, and an option's choices."""
+def bash_completer(env: dict | None = None):
+    """`complete(*words)`: what `nearsub completion bash` offers for the last word, as bash runs it
+    (with `env`; the script calls `nearsub`, which the PATH finds beside this interpreter)."""
     script = nearsub("completion", "bash")
     assert script.returncode == 0, script.stderr
+    env = dict(env or os.environ, PATH=f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}")
 
     def complete(*words: str) -> list[str]:
         line = " ".join(words)
@@ -186,14 +195,70 @@ def test_bash_completion_completes_subcommands_and_choices():
             f"{script.stdout}\nCOMP_WORDS=({' '.join(repr(w) for w in words)}); COMP_CWORD={len(words) - 1}; "
             f'COMP_LINE={line!r}; COMP_POINT=${{#COMP_LINE}}; _shtab_nearsub; echo "${{COMPREPLY[@]}}"'
         )
-        done = subprocess.run(["bash", "-c", probe], capture_output=True, text=True, timeout=60)
+        done = subprocess.run(["bash", "-c", probe], capture_output=True, text=True, timeout=60, env=env)
         assert done.returncode == 0, done.stderr
         return done.stdout.split()
+
+    return complete
+
+
+def test_bash_completion_completes_subcommands_and_choices():
+    """`nearsub completion bash` as bash runs it: the subcommands, and an option's choices."""
+    complete = bash_completer()
 
     assert complete("nearsub", "lo") == ["log"]
     assert set(TOOLS) <= set(complete("nearsub", ""))
     assert complete("nearsub", "log", "export", "a.mcap", "--format", "") == ["csv", "json", "alog", "foxglove"]
     assert complete("nearsub", "log", "") == ["info", "export", "play", "plot"]
+
+
+def test_bash_completion_offers_the_running_missions_names_for_mission(runtime_dir, tmp_path):
+    """Every MISSION completes with the names in the launcher's registry (a launcher alive: this
+    test's process); launch and validate with the shipped missions' names and the files."""
+    import json
+
+    for name, pid in (("sea_trial", os.getpid()), ("sunk", 2**22 + 1)):  # the second's launcher is gone
+        entry = {"community": name, "connect": ["tcp/127.0.0.1:1"], "pid": pid, "log": str(tmp_path / "x.mcap")}
+        (runtime_dir / f"{name}.json").write_text(json.dumps(entry))
+    complete = bash_completer(dict(os.environ, NEARSUB_RUNTIME_DIR=str(runtime_dir)))
+    for words in (
+        ("clock", "s"),
+        ("swap", ""),
+        ("poke", "sea"),
+        ("view", "sea"),
+        ("foxglove", ""),
+        ("moos", "watch", ""),
+        *(("tap", action, "") for action in ("list", "echo", "hz", "watch", "pub")),
+    ):
+        assert complete("nearsub", *words) == ["sea_trial"], words
+    assert complete("nearsub", "launch", "overtake_stern_n") == ["overtake_stern_nuv"]
+    assert complete("nearsub", "validate", "launch_t") == ["launch_two"]
+    assert complete("nearsub", "launch", str(ALPHA)[:-3]) == [str(ALPHA)]  # a mission file too
+
+
+def test_every_command_names_its_mission_first_and_a_misspelt_name_gets_did_you_mean(runtime_dir, tmp_path):
+    """One way of naming a running mission: MISSION, the first positional, one help text; a name
+    that is not running is one line naming it, the closest running one and the running ones."""
+    import json
+
+    from nearsub.tools.support.missions import MISSION_HELP
+
+    parser = build_parser(every=True)
+    commands = [["tap", a] for a in ("list", "echo", "hz", "watch", "pub")]
+    commands += [["clock"], ["swap"], ["poke"], ["view"], ["foxglove"], ["moos", "watch"]]
+    for words in commands:
+        sub = parser
+        for word in words:
+            sub = next(a for a in sub._actions if a.dest and a.choices and word in a.choices).choices[word]
+        first = next(a for a in sub._actions if not a.option_strings)
+        assert (first.dest, first.metavar) == ("mission", "MISSION") and first.help.startswith(MISSION_HELP), words
+    entry = {"community": "sea_trial", "connect": ["tcp/127.0.0.1:1"], "pid": os.getpid(), "log": "x.mcap"}
+    (runtime_dir / "sea_trial.json").write_text(json.dumps(entry))
+    for command, argv in (("clock", ["sea_tria", "status"]), ("tap echo", ["sea_tria", "state"]), ("poke", ["sea_tria", "X=1"])):
+        done = nearsub(*command.split(), *argv)
+        assert done.returncode == 2 and done.stderr == (
+            f"nearsub {command}: no running mission named 'sea_tria' (did you mean 'sea_trial'? running: sea_trial)\n"
+        ), done.stderr
 
 
 def test_a_mission_file_that_is_no_regular_file_or_nests_too_deeply_is_one_line_and_exit_2(runtime_dir, tmp_path):
@@ -208,11 +273,11 @@ def test_a_mission_file_that_is_no_regular_file_or_nests_too_deeply_is_one_line_
 
 @pytest.mark.parametrize("no_validate", [[], ["--no-validate"]])
 def test_tap_pub_of_a_huge_integer_or_deeply_nested_json_is_one_line_and_exit_2(runtime_dir, no_validate):
-    key = "nearsub/alpha/remus100/desired"
+    key = "remus100/desired"
     cases = (('{"step": ' + "1" + "0" * 30 + "}", "an integer beyond 64 bits"),
              ('{"a": ' * 3000 + "1" + "}" * 3000, "JSON nested too deeply"))  # fmt: skip
     for value, words in cases:
-        done = nearsub("tap", "pub", key, value, *no_validate)
+        done = nearsub("tap", "pub", "alpha", key, value, *no_validate)
         assert done.returncode == 2 and len(done.stderr.strip().splitlines()) == 1, done.stderr[-300:]
         assert done.stderr.startswith("nearsub tap pub: value") and words in done.stderr, done.stderr
 

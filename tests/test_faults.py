@@ -32,9 +32,9 @@ def test_malformed_messages_are_rejected_and_logged(launches, community):
     process = launches.start(ALPHA, "--set", f"name={community}", "--set", "pause_at_step=100", "--until", "30")
     wait_registered(community)
     key = f"nearsub/{community}/remus100/state"
-    raw = nearsub("tap", "pub", key, "--raw-hex", "c1ffee")
-    bad = nearsub("tap", "pub", key, json.dumps({"step": 3, "t": 0.1, "source": "sim", "u": "fast"}), "--no-validate")
-    refused = nearsub("tap", "pub", key, json.dumps({"u": float("inf")}))
+    raw = nearsub("tap", "pub", community, key, "--raw-hex", "c1ffee")
+    bad = nearsub("tap", "pub", community, key, json.dumps({"step": 3, "t": 0.1, "source": "sim", "u": "fast"}), "--no-validate")
+    refused = nearsub("tap", "pub", community, key, json.dumps({"u": float("inf")}))
     assert raw.returncode == 0 and bad.returncode == 0, (raw.stderr, bad.stderr)
     assert refused.returncode == 2 and "'u'" in refused.stderr  # tap pub validates by default
     assert nearsub("clock", community, "resume").returncode == 0

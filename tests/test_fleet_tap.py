@@ -28,14 +28,14 @@ def listing_taps(community: str) -> list[tuple[str, ...]]:
     """The taps that list the replay, rate alfa's keys and refuse an unknown vehicle. The rates are
     measured over a step timeout: under load the replay may hear of a new subscriber seconds late."""
     return [
-        ("tap", "list", "--community", community, "--json"),
-        ("tap", "hz", f"nearsub/{community}/**", "--vehicle", "alfa", "--community", community, "--duration",
+        ("tap", "list", community, "--json"),
+        ("tap", "hz", community, f"nearsub/{community}/**", "--vehicle", "alfa", "--duration",
          str(STEP), "--json"),
-        ("tap", "list", "--community", community, "--vehicle", "alfa", "--json"),
-        ("tap", "list", "--community", community, "--vehicle", "zulu"),
-        ("tap", "echo", f"nearsub/{community}/*/state", "--vehicle", "zulu", "--community", community,
+        ("tap", "list", community, "--vehicle", "alfa", "--json"),
+        ("tap", "list", community, "--vehicle", "zulu"),
+        ("tap", "echo", community, f"nearsub/{community}/*/state", "--vehicle", "zulu",
          "--count", "1", "--timeout", "2"),
-        ("tap", "hz", f"nearsub/{community}/**", "--vehicle", "zulu", "--community", community, "--duration", "1"),
+        ("tap", "hz", community, f"nearsub/{community}/**", "--vehicle", "zulu", "--duration", "1"),
     ]  # fmt: skip
 
 
@@ -47,10 +47,10 @@ LISTING_TIMEOUT = len(listing_taps("c")) * STARTUP + STEP
 def test_tap_lists_the_vehicles_and_echoes_one_of_them(fleet_log, runtime_dir, community):
     # The player starts at the first subscriber: bravo's echo, so that it hears bravo's half of
     # the log (30 s at warp 1) however long the others take to start; the 60 s log outlasts them.
-    player = start_player(fleet_log, "--warp", 1, "--community", community, "--wait", STARTUP)
+    player = start_player(fleet_log, "--warp", 1, "--name", community, "--wait", STARTUP)
     try:
         wait_registered(community, player)
-        argv = ("tap", "echo", f"nearsub/{community}/*/state", "--vehicle", "bravo", "--community", community,
+        argv = ("tap", "echo", community, f"nearsub/{community}/*/state", "--vehicle", "bravo",
                 "--count", "5", "--json")  # fmt: skip
         # Unbuffered: its first line read here, the rest by communicate.
         echo = subprocess.Popen([sys.executable, "-m", "nearsub", *argv], stdout=subprocess.PIPE,
@@ -88,14 +88,14 @@ def test_tap_lists_the_vehicles_and_echoes_one_of_them(fleet_log, runtime_dir, c
 
 @pytest.mark.timeout(STEP + STARTUP + (2 * STARTUP + STEP) + (STARTUP + STEP) + STARTUP)
 def test_play_of_one_vehicle_replays_its_keys_and_the_mission_wide_ones(fleet_log, runtime_dir, community):
-    player = start_player(fleet_log, "--warp", 0, "--vehicle", "bravo", "--community", community, "--wait", STARTUP)
+    player = start_player(fleet_log, "--warp", 0, "--vehicle", "bravo", "--name", community, "--wait", STARTUP)
     try:
         wait_registered(community, player)
         # The player names its message count before it waits for a subscriber. Asked for one more,
         # the tap gets them all (delivery is lossless) and stops when the replay ends.
         count = played_count(player)
         tap = nearsub(
-            "tap", "echo", f"nearsub/{community}/**", "--community", community, "--count", str(count + 1),
+            "tap", "echo", community, f"nearsub/{community}/**", "--count", str(count + 1),
             "--json", timeout=2 * STARTUP + STEP,
         )  # fmt: skip
         player.communicate(timeout=STARTUP + STEP)
@@ -127,12 +127,12 @@ def test_a_short_key_stands_for_that_topic_of_every_vehicle(fleet_log, runtime_d
     one line naming those there are."""
     from nearsub.tools.cli import main
 
-    player = start_player(fleet_log, "--warp", 1, "--community", community, "--wait", STARTUP)
+    player = start_player(fleet_log, "--warp", 1, "--name", community, "--wait", STARTUP)
     try:
         wait_registered(community, player)
-        echo = nearsub("tap", "echo", "state", "--count", "20", "--timeout", str(STARTUP), "--json",
-                       "--community", community, timeout=2 * STARTUP + STEP)  # fmt: skip
-        quiet = nearsub("tap", "echo", "poke", "--count", "1", "--timeout", "1", "--community", community,
+        echo = nearsub("tap", "echo", community, "state", "--count", "20", "--timeout", str(STARTUP), "--json",
+                       timeout=2 * STARTUP + STEP)  # fmt: skip
+        quiet = nearsub("tap", "echo", community, "poke", "--count", "1", "--timeout", "1",
                         timeout=STARTUP + STEP)  # fmt: skip
     finally:
         stop([player])
@@ -144,7 +144,8 @@ def test_a_short_key_stands_for_that_topic_of_every_vehicle(fleet_log, runtime_d
     assert main(["log", "export", str(fleet_log), "--topic", "state"]) == 0
     exported = {json.loads(line)["topic"] for line in capsys.readouterr().out.splitlines()}
     assert exported == {"nearsub/alpha/alfa/state", "nearsub/alpha/bravo/state"}
-    for argv in (("tap", "echo", "stat", "--count", "1"), ("log", "export", str(fleet_log), "--topic", "stat")):
+    for argv in (("tap", "echo", community, "stat", "--count", "1"),
+                 ("log", "export", str(fleet_log), "--topic", "stat")):  # fmt: skip
         refused = nearsub(*argv, timeout=STARTUP)
         assert refused.returncode == 2 and len(refused.stderr.splitlines()) == 1, refused.stderr
         assert "stat: not a short key (state, desired, input, helm, forces, poke, events, end)" in refused.stderr
@@ -155,13 +156,12 @@ def test_tap_watch_keeps_the_newest_value_of_each_key_in_columns(fleet_log, runt
     """uXMS: several keys and several fields; each key's newest message, a field another topic
     lacks left empty; `tap echo` keeps every --field too (it kept only the last). The watch lasts
     a step timeout: under load the replay may hear of a new subscriber seconds late."""
-    player = start_player(fleet_log, "--warp", 1, "--community", community, "--wait", STARTUP)
+    player = start_player(fleet_log, "--warp", 1, "--name", community, "--wait", STARTUP)
     try:
         wait_registered(community, player)
         calls = [
-            ("tap", "watch", "state", "desired", "--field", "x", "--field", "u_d", "--timeout", str(STEP),
-             "--community", community),
-            ("tap", "echo", "state", "--field", "x", "--field", "y", "--count", "2", "--community", community),
+            ("tap", "watch", community, "state", "desired", "--field", "x", "--field", "u_d", "--timeout", str(STEP)),
+            ("tap", "echo", community, "state", "--field", "x", "--field", "y", "--count", "2"),
         ]  # fmt: skip
         with ThreadPoolExecutor(len(calls)) as pool:
             watch, echo = pool.map(lambda call: nearsub(*call, timeout=len(calls) * STARTUP + STEP), calls)

@@ -24,7 +24,7 @@ pytestmark = pytest.mark.timeout(180)
 def test_tap_echo_and_hz_on_a_running_mission(launches, community):
     process = launches.start(ALPHA, "--set", f"name={community}", "--warp", "5", "--until", "60")
     wait_registered(community)
-    echo = nearsub("tap", "echo", f"nearsub/{community}/*/state", "--count", "5", "--field", "u", "--timeout", "30")
+    echo = nearsub("tap", "echo", community, "*/state", "--count", "5", "--field", "u", "--timeout", "30")
     assert echo.returncode == 0, echo.stderr
     lines = [json.loads(line) for line in echo.stdout.splitlines()]
     assert len(lines) == 5 and all(line["key"] == f"nearsub/{community}/remus100/state" for line in lines)
@@ -32,7 +32,7 @@ def test_tap_echo_and_hz_on_a_running_mission(launches, community):
     times = [line["t"] for line in lines]
     assert times == sorted(times)
 
-    hz = nearsub("tap", "hz", f"nearsub/{community}/**", "--duration", "3", "--json")
+    hz = nearsub("tap", "hz", community, "**", "--duration", "3", "--json")
     assert hz.returncode == 0, hz.stderr
     rates = {}
     for line in hz.stdout.splitlines():
@@ -41,7 +41,7 @@ def test_tap_echo_and_hz_on_a_running_mission(launches, community):
     assert rates["remus100/state"] == pytest.approx(20.0, rel=0.01)  # dt = 0.05 s of simulated time
     assert rates["remus100/desired"] == pytest.approx(4.0, rel=0.01)  # helm period 5
 
-    listed = nearsub("tap", "list", "--community", community, "--json")
+    listed = nearsub("tap", "list", community, "--json")
     assert listed.returncode == 0, listed.stderr
     apps = json.loads(listed.stdout)["apps"]
     for role in ("helm", "pid", "sim", "clock", "logger"):
@@ -150,12 +150,11 @@ def test_an_operator_steers_a_running_mission_and_the_log_replays_it(launches, c
     process = launches.start(ALPHA, "--set", f"name={community}", "--set", "pause_at_step=100", "--until", "30")
     wait_registered(community)
     wait_paused(community)
-    desired_key = f"nearsub/{community}/remus100/desired"
-    steer = nearsub("tap", "pub", desired_key, '{"u_d": 1.0, "psi_d": 0.5}')
+    steer = nearsub("tap", "pub", community, "remus100/desired", '{"u_d": 1.0, "psi_d": 0.5}')
     assert steer.returncode == 0, steer.stderr
     assert "pid: operator desired from step 100: u_d=1.0, psi_d=0.5" in steer.stdout
     state = nearsub(
-        "tap", "pub", f"nearsub/{community}/remus100/state", '{"u": 1, "v": 0, "r": 0, "x": 0, "y": 0, "psi": 0}'
+        "tap", "pub", community, f"nearsub/{community}/remus100/state", '{"u": 1, "v": 0, "r": 0, "x": 0, "y": 0, "psi": 0}'
     )
     assert state.returncode == 2 and "state is accepted only from the app that computes it" in state.stderr
     assert nearsub("clock", community, "resume").returncode == 0
@@ -185,7 +184,7 @@ def test_a_forged_tick_far_ahead_is_refused_and_changes_nothing(launches, commun
     wait_registered(community)
     assert wait_paused(community)["step"] == 100
     tick = json.dumps({"step": 10**6, "t": 0.0, "source": "clock"})
-    forged = nearsub("tap", "pub", f"nearsub/{community}/clock/tick", tick, "--no-validate")
+    forged = nearsub("tap", "pub", community, "clock/tick", tick, "--no-validate")
     assert forged.returncode == 0, forged.stderr
     assert nearsub("clock", community, "resume").returncode == 0
     code, summary, err = finish(process)

@@ -52,7 +52,7 @@ def test_replay_equals_the_log_message_for_message(log, runtime_dir, community):
             bytes(r.data)
         )
     total = sum(len(v) for v in logged.values())
-    player = start_player(log, "--warp", 0, "--community", community, "--wait", STARTUP)
+    player = start_player(log, "--warp", 0, "--name", community, "--wait", STARTUP)
     try:
         entry = wait_registered(community, player)
         received = defaultdict(list)
@@ -81,13 +81,13 @@ def test_replay_equals_the_log_message_for_message(log, runtime_dir, community):
 
 def test_tap_finds_the_replay_by_name_with_a_window_and_a_warp(log, runtime_dir, community):
     player = start_player(
-        log, "--warp", 2, "--from", 5, "--to", 6, "--topic", "nearsub/alpha/*/state", "--community", community,
+        log, "--warp", 2, "--from", 5, "--to", 6, "--topic", "nearsub/alpha/*/state", "--name", community,
         "--wait", STARTUP,
     )  # fmt: skip
     try:
         wait_registered(community, player)
         key = f"nearsub/{community}/remus100/state"
-        tap = nearsub("tap", "echo", key, "--community", community, "--count", "21", "--json", timeout=STARTUP + STEP)
+        tap = nearsub("tap", "echo", community, key, "--count", "21", "--json", timeout=STARTUP + STEP)
         out, err = player.communicate(timeout=STARTUP + STEP)
     finally:
         stop([player])
@@ -103,7 +103,7 @@ def test_tap_finds_the_replay_by_name_with_a_window_and_a_warp(log, runtime_dir,
 @pytest.mark.parametrize(
     "args, named",
     [
-        (["--community", "a b"], "--community 'a b'"),
+        (["--name", "a b"], "--name 'a b'"),
         (["--topic", "nearsub/other/**"], "--topic nearsub/other/**"),
         (["--from", "5", "--to", "2"], "--to 2"),
         (["--connect", "garbage"], "connect endpoint 'garbage' is not <protocol>/<address>"),
@@ -118,5 +118,5 @@ def test_bad_input_is_one_line_and_exit_2(log, runtime_dir, args, named):
 
 def test_a_running_mission_name_is_refused(log, runtime_dir, community):
     with registry.claim(community):
-        out = nearsub("log", "play", str(log), "--community", community, timeout=STARTUP)
-    assert out.returncode == 2 and f"--community {community}: a mission of that name is running" in out.stderr
+        out = nearsub("log", "play", str(log), "--name", community, timeout=STARTUP)
+    assert out.returncode == 2 and f"--name {community}: a mission of that name is running" in out.stderr

@@ -38,7 +38,7 @@ def test_tools_name_an_unreachable_router_in_one_line_and_exit_2(tmp_path):
 
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"  # nothing listens there
     env = dict(os.environ, NEARSUB_CONNECT_TIMEOUT="1", NEARSUB_RUNTIME_DIR=str(tmp_path))
-    for argv in (["tap", "list"], ["clock", "alpha", "status"], ["swap", "alpha", "helm"], ["view", "alpha"]):
+    for argv in (["tap", "list", "alpha"], ["clock", "alpha", "status"], ["swap", "alpha", "helm"], ["view", "alpha"]):
         out = subprocess.run(
             [sys.executable, "-m", "nearsub", *argv, "--connect", endpoint],
             capture_output=True,

@@ -119,7 +119,7 @@ def test_live_view_follows_the_state_topic_pauses_resumes_and_swaps_from_the_pag
     # draws the same mission.
     key = f"nearsub/{community}/{MISSION.vehicle_name}/state"
     tap = subprocess.Popen(
-        [sys.executable, "-m", "nearsub", "tap", "echo", key, "--count", "60", "--json"],
+        [sys.executable, "-m", "nearsub", "tap", "echo", community, key, "--count", "60", "--json"],
         stdout=subprocess.PIPE,
         text=True,
     )
@@ -299,7 +299,7 @@ def test_live_view_follows_every_vehicle_of_a_running_mission(runtime_dir, commu
 
     path = tmp_path / "fleet.mcap"
     write_fleet_log(path, seconds=60.0)
-    player = start_player(path, "--warp", 1, "--community", community, "--wait", STARTUP)
+    player = start_player(path, "--warp", 1, "--name", community, "--wait", STARTUP)
     try:
         entry = wait_replay(community, player)
         monkeypatch.setenv("NEARSUB_CREDENTIALS", entry["credentials"])

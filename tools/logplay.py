@@ -4,12 +4,14 @@ so that `tap`, `view` or a new app run on a replay as on a live mission.
 Every selected message goes out with its logged bytes, unchanged, at its logged simulated time
 scaled by the warp (warp 0: as fast as the bus takes them), in log-time order (messages logged at
 the same time keep the log's order), one lossless publisher per key (docs/design.md, "Transport").
-Under `--community NAME` the keys move from `nearsub/<logged>/...` to `nearsub/<NAME>/...`; the
-payloads stay as logged, so a control request's `reply_to` still names the logged community.
+Under `--name NAME` the keys move from `nearsub/<logged>/...` to `nearsub/<NAME>/...`; the
+payloads stay as logged, so a control request's `reply_to` still names the logged mission. The new
+name is an option, not the MISSION positional of the commands that address a running mission: the
+positional is the log, and the name is one the replay claims, not one that must be running.
 
 Without `--connect` the player starts a router on a free loopback port as the launcher does
-(`launcher.processes.spawn_router`) and prints its endpoint. It claims the community name and registers the
-replay like a launched mission (`registry`), so `nearsub tap echo KEY --community NAME` and
+(`launcher.processes.spawn_router`) and prints its endpoint. It claims the name and registers the
+replay like a launched mission (`registry`), so `nearsub tap echo NAME KEY` and
 `nearsub view NAME` find it by name; a live mission of that name is refused rather than mixed with.
 """
 
@@ -56,7 +58,7 @@ def add_arguments(t) -> None:
     t.add_argument("--to", dest="end", type=number(minimum=0.0), metavar="T", help="last simulated second to replay")
     t.add_argument("--topic", help="key expression of the logged keys to replay (wildcards * and **)")
     t.add_argument("--vehicle", metavar="NAME", help="replay one vehicle's keys and the mission-wide ones")
-    t.add_argument("--community", help="publish under this community name (default: the logged one)")
+    t.add_argument("--name", help="publish as the mission of this name (default: the logged one)")
     t.add_argument("--connect", action="append", metavar="ENDPOINT", help="use this router instead of starting one")
     t.add_argument(
         "--wait",
@@ -90,8 +92,8 @@ def select(args) -> Selection:
             raise PlayInputError(str(exc)) from None
     if args.start is not None and args.end is not None and args.end < args.start:
         raise PlayInputError(f"--to {args.end:g}: before --from {args.start:g}")
-    if args.community is not None and not COMMUNITY_PATTERN.match(args.community):
-        raise PlayInputError(f"--community {args.community!r}: use {COMMUNITY_CHARS}")
+    if args.name is not None and not COMMUNITY_PATTERN.match(args.name):
+        raise PlayInputError(f"--name {args.name!r}: use {COMMUNITY_CHARS}")
     wanted = topic_filter(args.topic)
     contents = read_log(args.log)
     records = contents.records
@@ -100,7 +102,7 @@ def select(args) -> Selection:
     logged = contents.metadata.get("mission", {}).get("name") or next(
         (r.topic.split("/")[1] for r in contents.records if r.topic.count("/") >= 2), "nearsub"
     )
-    community = args.community or logged
+    community = args.name or logged
     startup_timeout = 30.0
     try:
         startup_timeout = float(json.loads(contents.metadata["mission"]["resolved"])["startup_timeout"])
@@ -134,8 +136,8 @@ def play_command(args) -> int:
         claim = registry.claim(selection.community)
     except registry.NameTaken:
         print(
-            f"nearsub log play: --community {selection.community}: a mission of that name is running; "
-            "replay under another name with --community NAME",
+            f"nearsub log play: --name {selection.community}: a mission of that name is running; "
+            "replay under another name with --name NAME",
             file=sys.stderr,
         )
         return 2
@@ -196,7 +198,7 @@ def _publish(args, selection: Selection, bus, connect: list[str], own_router: bo
     print(f"router {connect[0]} ({router})", flush=True)
     print(
         f"playing {len(selection.items)} messages of {len(publishers)} keys, simulated {first:.2f} .. {last:.2f} s, "
-        f"as community {c} at warp {args.warp:g}",
+        f"as mission {c} at warp {args.warp:g}",
         flush=True,
     )
     if args.wait > 0 and not _wait_for_subscriber(publishers.values(), args.wait):

@@ -182,7 +182,7 @@ class LiveSource:
         return {"type": "reply", "cmd": cmd, "ok": False, "text": f"unknown command {cmd!r}"}
 
     async def _swap(self, behaviour: str) -> dict:
-        """The helm swap of `nearsub swap COMMUNITY helm --behaviour B`, asked of the launcher."""
+        """The helm swap of `nearsub swap MISSION helm --behaviour B`, asked of the launcher."""
         if behaviour not in self.scene["behaviours"]:
             return {"type": "reply", "cmd": "swap", "ok": False, "text": f"behaviour {behaviour!r} is not known"}
         request = msgpack.packb({"cmd": "swap", "app": "helm", "set": [f"behaviour={behaviour}"], "at_step": None})

@@ -1,4 +1,4 @@
-"""`nearsub clock COMMUNITY status|pause|resume|warp N`: ask a running mission's clock."""
+"""`nearsub clock MISSION status|pause|resume|warp N`: ask a running mission's clock."""
 
 from __future__ import annotations
 
@@ -7,17 +7,16 @@ import sys
 import uuid
 
 from ..support.arguments import STEP
-from ..support.connect import add_router_argument, open_bus
+from ..support.connect import add_connect_arguments, open_bus
 
 
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("clock")
-    p.add_argument("community", help="mission name")
+    add_connect_arguments(p)
     p.add_argument("action", choices=("status", "pause", "resume", "warp"))
     p.add_argument("warp", nargs="?", type=float, help="with warp: simulated seconds per wall second (0: flat out)")
     p.add_argument("--at-step", type=STEP, help="with pause: pause when the clock reaches this step")
     p.add_argument("--json", action="store_true", help="the reply as JSON (the default when piped)")
-    add_router_argument(p)
     p.set_defaults(func=clock_command)
 
 

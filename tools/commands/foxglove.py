@@ -1,4 +1,4 @@
-"""`nearsub foxglove NAME` and `nearsub log export --format foxglove`: a mission for Foxglove.
+"""`nearsub foxglove MISSION` and `nearsub log export --format foxglove`: a mission for Foxglove.
 
 Both go through foxglove-sdk: an MCAP file it writes, or its WebSocket server on 127.0.0.1
 (Foxglove's WebSocket protocol, subprotocol "foxglove.sdk.v1"), following a running mission. The channels are those of
@@ -20,6 +20,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+from ..support.missions import add_mission_argument, mission_name
 from .view import PORT
 
 REPUBLISH = 2.0  # wall seconds between repeats of the fixed scene, for clients that join late
@@ -27,7 +28,7 @@ REPUBLISH = 2.0  # wall seconds between repeats of the fixed scene, for clients 
 
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("foxglove", help="serve a running mission to Foxglove (WebSocket, 127.0.0.1)")
-    p.add_argument("community", metavar="MISSION_NAME", help="a running mission's name")
+    add_mission_argument(p)
     p.add_argument(
         "--port",
         type=PORT,
@@ -140,7 +141,8 @@ def serve_mission(bus, community: str, mission, port: int, ready) -> None:
 def foxglove_command(args) -> int:
     from .view import mission_endpoints
 
-    endpoints, mission, _, credentials = mission_endpoints(args.community, args.connect, args.run)
+    community = mission_name(args.mission)
+    endpoints, mission, _, credentials = mission_endpoints(community, args.connect, args.run)
     from nearsub.common.runtime.bus import Bus, Endpoints
 
     def ready(url: str) -> None:
@@ -148,7 +150,7 @@ def foxglove_command(args) -> int:
 
     try:
         with Bus(Endpoints("client", endpoints, credentials=credentials)) as bus:
-            serve_mission(bus, args.community, mission, args.port, ready)
+            serve_mission(bus, community, mission, args.port, ready)
     except KeyboardInterrupt:  # the way to stop it
         pass
     return 0

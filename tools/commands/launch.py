@@ -10,12 +10,15 @@ from pathlib import Path
 from ..support import registry
 from ..support.arguments import number
 from ..support.errors import InputError
+from ..support.missions import add_shipped_completion
 from .view import PORT
 
 
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("launch")
-    p.add_argument("mission", help="mission file (TOML), or a shipped mission's name (alpha: missions/alpha.toml)")
+    add_shipped_completion(
+        p.add_argument("mission", help="mission file (TOML), or a shipped mission's name (alpha: missions/alpha.toml)")
+    )
     p.add_argument("--warp", type=number(minimum=0.0), help="time warp: 0 = as fast as possible, 1 = real time")
     p.add_argument("--until", type=number(above=0.0), metavar="T", help="stop after T simulated seconds")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a mission setting")

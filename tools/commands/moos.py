@@ -1,11 +1,13 @@
 """`nearsub moos sim FILE.moos [NAME]`: nearsub's sim in a MOOS community, as uSimMarineV22
 (docs/moos.md). pAntler starts it with `InhibitMOOSParams = true` and the arguments in
-`ExtraProcessParams` (missions/moos/). `nearsub moos watch MISSION_NAME --db HOST:PORT`: a running
+`ExtraProcessParams` (missions/moos/). `nearsub moos watch MISSION --db HOST:PORT`: a running
 nearsub mission posted to a MOOSDB, for pMarineViewer. Both need the `moos` extra (pymoos2)."""
 
 from __future__ import annotations
 
 import sys
+
+from ..support.missions import add_mission_argument, mission_name
 
 
 def add_parser(subparsers) -> None:
@@ -16,7 +18,7 @@ def add_parser(subparsers) -> None:
     sim.add_argument("name", nargs="?", default="nearsub_sim", help="its MOOS name and ProcessConfig block")
     sim.set_defaults(func=sim_command)
     watch = sub.add_parser("watch", help="post a running nearsub mission to a MOOSDB for pMarineViewer")
-    watch.add_argument("community", metavar="MISSION_NAME", help="a running mission's name")
+    add_mission_argument(watch)
     watch.add_argument(
         "--db", default="localhost:9000", metavar="HOST:PORT", help="the MOOSDB (default localhost:9000)"
     )
@@ -73,9 +75,10 @@ def watch_command(args) -> int:
         print(f"nearsub moos: {problem}", file=sys.stderr)
         return 2
     host, port = db_address(args.db)
-    endpoints, mission, _, credentials = mission_endpoints(args.community, args.connect, args.run)
+    community = mission_name(args.mission)
+    endpoints, mission, _, credentials = mission_endpoints(community, args.connect, args.run)
     if mission is None:
-        raise InputError(f"{args.community}: its mission is unknown with --connect alone; give --run RUN.json")
+        raise InputError(f"{community}: its mission is unknown with --connect alone; give --run RUN.json")
     from pymoos2.core.MOOSCommClient import MOOSCommClient
 
     client = MOOSCommClient(host, port, app_name="nearsub_watch", comm_tick=20.0)
@@ -85,7 +88,7 @@ def watch_command(args) -> int:
             print(f"nearsub moos watch: no MOOSDB at {host}:{port} after {CONNECT_TIMEOUT:g} s", file=sys.stderr)
             return 1
         with Bus(Endpoints("client", endpoints, credentials=credentials)) as bus:
-            follow(bus, args.community, mission, client)
+            follow(bus, community, mission, client)
         print("nearsub moos watch: lost the MOOSDB", file=sys.stderr)
         return 1
     except KeyboardInterrupt:  # the way to stop it

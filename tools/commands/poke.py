@@ -1,4 +1,4 @@
-"""`nearsub poke MISSION NAME=VALUE ...`: set mission variables in a running helm (uPokeDB).
+"""`nearsub poke MISSION [--vehicle NAME] NAME=VALUE ...`: set mission variables in a running helm (uPokeDB).
 
 The poke travels as an operator override (`nearsub tap pub` on the vehicle's `poke` topic): the
 helm applies it at the next step it runs, records that step in an info event, which this command
@@ -9,17 +9,15 @@ from __future__ import annotations
 import json
 import math
 import sys
-from pathlib import Path
 
-from ..support.connect import add_router_argument
+from ..support.connect import add_connect_arguments
 
 
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("poke", help="set mission variables of a running helm (uPokeDB)")
-    p.add_argument("mission", help="the mission file, or the running mission's (community) name with --vehicle")
+    add_connect_arguments(p)
     p.add_argument("assignments", nargs="+", metavar="NAME=VALUE", help="values are read as TOML, else as text")
-    p.add_argument("--vehicle", help="the vehicle's name in the keys (default: the mission file's single vehicle)")
-    add_router_argument(p)
+    p.add_argument("--vehicle", help="whose helm to poke (default: the mission's only vehicle)")
     p.set_defaults(func=run)
 
 
@@ -44,8 +42,7 @@ def parse_assignments(texts: list[str]) -> dict:
 
 
 def run(args) -> int:
-    from nearsub.common.mission.schema import MissionError, load_mission
-
+    from ..support.missions import mission_of
     from . import tap
 
     try:
@@ -53,30 +50,26 @@ def run(args) -> int:
     except ValueError as exc:
         print(f"nearsub poke: {exc}", file=sys.stderr)
         return 2
-    community, vehicle = args.mission, args.vehicle
-    if Path(args.mission).suffix == ".toml":
-        try:
-            mission = load_mission(args.mission)
-        except MissionError as exc:
-            print(f"nearsub poke: {exc}", file=sys.stderr)
-            return 2
+    mission = mission_of(args)  # a name that is not running: the command line reports it, exit 2
+    community, vehicle = args.mission if mission is None else mission.name, args.vehicle
+    if mission is not None:
         fleet = [entry["name"] for entry in mission.model_dump().get("vehicles") or []]
         vehicle = fleet[0] if vehicle is None and len(fleet) == 1 else vehicle
         if fleet and vehicle not in fleet:  # several vehicles: the poke names whose helm it sets
             given = f"--vehicle {vehicle}: not a vehicle of {args.mission}" if vehicle else "give --vehicle NAME"
             print(f"nearsub poke: {given} (its vehicles: {', '.join(fleet)})", file=sys.stderr)
             return 2
-        community, vehicle = mission.name, vehicle or mission.vehicle_name
+        vehicle = vehicle or mission.vehicle_name
     if vehicle is None:
-        print(f"nearsub poke: give --vehicle for the running mission {community!r}, or its file", file=sys.stderr)
+        print(f"nearsub poke: give --vehicle for the mission {community!r} reached with --connect", file=sys.stderr)
         return 2
     pub = type(args)(
+        mission=community,
         key=f"nearsub/{community}/{vehicle}/poke",
         value=json.dumps({"values": values}),
         raw_hex=None,
         no_validate=False,
         connect=args.connect,
         credentials=args.credentials,
-        community=community,
     )
     return tap.tap_pub(pub)

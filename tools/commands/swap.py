@@ -1,4 +1,4 @@
-"""`nearsub swap COMMUNITY APP --with SETTINGS`: replace a running app without stopping the mission.
+"""`nearsub swap MISSION APP --with SETTINGS`: replace a running app without stopping the mission.
 
 SETTINGS is a comma-separated list of settings of the new app, e.g. `behaviour=waypoints,period=5`;
 keys are relative to the app's mission section (`apps.helm`) unless they start with `apps.`.
@@ -14,12 +14,12 @@ import json
 import sys
 
 from ..support.arguments import STEP, number
-from ..support.connect import add_router_argument, open_bus
+from ..support.connect import add_connect_arguments, open_bus
 
 
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("swap")
-    p.add_argument("community", help="mission name")
+    add_connect_arguments(p)
     p.add_argument("app", help="role to replace, e.g. helm")
     p.add_argument(
         "--with",
@@ -34,7 +34,6 @@ def add_parser(subparsers) -> None:
     p.add_argument("--at-step", type=STEP, help="swap when the clock reaches this step (default: now)")
     p.add_argument("--timeout", type=number(above=0.0), default=120.0, help="wall seconds to wait for the swap")
     p.add_argument("--json", action="store_true")
-    add_router_argument(p)
     p.set_defaults(func=swap_command)
 
 

@@ -1,4 +1,6 @@
-"""`nearsub tap`: watch a running mission (uXMS / `ros2 topic`): list, echo, hz, pub."""
+"""`nearsub tap list|echo|hz|watch|pub MISSION ...`: watch a running mission (uXMS / `ros2 topic`).
+MISSION is the running mission's name (tools/support/missions.py); KEY a short key such as `state`,
+or a key expression, relative to the mission unless it starts with `nearsub/` (tools/support/topics.py)."""
 
 from __future__ import annotations
 
@@ -10,9 +12,18 @@ from collections import defaultdict, deque
 from ..support.arguments import integer, number
 from ..support.connect import add_connect_arguments, open_bus
 from ..support.errors import InputError
+from ..support.missions import resolve_mission
 from ..support.topics import topic_key
 
-KEY_HELP = "a key expression (wildcards * and **), or a short key: state, desired, input, forces, ... (every vehicle's)"
+KEY_HELP = (
+    "a short key: state, desired, input, forces, ... (every vehicle's), or a key expression (wildcards * and **) "
+    "relative to the mission (auv1/state, */forces) unless it starts with nearsub/"
+)
+
+PUB_VALUE_HELP = (
+    "JSON object of fields; an angle may be given in degrees as NAME_deg, as tap echo prints it on a terminal "
+    '(\'{"u_d": 1.5, "psi_d_deg": 30}\')'
+)
 
 
 def add_parser(subparsers) -> None:
@@ -27,6 +38,7 @@ def add_parser(subparsers) -> None:
     t.add_argument("--vehicle", metavar="NAME", help="only this vehicle's topics (and the apps)")
     t.set_defaults(func=tap_list)
     t = tap.add_parser("echo", help="print messages of a key expression (wildcards * and **)")
+    add_connect_arguments(t)
     t.add_argument("key", help=KEY_HELP)
     t.add_argument(
         "--field", action="append", help="print only this field (dotted path); given again, a map of the fields"
@@ -35,17 +47,17 @@ def add_parser(subparsers) -> None:
     t.add_argument("--timeout", type=number(above=0.0), help="stop after S wall seconds (or at the mission end)")
     t.add_argument("--json", action="store_true", help="JSON lines (the default when piped)")
     t.add_argument("--vehicle", metavar="NAME", help="only the keys of this vehicle (nearsub/<c>/NAME/...)")
-    add_connect_arguments(t)
     t.set_defaults(func=tap_echo)
     t = tap.add_parser("hz", help="message rates per key, in simulated time")
+    add_connect_arguments(t)
     t.add_argument("key", help=KEY_HELP)
     t.add_argument("--window", type=integer(minimum=2), default=100, help="samples per rate estimate")
     t.add_argument("--vehicle", metavar="NAME", help="only the keys of this vehicle (nearsub/<c>/NAME/...)")
     t.add_argument("--duration", type=number(above=0.0), default=5.0, help="wall seconds to listen")
     t.add_argument("--json", action="store_true")
-    add_connect_arguments(t)
     t.set_defaults(func=tap_hz)
     t = tap.add_parser("watch", help="a table of the newest value on each key, refreshed as they come (uXMS)")
+    add_connect_arguments(t)
     t.add_argument("keys", nargs="+", metavar="KEY", help=KEY_HELP)
     t.add_argument("--field", action="append", help="a column: this field (dotted path); default: the whole value")
     t.add_argument("--vehicle", metavar="NAME", help="only the keys of this vehicle (nearsub/<c>/NAME/...)")
@@ -53,14 +65,13 @@ def add_parser(subparsers) -> None:
         "--timeout", type=number(above=0.0), help="stop after S wall seconds (default: at Ctrl-C or the mission end)"
     )
     t.add_argument("--json", action="store_true", help="at the end, one JSON line per key (the default when piped)")
-    add_connect_arguments(t)
     t.set_defaults(func=tap_watch)
     t = tap.add_parser("pub", help="publish one message by hand, validated against its schema")
-    t.add_argument("key")
-    t.add_argument("value", nargs="?", default="{}", help="JSON object of fields")
+    add_connect_arguments(t)
+    t.add_argument("key", help="one key: VEHICLE/LEAF (auv1/desired), or nearsub/MISSION/...")
+    t.add_argument("value", nargs="?", default="{}", help=PUB_VALUE_HELP)
     t.add_argument("--no-validate", action="store_true", help="send the JSON as msgpack without checking it")
     t.add_argument("--raw-hex", help="send these bytes instead (fault injection)")
-    add_connect_arguments(t)
     t.set_defaults(func=tap_pub)
 
 
@@ -106,11 +117,11 @@ def vehicle_name(key: str) -> str | None:
     return owner[0] if owner else None
 
 
-def publishing_vehicles(bus, community: str | None) -> list[str]:
-    """The vehicles with a publisher now in `community` (None: in any)."""
+def publishing_vehicles(bus, community: str) -> list[str]:
+    """The vehicles with a publisher now in `community`."""
     from nearsub.common.runtime import keys
 
-    prefix = keys.community_root(community) + "/" if community else "nearsub/"
+    prefix = keys.community_root(community) + "/"
     return sorted(
         {name for key in bus.admin_keys("publisher") if key.startswith(prefix) and (name := vehicle_name(key))}
     )
@@ -169,10 +180,10 @@ def tap_list(args) -> int:
 
     times: dict[str, list[float]] = defaultdict(list)
     with bus:
-        prefix = keys.community_root(community) if community else "nearsub"
+        prefix = keys.community_root(community)
         mailbox = Mailbox()
         bus.subscribe(f"{prefix}/**", mailbox)
-        apps = bus.alive(f"{prefix}/alive/**" if community else "nearsub/*/alive/**")
+        apps = bus.alive(f"{prefix}/alive/**")
         publishers = [k for k in bus.admin_keys("publisher") if k.startswith(prefix)]
         subscribers = [k for k in bus.admin_keys("subscriber") if k.startswith(prefix)]
         deadline = time.monotonic() + args.sample
@@ -230,9 +241,9 @@ def rate(stamps) -> float:
 
 def tap_echo(args) -> int:
     as_json = args.json or not sys.stdout.isatty()
-    check_key(topic_key(args.key))  # a bare word that is no short key: said before the bus opens
-    bus, community = open_bus(args, args.key)
-    key = topic_key(args.key, community)
+    key = topic_key(args.key, resolve_mission(args))
+    check_key(key)  # a bare word that is no short key: said before the bus opens
+    bus, community = open_bus(args)
     from nearsub.common.runtime.bus import Mailbox
 
     printed = 0
@@ -287,10 +298,10 @@ def tap_watch(args) -> int:
     refreshed four times a second, its columns the `--field`s (a field a message lacks is "-");
     piped or with --json, one JSON line per key at the end. It stops at Ctrl-C, --timeout or the
     mission end."""
-    for pattern in args.keys:
-        check_key(topic_key(pattern))
-    bus, community = open_bus(args, args.keys[0])
-    patterns = [topic_key(pattern, community) for pattern in args.keys]
+    patterns = [topic_key(pattern, resolve_mission(args)) for pattern in args.keys]
+    for pattern in patterns:
+        check_key(pattern)
+    bus, community = open_bus(args)
     from nearsub.common.runtime.bus import Mailbox
 
     live = not args.json and sys.stdout.isatty()
@@ -372,9 +383,9 @@ def _watch_screen(fields: list[str] | None, latest: dict[str, dict]):
 
 def tap_hz(args) -> int:
     """Message rates per key, in simulated time (the message's t), like `ros2 topic hz`."""
-    check_key(topic_key(args.key))
-    bus, community = open_bus(args, args.key)
-    key = topic_key(args.key, community)
+    key = topic_key(args.key, resolve_mission(args))
+    check_key(key)
+    bus, community = open_bus(args)
     from nearsub.common.runtime.bus import Mailbox
 
     times: dict[str, deque] = defaultdict(lambda: deque(maxlen=args.window))
@@ -430,8 +441,11 @@ def tap_pub(args) -> int:
     from nearsub.common.runtime.lifecycle import OPERATOR, OPERATOR_TOPICS
     from nearsub.common.runtime.messages import VEHICLE_TOPICS, MessageError, decode, encode, model_for_key
 
-    check_key(args.key)
-    parts = args.key.split("/")
+    key = topic_key(args.key, resolve_mission(args))
+    check_key(key)
+    if "*" in key:
+        raise InputError(f"key {args.key}: a message goes to one key; name the vehicle, e.g. VEHICLE/{args.key}")
+    parts = key.split("/")
     leaf = parts[3] if len(parts) == 4 and parts[3] in VEHICLE_TOPICS else None
     operator = leaf in OPERATOR_TOPICS and args.raw_hex is None and not args.no_validate
     if args.raw_hex is not None:
@@ -453,21 +467,21 @@ def tap_pub(args) -> int:
         if args.no_validate:
             payload = packed
         else:
-            model = model_for_key(args.key)
+            model = model_for_key(key)
             if model is None:
-                print(f"nearsub tap pub: no message schema for key {args.key!r}", file=sys.stderr)
+                print(f"nearsub tap pub: no message schema for key {key!r}", file=sys.stderr)
                 return 2
             if not isinstance(fields, dict):
                 raise InputError(f"value {args.value!r}: not a JSON object of fields")
             fields = {"step": 0, "t": 0.0, "source": OPERATOR if operator else "tap", **fields}
             try:
-                message = decode(msgpack.packb(fields), model, args.key)
+                message = decode(msgpack.packb(fields), model, key)
             except MessageError as exc:
                 print(f"nearsub tap pub: {exc}", file=sys.stderr)
                 return 2
             if message.__class__.__name__ in LOCKSTEP_MESSAGES:
                 raise InputError(
-                    f"{args.key}: a {message.__class__.__name__} is the lock-step's own (the clock and the apps "
+                    f"{key}: a {message.__class__.__name__} is the lock-step's own (the clock and the apps "
                     "publish it); --no-validate sends it anyway, for fault injection"
                 )
             if leaf is not None and not operator:
@@ -481,10 +495,10 @@ def tap_pub(args) -> int:
                 print(f"nearsub tap pub: an operator's {leaf} goes out with source {OPERATOR!r}", file=sys.stderr)
                 return 2
             payload = encode(message)
-    bus, _ = open_bus(args, args.key)
+    bus, _ = open_bus(args)
     from nearsub.common.runtime.bus import Mailbox
 
-    vehicle = vehicle_name(args.key) if leaf is not None else None
+    vehicle = vehicle_name(key) if leaf is not None else None
     from nearsub.common.runtime import keys
 
     with bus:
@@ -498,16 +512,16 @@ def tap_pub(args) -> int:
             # The consumer's event: from a mission-wide app instance, or one of the vehicle's.
             bus.subscribe(keys.all_events(parts[1]), mailbox)
         # A fresh session drops data put before it knows a subscriber (docs/design.md, "Transport").
-        if not bus.put_when_matched(args.key, payload, wait=5.0):
+        if not bus.put_when_matched(key, payload, wait=5.0):
             if operator:
                 running = publishing_vehicles(bus, parts[1])
                 print(
-                    f"nearsub tap pub: nobody consumes {args.key}: is vehicle {vehicle!r} running? "
+                    f"nearsub tap pub: nobody consumes {key}: is vehicle {vehicle!r} running? "
                     f"(vehicles publishing: {', '.join(running) or 'none'})",
                     file=sys.stderr,
                 )
                 return 1
-            print(f"nearsub tap pub: nobody subscribes to {args.key}; published anyway", file=sys.stderr)
+            print(f"nearsub tap pub: nobody subscribes to {key}; published anyway", file=sys.stderr)
         if operator:
             return _confirm_override(mailbox, leaf, vehicle)
         time.sleep(0.1)  # let the session flush before it closes

@@ -15,18 +15,20 @@ import sys
 from pathlib import Path
 
 from ..support.errors import InputError
+from ..support.missions import add_shipped_completion
 
 MISSIONS = Path(__file__).resolve().parents[2] / "missions"
 
 
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("validate")
-    p.add_argument(
+    missions = p.add_argument(
         "missions",
         nargs="*",
         metavar="MISSION",
         help="mission files (or shipped missions' names) to check without running them; none: the physics suite",
     )
+    add_shipped_completion(missions)
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a mission setting")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=validate_command)

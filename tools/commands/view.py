@@ -1,6 +1,6 @@
-"""`nearsub view MISSION_NAME | LOG.mcap`: the live map in a browser (the pMarineViewer of nearsub).
+"""`nearsub view MISSION | LOG.mcap`: the live map in a browser (the pMarineViewer of nearsub).
 
-With a mission name it follows the running mission (found through the launcher's registry, or
+With a mission (its name, tools/support/missions.py) it follows the running mission (found through the launcher's registry, or
 `--connect ENDPOINT`); with a log file it replays the log with a timeline to scrub. Either way it
 serves one page on http://127.0.0.1:PORT/?token=TOKEN (a free port unless `--port` is given) and
 prints its URL, then the read-only one (tools/view_server.py, "Access"). A running mission's
@@ -17,13 +17,14 @@ from pathlib import Path
 from ..support.arguments import integer
 from ..support.errors import InputError
 from ..support.log_input import check_log, is_log, mission_of_log
+from ..support.missions import add_mission_argument, mission_name, mission_of_run
 
 PORT = integer(minimum=0, maximum=65535)  # a TCP port; 0: a free one
 
 
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("view", help="live map of a running mission, or replay of a log, in a browser")
-    p.add_argument("target", metavar="MISSION_NAME|LOG.mcap", help="a running mission's name, or a log file")
+    add_mission_argument(p, or_log=True)
     p.add_argument("--port", type=PORT, default=0, help="TCP port on 127.0.0.1 (default: a free one)")
     p.add_argument("--connect", action="append", metavar="ENDPOINT", help="router endpoint instead of the registry")
     p.add_argument(
@@ -83,23 +84,12 @@ def start_server_process(tool: str, run_file: str | Path, port: int, timeout: fl
     return process, line.split(": ", 1)[1].strip()
 
 
-def mission_of_run(entry: dict):
-    """The mission of a running launcher: its run file sits beside the log it writes."""
-    from nearsub.common.mission.schema import RunConfig
-
-    run_file = Path(entry.get("log", "")).parent / "run.json"
-    try:
-        return RunConfig.load(run_file).mission
-    except (OSError, ValueError):
-        return None
-
-
 def view_command(args) -> int:
-    if is_log(args.target):
-        path = Path(args.target)
+    if is_log(args.mission):
+        path = Path(args.mission)
         check_log(path)
         return _replay(path, args.port)
-    return _live(args.target, args.connect, args.run, args.port)
+    return _live(mission_name(args.mission), args.connect, args.run, args.port)
 
 
 def _ready(url: str) -> None:

@@ -5,6 +5,7 @@
 - errors: InputError, the bad input `cli` prints as one line, exit 2.
 - tables: the console the tools print their tables on.
 - registry: where running missions are found (one JSON file per mission) and their names claimed.
+- missions: MISSION, the first positional of every command that addresses a running mission.
 - connect: a bus to a running mission, by endpoint or by name (through the registry).
 - caller: request/reply to the clock or an app of a running mission.
 - schedulers: the `--scheduler ADDRESS` check of the commands that run Dask tasks.

@@ -1,4 +1,4 @@
-"""Open a bus to a running mission: by explicit endpoint, or by community name via the registry."""
+"""Open a bus to a running mission: by explicit endpoint, or by its name via the registry."""
 
 from __future__ import annotations
 
@@ -6,18 +6,20 @@ import time
 from typing import TYPE_CHECKING
 
 from . import registry
+from .missions import add_mission_argument, mission_name
 
 if TYPE_CHECKING:
     from nearsub.common.runtime.bus import Bus
 
 
 def add_connect_arguments(parser) -> None:
+    """MISSION (`missions.add_mission_argument`), then `--connect` and `--credentials`."""
+    add_mission_argument(parser)
     add_router_argument(parser)
-    parser.add_argument("--community", help="mission (community) name; default: from the key, or the only running one")
 
 
 def add_router_argument(parser) -> None:
-    """`--connect` and `--credentials` for the tools that name their mission as a positional argument."""
+    """`--connect` and `--credentials`: a router instead of the registry's, and its credentials."""
     parser.add_argument(
         "--connect", action="append", metavar="ENDPOINT", help="router endpoint (default: from the registry)"
     )
@@ -28,24 +30,17 @@ def add_router_argument(parser) -> None:
     )
 
 
-def community_from_key(key: str | None) -> str | None:
-    parts = (key or "").split("/")
-    if len(parts) >= 2 and parts[0] == "nearsub" and parts[1] not in ("*", "**"):
-        return parts[1]
-    return None
-
-
-def open_bus(args, key: str | None = None) -> tuple[Bus, str | None]:
-    """A client bus for a tool, and the community it resolved (None when unknown). The registry is
-    read first, so that a tool with no mission to talk to says so before Zenoh loads. The
-    credentials are those the launcher recorded for the mission, unless given."""
-    community = args.community or community_from_key(key)
+def open_bus(args) -> tuple[Bus, str]:
+    """A client bus to the mission `args.mission` names, and its name. The registry is read
+    first, so that a tool with no mission to talk to says so before Zenoh loads. The credentials
+    are those the launcher recorded for the mission, unless given."""
+    community = mission_name(args.mission)
     credentials = args.credentials
     if args.connect:
         connect = args.connect
     else:
         entry = registry.lookup(community)
-        connect, community = entry["connect"], entry["community"]
+        connect = entry["connect"]
         credentials = credentials or entry.get("credentials")
     from nearsub.common.runtime.bus import Bus, Endpoints
 

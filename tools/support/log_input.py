@@ -83,8 +83,8 @@ def topic_filter(pattern: str | None):
 
 
 def is_log(target: str) -> bool:
-    """Whether `nearsub view TARGET` names a log (else a running mission)."""
-    return target.endswith(".mcap") or Path(target).is_file()
+    """Whether `nearsub view MISSION` names a log (else a running mission, or its mission file)."""
+    return target.endswith(".mcap") or (Path(target).is_file() and Path(target).suffix != ".toml")
 
 
 def mission_of_log(path: Path):

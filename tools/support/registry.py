@@ -191,16 +191,16 @@ def running() -> dict[str, dict]:
     return found
 
 
-def lookup(community: str | None) -> dict:
-    """The entry of `community`, or of the only running mission when `community` is None."""
+def lookup(community: str) -> dict:
+    """The entry of the running mission `community`; a LookupError naming it, the running ones and
+    the closest of them (did you mean) when it is not running."""
     missions = running()
-    if community is not None:
-        if community not in missions:
-            names = ", ".join(sorted(missions)) or "none"
-            raise LookupError(f"no running mission named {community!r} (running: {names})")
+    if community in missions:
         return missions[community]
-    if len(missions) == 1:
-        return next(iter(missions.values()))
     if not missions:
-        raise LookupError("no mission is running (start one with `nearsub launch`, or pass --connect)")
-    raise LookupError(f"several missions are running ({', '.join(sorted(missions))}); name one")
+        raise LookupError(f"no running mission named {community!r} (none is running; start one with `nearsub launch`)")
+    import difflib
+
+    close = difflib.get_close_matches(community, missions, n=1)
+    hint = f"did you mean {close[0]!r}? " if close else ""
+    raise LookupError(f"no running mission named {community!r} ({hint}running: {', '.join(sorted(missions))})")
