@@ -105,7 +105,10 @@ def test_an_unknown_subcommand_is_named():
             ]
         ),
         # A port out of range, refused at once (was: 30 s of retries before "cannot reach").
-        (["tap", "list", "alpha", "--connect", "tcp/127.0.0.1:99999"], "nearsub tap: connect endpoint 'tcp/127.0.0.1:99999' "),
+        (
+            ["tap", "list", "alpha", "--connect", "tcp/127.0.0.1:99999"],
+            "nearsub tap: connect endpoint 'tcp/127.0.0.1:99999' ",
+        ),
         (["router", "--credentials", "/nonexistent/x.cred"], "nearsub router: --credentials /nonexistent/x.cred: "),
         (["router", "--credentials", "/"], "nearsub router: --credentials /: is a directory"),
         (["launch", str(ALPHA), "--log", str(ALPHA)], f"nearsub launch: --log {ALPHA}: cannot make a folder there"),
@@ -254,7 +257,8 @@ def test_every_command_names_its_mission_first_and_a_misspelt_name_gets_did_you_
         assert (first.dest, first.metavar) == ("mission", "MISSION") and first.help.startswith(MISSION_HELP), words
     entry = {"community": "sea_trial", "connect": ["tcp/127.0.0.1:1"], "pid": os.getpid(), "log": "x.mcap"}
     (runtime_dir / "sea_trial.json").write_text(json.dumps(entry))
-    for command, argv in (("clock", ["sea_tria", "status"]), ("tap echo", ["sea_tria", "state"]), ("poke", ["sea_tria", "X=1"])):
+    calls = (("clock", ["sea_tria", "status"]), ("tap echo", ["sea_tria", "state"]), ("poke", ["sea_tria", "X=1"]))
+    for command, argv in calls:
         done = nearsub(*command.split(), *argv)
         assert done.returncode == 2 and done.stderr == (
             f"nearsub {command}: no running mission named 'sea_tria' (did you mean 'sea_trial'? running: sea_trial)\n"

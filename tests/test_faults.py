@@ -33,7 +33,8 @@ def test_malformed_messages_are_rejected_and_logged(launches, community):
     wait_registered(community)
     key = f"nearsub/{community}/remus100/state"
     raw = nearsub("tap", "pub", community, key, "--raw-hex", "c1ffee")
-    bad = nearsub("tap", "pub", community, key, json.dumps({"step": 3, "t": 0.1, "source": "sim", "u": "fast"}), "--no-validate")
+    malformed = json.dumps({"step": 3, "t": 0.1, "source": "sim", "u": "fast"})
+    bad = nearsub("tap", "pub", community, key, malformed, "--no-validate")
     refused = nearsub("tap", "pub", community, key, json.dumps({"u": float("inf")}))
     assert raw.returncode == 0 and bad.returncode == 0, (raw.stderr, bad.stderr)
     assert refused.returncode == 2 and "'u'" in refused.stderr  # tap pub validates by default

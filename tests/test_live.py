@@ -153,9 +153,7 @@ def test_an_operator_steers_a_running_mission_and_the_log_replays_it(launches, c
     steer = nearsub("tap", "pub", community, "remus100/desired", '{"u_d": 1.0, "psi_d": 0.5}')
     assert steer.returncode == 0, steer.stderr
     assert "pid: operator desired from step 100: u_d=1.0, psi_d=0.5" in steer.stdout
-    state = nearsub(
-        "tap", "pub", community, f"nearsub/{community}/remus100/state", '{"u": 1, "v": 0, "r": 0, "x": 0, "y": 0, "psi": 0}'
-    )
+    state = nearsub("tap", "pub", community, "remus100/state", '{"u": 1, "v": 0, "r": 0, "x": 0, "y": 0, "psi": 0}')
     assert state.returncode == 2 and "state is accepted only from the app that computes it" in state.stderr
     assert nearsub("clock", community, "resume").returncode == 0
     code, summary, err = finish(process)

@@ -1,12 +1,13 @@
 """`nearsub view MISSION | LOG.mcap`: the live map in a browser (the pMarineViewer of nearsub).
 
-With a mission (its name, tools/support/missions.py) it follows the running mission (found through the launcher's registry, or
-`--connect ENDPOINT`); with a log file it replays the log with a timeline to scrub. Either way it
-serves one page on http://127.0.0.1:PORT/?token=TOKEN (a free port unless `--port` is given) and
-prints its URL, then the read-only one (tools/view_server.py, "Access"). A running mission's
-tokens derive from its credentials, which the registry names in the runtime folder only their
-owner can read. The mission (waypoints, vehicle, submarine) comes from the launcher's run file, which the
-registry entry points to, or from the log's metadata.
+With a mission (its name, tools/support/missions.py) it follows the running mission (found
+through the launcher's registry, or `--connect ENDPOINT`); with a log file it replays the log
+with a timeline to scrub. Either way it serves one page on http://127.0.0.1:PORT/?token=TOKEN (a
+free port unless `--port` is given) and prints its URL, then the read-only one
+(tools/view_server.py, "Access"). A running mission's tokens derive from its credentials, which
+the registry names in the runtime folder only their owner can read. The mission (waypoints,
+vehicle, submarine) comes from the launcher's run file, which the registry entry points to, or
+from the log's metadata.
 """
 
 from __future__ import annotations

@@ -20,7 +20,8 @@ def completion(names: str, files: bool = False) -> dict:
     running missions, from the registry; or the shipped ones), and with `files` the files too."""
     command = f"nearsub completion --names {names} 2>/dev/null"
     function = f"_nearsub_{names}{'_or_files' if files else ''}"
-    bash = f'{function}() {{\n  compgen -W "$({command})" -- "$1"\n' + ('  compgen -f -- "$1"\n' if files else "") + "}\n"
+    lines = [f'compgen -W "$({command})" -- "$1"'] + (['compgen -f -- "$1"'] if files else [])
+    bash = f"{function}() {{\n" + "".join(f"  {line}\n" for line in lines) + "}\n"
     return {
         "bash": function,
         # shtab puts it in a double-quoted spec: escaped, it runs when completing, not when loaded
