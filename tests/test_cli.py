@@ -118,6 +118,10 @@ def test_an_unknown_subcommand_is_named():
         (["launch", str(ALPHA), "--warp", "1e300"], "nearsub launch: --warp 1e+300: field 'warp' = 1e+300: "),
         (["tap", "pub", "a", "v/desired", "{}", "--raw-hex", "zz"], "nearsub tap pub: --raw-hex 'zz': not hex"),
         (["tap", "pub", "a", "nearsub/a/v/desired", "[1,2]"], "nearsub tap pub: value '[1,2]': not a JSON object"),
+        (
+            ["tap", "pub", "a", "v/desired", '{"psi_d": 0.5, "psi_d_deg": 30}'],
+            "nearsub tap pub: value: psi_d and psi_d_deg both given: give one",
+        ),
         (["tap", "pub", "a", "desired", "{}"], "nearsub tap pub: key desired: a message goes to one key; name the"),
         (["tap", "pub", "a", "nearsub/b/v/desired", "{}"], "nearsub tap pub: key nearsub/b/v/desired: not a key of"),
         (
@@ -288,19 +292,30 @@ def test_tap_pub_of_a_huge_integer_or_deeply_nested_json_is_one_line_and_exit_2(
 
 def test_tap_echo_on_a_terminal_prints_json_that_tap_pub_takes():
     """A person copies the value `tap echo` shows into `tap pub`: JSON, not a Python dict, with
-    the simulated time to the millisecond (it printed t=23.450000000000003 and {'x': ...})."""
+    the simulated time to the millisecond (it printed t=23.450000000000003 and {'x': ...}), and
+    the heading in degrees under a name that says so (psi_d_deg), which `tap pub` takes back."""
     import json
+    import math
 
     import msgpack
+    import pytest
 
+    from nearsub.common.runtime.fields import from_people
     from nearsub.common.runtime.messages import Desired, decode
-    from nearsub.tools.commands.tap import terminal_line
+    from nearsub.tools.commands.tap import _for_people, terminal_line
 
     desired = Desired(step=469, t=469 * 0.05, source="helm", u_d=1.2, psi_d=0.5)
     key = "nearsub/alpha/remus100/desired"
-    line = terminal_line({"key": key, "vehicle": "remus100", "t": desired.t, "value": desired.model_dump(mode="json")})
+    shown = _for_people(key, desired.model_dump(mode="json"), None)
+    line = terminal_line({"key": key, "vehicle": "remus100", "t": desired.t, "value": shown})
     shown_key, when, value = line.split("  ", 2)
     assert (shown_key, when) == (key, "t=23.450")
-    assert decode(msgpack.packb(json.loads(value)), Desired, key) == desired
+    typed = json.loads(value)
+    assert typed["psi_d_deg"] == round(math.degrees(0.5), 3) and "psi_d" not in typed
+    pasted = decode(msgpack.packb(from_people("Desired", typed)), Desired, key)
+    assert pasted.psi_d == pytest.approx(0.5, abs=math.radians(0.001))  # shown to a thousandth of a degree
+    assert pasted.model_copy(update={"psi_d": 0.5}) == desired
+    assert _for_people(key, desired.model_dump(mode="json"), ["psi_d"]) == {"psi_d_deg": typed["psi_d_deg"]}
+    assert _for_people(key, desired.model_dump(mode="json"), ["u_d", "psi_d"]) == {"u_d": 1.2, "psi_d_deg": 28.648}
     unreadable = {"key": key, "vehicle": None, "error": "not valid msgpack"}
     assert terminal_line(unreadable) == f"{key}  t=-  not valid msgpack"

@@ -1,6 +1,7 @@
 """Tap, swap and the clock controls against running missions."""
 
 import json
+import math
 import os
 import pty
 import re
@@ -150,9 +151,10 @@ def test_an_operator_steers_a_running_mission_and_the_log_replays_it(launches, c
     process = launches.start(ALPHA, "--set", f"name={community}", "--set", "pause_at_step=100", "--until", "30")
     wait_registered(community)
     wait_paused(community)
-    steer = nearsub("tap", "pub", community, "remus100/desired", '{"u_d": 1.0, "psi_d": 0.5}')
+    # Degrees as a person types them (psi_d_deg), radians on the wire: 0.5 rad.
+    steer = nearsub("tap", "pub", community, "remus100/desired", f'{{"u_d": 1.0, "psi_d_deg": {math.degrees(0.5)!r}}}')
     assert steer.returncode == 0, steer.stderr
-    assert "pid: operator desired from step 100: u_d=1.0, psi_d=0.5" in steer.stdout
+    assert "pid: operator desired from step 100: u_d=1.0, psi_d_deg=28.648" in steer.stdout
     state = nearsub("tap", "pub", community, "remus100/state", '{"u": 1, "v": 0, "r": 0, "x": 0, "y": 0, "psi": 0}')
     assert state.returncode == 2 and "state is accepted only from the app that computes it" in state.stderr
     assert nearsub("clock", community, "resume").returncode == 0

@@ -374,7 +374,8 @@ def test_an_operator_override_holds_from_the_next_step_and_survives_a_handover()
     drive(old, range(3))
     event = old.override("desired", steer)
     assert (event.kind, event.step, event.data["leaf"]) == ("info", 3, "desired")
-    assert event.detail == "operator desired from step 3: u_d=1.0, psi_d=9.0"
+    assert event.detail == "operator desired from step 3: u_d=1.0, psi_d_deg=515.662"  # 9 rad, for people
+    assert event.data["message"]["psi_d"] == 9.0  # the raw message, as it went
     drive(old, range(3, 5))  # the pause before step 4
     new = stepper(MailPid())
     new.take_over(old.handover(4), 4)

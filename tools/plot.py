@@ -136,7 +136,7 @@ def plot_log(path: str | Path, output: str | Path | None = None, title: str | No
         t = state["t"]
         heading = np.degrees(np.unwrap(state["psi"]))
         desired_heading = _same_turn(desired.get("t"), desired.get("psi_d"), t, heading)
-        panels["heading [deg]"].append((name, [(t, heading, "actual"), (desired.get("t"), desired_heading, "desired")]))
+        panels["psi [deg]"].append((name, [(t, heading, "actual"), (desired.get("t"), desired_heading, "desired")]))
         panels["speed [m/s]"].append((name, [(t, state["u"], "u"), (desired.get("t"), desired.get("u_d"), "desired")]))
         panels["rudder [deg]"].append((name, [(command.get("t"), _degrees(command.get("delta_r")), "rudder")]))
         panels["thrust [N]"].append((name, [(command.get("t"), command.get("X_prop"), "thrust")]))

@@ -26,6 +26,7 @@ from typing import Protocol
 import msgpack
 
 from nearsub.common.runtime import keys
+from nearsub.common.runtime.fields import for_people
 from nearsub.common.runtime.messages import (
     VEHICLE_TOPICS,
     Ack,
@@ -364,7 +365,8 @@ class Stepper:
         pending = [(k, m) for k, m in self.overrides.get(leaf, []) if k < step or leaf in OPERATOR_ONLY]
         self.overrides[leaf] = [*pending, (step, message)]
         fields = message.model_dump(mode="json", exclude={"schema_version", "step", "t", "source"})
-        detail = f"operator {leaf} from step {step}: " + ", ".join(f"{k}={v}" for k, v in fields.items())
+        shown = for_people(type(message).__name__, fields)  # for people: angles in degrees, named so
+        detail = f"operator {leaf} from step {step}: " + ", ".join(f"{k}={v}" for k, v in shown.items())
         data = {"leaf": leaf, "step": step, "message": message.model_dump(mode="json")}
         return Event(step=step, t=step * self.dt, source=self.core.role, kind="info", detail=detail, data=data)
 

@@ -84,6 +84,29 @@ def _project(value: dict, fields: list[str] | None):
     return _field(value, fields[0])
 
 
+def _model_name(key: str) -> str:
+    from nearsub.common.runtime.messages import model_for_key
+
+    return getattr(model_for_key(key), "__name__", "")
+
+
+def _for_people(key: str, value, fields: list[str] | None):
+    """A message and its `--field`s as people read them (common/runtime/fields.py): angles in
+    degrees under NAME_deg; one angle field alone becomes a map, so its name says the unit."""
+    from nearsub.common.runtime.fields import for_people, people_name
+
+    if not isinstance(value, dict):
+        return value
+    model = _model_name(key)
+    shown = for_people(model, value)
+    if not fields:
+        return shown
+    names = [people_name(model, field) for field in fields]
+    if len(names) == 1 and names != fields:
+        return {names[0]: _field(shown, names[0])}
+    return _project(shown, names)
+
+
 def _field(value: dict, field: str):
     for part in field.split("."):
         if isinstance(value, dict) and part in value:
@@ -270,7 +293,7 @@ def tap_echo(args) -> int:
                         "key": mail.key,
                         "vehicle": vehicle_name(mail.key),
                         "t": value.get("t") if isinstance(value, dict) else None,
-                        "value": _project(value, args.field),
+                        "value": _project(value, args.field) if as_json else _for_people(mail.key, value, args.field),
                     }
                 except KeyError as exc:
                     print(f"nearsub tap echo: {exc.args[0]} in {mail.key}", file=sys.stderr)
@@ -287,7 +310,8 @@ def tap_echo(args) -> int:
 
 def terminal_line(line: dict) -> str:
     """One echoed message for people: its key, its simulated time to the millisecond, and its
-    value as JSON (what `tap pub` takes), or the reason it could not be read."""
+    value as JSON with angles in degrees (`_for_people`; what `tap pub` takes), or the reason it
+    could not be read."""
     t = line.get("t")
     when = f"t={t:.3f}" if isinstance(t, int | float) else "t=-"
     return f"{line['key']}  {when}  {json.dumps(line['value']) if 'value' in line else line['error']}"
@@ -320,7 +344,7 @@ def tap_watch(args) -> int:
                 mail = mailbox.get(timeout=0.25)
                 while mail is not None:
                     if not mission.took(mail) and not other_vehicle(args, mail.key):
-                        latest[mail.key] = _watch_row(mail.key, mail.payload, args.field)
+                        latest[mail.key] = _watch_row(mail.key, mail.payload, args.field, live)
                     mail = mailbox.get(timeout=0)
                 if screen is not None:
                     screen.update(_watch_table(args.field, latest))
@@ -338,20 +362,28 @@ def tap_watch(args) -> int:
     return 0
 
 
-def _watch_row(key: str, payload: bytes, fields: list[str] | None) -> dict:
+def _watch_row(key: str, payload: bytes, fields: list[str] | None, people: bool) -> dict:
+    """The newest message of a key: its value, or its `--field`s (None where it has none); for
+    `people`, angles in degrees with their unit (`_for_people`)."""
+    from nearsub.common.runtime.fields import for_people, people_name, people_unit
+
     value, error = _decode_any(key, payload)
     row = {"key": key, "vehicle": vehicle_name(key), "t": value.get("t") if isinstance(value, dict) else None}
     if error:
         return row | {"error": error}
+    model = _model_name(key)
+    shown = for_people(model, value) if people and isinstance(value, dict) else value
     if not fields:
-        return row | {"value": value}
-    found = {}
+        return row | {"value": shown}
+    found, units = {}, {}
     for field in fields:
         try:
-            found[field] = _field(value, field)
+            found[field] = _field(shown, people_name(model, field) if people else field)
         except KeyError:
             found[field] = None  # another topic's field
-    return row | {"fields": found}
+        if people and (unit := people_unit(model, field)):
+            units[field] = unit
+    return row | {"fields": found} | ({"units": units} if units else {})
 
 
 def _watch_table(fields: list[str] | None, latest: dict[str, dict]):
@@ -364,7 +396,11 @@ def _watch_table(fields: list[str] | None, latest: dict[str, dict]):
         if "error" in row:
             cells = [row["error"]]
         elif fields:
-            cells = ["-" if row["fields"][f] is None else json.dumps(row["fields"][f]) for f in fields]
+            units = row.get("units", {})
+            cells = [
+                "-" if row["fields"][f] is None else f"{json.dumps(row['fields'][f])} {units.get(f, '')}".rstrip()
+                for f in fields
+            ]
         else:
             cells = [json.dumps(row["value"])]
         table.add_row(key, f"{t:.3f}" if isinstance(t, int | float) else "-", *cells)
@@ -438,6 +474,7 @@ def tap_pub(args) -> int:
     their only accepted source is the app that computes them."""
     import msgpack
 
+    from nearsub.common.runtime.fields import from_people
     from nearsub.common.runtime.lifecycle import OPERATOR, OPERATOR_TOPICS
     from nearsub.common.runtime.messages import VEHICLE_TOPICS, MessageError, decode, encode, model_for_key
 
@@ -473,6 +510,10 @@ def tap_pub(args) -> int:
                 return 2
             if not isinstance(fields, dict):
                 raise InputError(f"value {args.value!r}: not a JSON object of fields")
+            try:  # angles as people type them: NAME_deg in degrees (common/runtime/fields.py)
+                fields = from_people(model.__name__, fields)
+            except ValueError as exc:
+                raise InputError(f"value: {exc}") from None
             fields = {"step": 0, "t": 0.0, "source": OPERATOR if operator else "tap", **fields}
             try:
                 message = decode(msgpack.packb(fields), model, key)
