@@ -5,6 +5,7 @@
 - credentials: the mission's user:password file for Zenoh's authentication (create, load).
 - keys: build and parse every key expression.
 - messages: wire messages (pydantic models, msgpack codec, topic -> model registry).
+- fields: each message field's unit and frame, and the degrees people read and type (docs/messages.md).
 - lifecycle: the app core protocol (start-up, new mail, iterate), schedule, step runner and in-process runner.
 - clock: the clock's grants, pauses and stall timer (ClockCore), free of transport and of the wall clock.
 - logfile: MCAP mission logs (write and read).
