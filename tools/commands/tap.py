@@ -39,7 +39,7 @@ def add_parser(subparsers) -> None:
     t.set_defaults(func=tap_list)
     t = tap.add_parser("echo", help="print messages of a key expression (wildcards * and **)")
     add_connect_arguments(t)
-    t.add_argument("key", help=KEY_HELP)
+    t.add_argument("key", metavar="KEY", help=KEY_HELP)
     t.add_argument(
         "--field", action="append", help="print only this field (dotted path); given again, a map of the fields"
     )
@@ -50,7 +50,7 @@ def add_parser(subparsers) -> None:
     t.set_defaults(func=tap_echo)
     t = tap.add_parser("hz", help="message rates per key, in simulated time")
     add_connect_arguments(t)
-    t.add_argument("key", help=KEY_HELP)
+    t.add_argument("key", metavar="KEY", help=KEY_HELP)
     t.add_argument("--window", type=integer(minimum=2), default=100, help="samples per rate estimate")
     t.add_argument("--vehicle", metavar="NAME", help="only the keys of this vehicle (nearsub/<c>/NAME/...)")
     t.add_argument("--duration", type=number(above=0.0), default=5.0, help="wall seconds to listen")
@@ -68,7 +68,7 @@ def add_parser(subparsers) -> None:
     t.set_defaults(func=tap_watch)
     t = tap.add_parser("pub", help="publish one message by hand, validated against its schema")
     add_connect_arguments(t)
-    t.add_argument("key", help="one key: VEHICLE/LEAF (auv1/desired), or nearsub/MISSION/...")
+    t.add_argument("key", metavar="KEY", help="one key: VEHICLE/LEAF (auv1/desired), or nearsub/MISSION/...")
     t.add_argument("value", nargs="?", default="{}", help=PUB_VALUE_HELP)
     t.add_argument("--no-validate", action="store_true", help="send the JSON as msgpack without checking it")
     t.add_argument("--raw-hex", help="send these bytes instead (fault injection)")
