@@ -39,6 +39,13 @@ def test_two_vehicles_as_processes_equal_in_process_bit_for_bit(launches, commun
     assert summary["vehicles"]["auv1"]["waypoints_reached"] == 1
     assert summary["vehicles"]["auv2"]["waypoints_reached"] == 0
     assert summary["events"]["collision"] == 1 and summary["events"]["close_call"] == 1
+    # The summary's closest approaches (common/analysis/approach.py, from the log): the pair that
+    # collided, touching at the end; no hull without a submarine.
+    approaches = summary["approaches"]
+    assert approaches["hull"] == {}
+    assert approaches["closest_pair"]["vehicles"] == ["auv1", "auv2"]
+    assert approaches["closest_pair"]["clearance_m"] <= 0.0
+    assert approaches["closest_pair"]["t"] == pytest.approx(summary["sim_time"], abs=mission.dt)
 
 
 def test_swap_names_the_vehicle_and_replaces_only_its_helm(launches, community):

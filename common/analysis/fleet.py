@@ -7,8 +7,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from nearsub.common.analysis import approach
 from nearsub.common.mission.schema import Mission
-from nearsub.common.physics import encounters, proximity
+from nearsub.common.physics import proximity
 from nearsub.common.runtime.lifecycle import InProcessResult
 
 
@@ -41,7 +42,7 @@ class FleetFigures:
 
 
 def fleet_figures(mission: Mission, result: InProcessResult) -> FleetFigures:
-    found = []
+    found, tracks = [], {}
     for member in mission.members():
         name, model = member.vehicle_name, member.vehicle_model
         states = result.topic("state", name)
@@ -54,18 +55,12 @@ def fleet_figures(mission: Mission, result: InProcessResult) -> FleetFigures:
         done = next((m.t for m in result.topic("helm", name) if m.complete), None)
         hull = proximity.closest_distance(track[:, 0], track[:, 1], track[:, 2], model.length, model.diameter)
         found.append(VehicleFigures(name, model.name, phases, done, track, times, hull))
+        steps = np.array([s.step for s in states])
+        tracks[name] = approach.Track(steps, times, *track.T, model.length, model.diameter)
     figures = FleetFigures(result.outcome, result.reason, result.steps * mission.dt, found)
     for i, a in enumerate(found):
         for b in found[i + 1 :]:
-            ca, cb = (encounters.Capsule.of(*_size(mission, v.name)) for v in (a, b))
-            n = min(len(a.track), len(b.track))
-            gaps = [encounters.clearance(ca, tuple(a.track[k]), cb, tuple(b.track[k])) for k in range(n)]
-            k = int(np.argmin(gaps))
-            figures.closest_pair[(a.name, b.name)] = (float(gaps[k]), float(a.times[k]))
+            pair = approach.pair_approach(a.name, tracks[a.name], b.name, tracks[b.name])
+            figures.closest_pair[(a.name, b.name)] = (pair.clearance, pair.t)
     figures.encounter_events = [f"{e.kind} at t = {e.t:.2f} s: {e.detail}" for e in result.topic("events")]
     return figures
-
-
-def _size(mission: Mission, name: str) -> tuple[float, float]:
-    model = mission.member(name).vehicle_model
-    return model.length, model.diameter

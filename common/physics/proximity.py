@@ -90,12 +90,13 @@ def _joints_x() -> tuple[float, float]:
     return SUB_CB_FROM_NOSE - joint_bow, SUB_CB_FROM_NOSE - joint_aft
 
 
-def _curve_distance(curve: tuple[cKDTree, np.ndarray], query: np.ndarray) -> np.ndarray:
-    """Distance from points (M, 2) to a polyline; the nearest vertex's two segments hold the
-    closest point."""
+def _curve_nearest(curve: tuple[cKDTree, np.ndarray], query: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distance from points (M, 2) to a polyline, and the nearest polyline points (M, 2); the
+    nearest vertex's two segments hold the closest point."""
     tree, pts = curve
     _, nearest = tree.query(query)
     best = np.full(len(query), np.inf)
+    where = np.empty_like(query)
     for lo in (nearest - 1, nearest):
         a = pts[np.clip(lo, 0, len(pts) - 1)]
         ab = pts[np.clip(lo + 1, 0, len(pts) - 1)] - a
@@ -104,23 +105,43 @@ def _curve_distance(curve: tuple[cKDTree, np.ndarray], query: np.ndarray) -> np.
             0,
             1,
         )
-        best = np.minimum(best, np.linalg.norm(query - (a + t[:, None] * ab), axis=1))
-    return best
+        foot = a + t[:, None] * ab
+        gap = np.linalg.norm(query - foot, axis=1)
+        closer = gap < best
+        best, where[closer] = np.where(closer, gap, best), foot[closer]
+    return best, where
 
 
-def _exact_signed_distance(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+def _exact_nearest(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Signed distance from points (flat arrays, y >= 0) to the outline, from the 1 cm polylines
-    (exact to about 0.1 mm): the reference the grids are built from, and their fallback."""
+    (exact to about 0.1 mm), and the x of the nearest outline point."""
     bow, stern = _hull_curves()
     x_bow_joint, x_aft_joint = _joints_x()
     beside = (x <= x_bow_joint) & (x >= x_aft_joint)
     inside = y < submarine_half_width(x)
     dist = np.where(beside, np.abs(y - R_SUB), np.inf)
+    hull_x = x.copy()  # beside the middle body the nearest point is straight across
     for curve, side in ((bow, x > x_aft_joint), (stern, x < x_bow_joint)):
-        todo = side & (~beside | inside)  # inside points near a joint may be closer to a curve
-        if todo.any():
-            dist[todo] = np.minimum(dist[todo], _curve_distance(curve, np.column_stack([x[todo], y[todo]])))
-    return np.where(inside, -dist, dist)
+        todo = np.flatnonzero(side & (~beside | inside))  # inside points near a joint may be closer to a curve
+        if todo.size:
+            gap, foot = _curve_nearest(curve, np.column_stack([x[todo], y[todo]]))
+            closer = gap < dist[todo]
+            dist[todo[closer]], hull_x[todo[closer]] = gap[closer], foot[closer, 0]
+    return np.where(inside, -dist, dist), hull_x
+
+
+def _exact_signed_distance(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Signed distance from points (flat arrays, y >= 0) to the outline (`_exact_nearest`): the
+    reference the grids are built from, and their fallback."""
+    return _exact_nearest(x, y)[0]
+
+
+def nearest_hull_point(px, py) -> tuple[np.ndarray, np.ndarray]:
+    """Exact signed distance [m] from points to the submarine outline (negative inside), and the
+    frame x [m] of the nearest outline point: where on the hull a UUV came closest."""
+    px, py = np.broadcast_arrays(np.asarray(px, dtype=float), np.asarray(py, dtype=float))
+    dist, hull_x = _exact_nearest(px.ravel(), np.abs(py.ravel()))
+    return dist.reshape(px.shape), hull_x.reshape(px.shape)
 
 
 @dataclass(frozen=True)

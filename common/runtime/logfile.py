@@ -187,22 +187,27 @@ def vehicle_spec(resolved: dict | None, name: str):
     return resolved.get("vehicle")
 
 
-def read_log(path: str | Path) -> LogContents:
-    """Every message of a log in file order, with its metadata. A damaged file keeps every chunk
-    that is intact: one with its summary is read chunk by chunk, skipping the damaged ones; one
-    without (a crash before `finish`) is read as a stream up to its first damaged or torn record."""
+def read_log(path: str | Path, topics: Iterable[str] | None = None) -> LogContents:
+    """Every message of a log (or of the given `topics` only) in file order, with its metadata. A
+    damaged file keeps every chunk that is intact: one with its summary is read chunk by chunk,
+    skipping the damaged ones; one without (a crash before `finish`) is read as a stream up to its
+    first damaged or torn record."""
     path = Path(path)
+    topics = None if topics is None else list(topics)
     try:
         with open(path, "rb") as f:
             reader = make_reader(f, validate_crcs=True)
             records = [
                 LogRecord(channel.topic, m.log_time, m.publish_time, m.sequence, m.data)
-                for _, channel, m in reader.iter_messages(log_time_order=False)
+                for _, channel, m in reader.iter_messages(topics=topics, log_time_order=False)
             ]
             metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
             return LogContents(records, metadata, recovered=False)
     except Exception:
-        return _by_chunks(path) or _by_stream(path)
+        contents = _by_chunks(path) or _by_stream(path)
+    if topics is not None:
+        contents.records = [r for r in contents.records if r.topic in topics]
+    return contents
 
 
 def _records_of(stream, channels: dict[int, Channel], records: list[LogRecord], metadata: dict) -> None:

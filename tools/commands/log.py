@@ -7,14 +7,10 @@ import json
 import sys
 from collections import Counter, defaultdict
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 from ..support.errors import InputError
 from ..support.log_input import check_log, log_paths, select_topic, vehicle_records
 from ..support.outputs import output_file, output_folder
-
-if TYPE_CHECKING:
-    pass
 
 
 def add_parser(subparsers) -> None:
@@ -58,19 +54,22 @@ def info_command(args) -> int:
     paths = log_paths(args.log)
     for i, path in enumerate(paths):
         summary = log_summary(path)
+        lines = summary.pop("approach_lines")
         if args.json:
             print(json.dumps(summary))  # one JSON object per line and log
         else:
             if i:
                 print()
-            print_summary(summary)
+            print_summary(summary, lines)
     return 0
 
 
 def log_summary(path: Path) -> dict:
+    from nearsub.common.analysis.approach import log_approaches
     from nearsub.common.runtime.logfile import read_log
 
     contents = read_log(path)
+    approaches = log_approaches(contents)
     counts = Counter(r.topic for r in contents.records)
     spans = defaultdict(list)
     for r in contents.records:
@@ -85,6 +84,8 @@ def log_summary(path: Path) -> dict:
         "outcome": contents.metadata.get("outcome", {}),
         "invalid_dropped": {key: int(n) for key, n in contents.metadata.get("invalid_dropped", {}).items()},
         "vehicles": contents.vehicles(),
+        "approaches": approaches.as_dict() if approaches else None,
+        "approach_lines": approaches.lines() if approaches else [],
         "topics": {
             topic: {
                 "count": n,
@@ -97,7 +98,7 @@ def log_summary(path: Path) -> dict:
     }
 
 
-def print_summary(summary: dict) -> None:
+def print_summary(summary: dict, approach_lines: list[str]) -> None:
     """The summary as a rich table: plain text when piped, wrapped to the terminal's width."""
     from rich.table import Table
 
@@ -133,6 +134,8 @@ def print_summary(summary: dict) -> None:
             steps = span = "-"
         vehicles.add_row(name, str(item["states"]), steps, span)
     console.print(vehicles)
+    for line in approach_lines:
+        console.print(line, highlight=False)
 
 
 def export_command(args) -> int:

@@ -7,8 +7,12 @@ import sys
 import time
 from collections import Counter
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 from nearsub.common.runtime.messages import Event, MessageError, MissionEnd, decode, model_for_key
+
+if TYPE_CHECKING:
+    from nearsub.common.analysis.approach import Approaches
 
 NORMAL_OUTCOMES = ("completed", "time_limit", "collision")
 STATUS_INTERVAL = 1.0  # wall seconds between two updates of the terminal status line
@@ -33,6 +37,7 @@ class Summary:
     shutdown_time: float = 0.0  # mission end until every process has gone
     cpu: dict[str, float] = field(default_factory=dict)  # CPU seconds of each process at the end
     vehicles: dict[str, dict] = field(default_factory=dict)  # a fleet: waypoints and events per vehicle
+    approaches: Approaches | None = None  # closest to the hull and between UUVs, from the log
 
     def record_end(self, end: MissionEnd) -> None:
         """The mission end's step, time, outcome and reason. An interrupt always wins: an app's
@@ -85,6 +90,7 @@ class Summary:
                 if self.vehicles
                 else {}
             ),
+            **({"approaches": self.approaches.as_dict()} if self.approaches else {}),
         }
 
     def text(self) -> str:
@@ -103,6 +109,7 @@ class Summary:
         for name, mine in sorted(self.vehicles.items()):
             events = ", ".join(f"{k} {v}" for k, v in sorted(mine["events"].items())) or "none"
             lines.append(f"    {name}: waypoints reached {mine['waypoints_reached']}; events: {events}")
+        lines += [f"  {line}" for line in (self.approaches.lines() if self.approaches else ())]
         if self.swaps:
             lines.append("  swaps: " + "; ".join(f"{s['old']} -> {s['new']} at step {s['step']}" for s in self.swaps))
         if self.log:
@@ -132,6 +139,7 @@ class Console:
         self.showing_status = False
         self.launched = time.monotonic()
         self.positions: dict[str, tuple] = {}  # vehicle -> (u, x, y), from the latest states
+        self.phases: dict[str, dict] = {}  # vehicle -> what its helm last said it was doing
 
     def say(self, text: str) -> None:
         """A progress line for people (not with --json)."""
@@ -145,6 +153,35 @@ class Console:
             self.clear_status()
             who = f"{vehicle}: " if vehicle else ""
             print(f"  t={event.t:8.2f}  {event.kind:<10} {who}{event.detail}", file=sys.stderr, flush=True)
+
+    def helm_phases(self, progress, fleet: bool) -> None:
+        """A line for each change of what a helm does (its behaviour, its MODE, the behaviours
+        with an objective, completion), from `progress`, a stream of the helms' progress (None
+        with --json)."""
+        while progress is not None and (latest := progress.try_recv()) is not None:
+            key, payload = latest
+            try:
+                message = decode(payload, model_for_key(key), key)
+            except MessageError:
+                continue
+            vehicle = key.split("/")[2]
+            now = {
+                "helm": message.behaviour,
+                "mode": message.mode,
+                "active": ", ".join(message.active) or "none",
+                "complete": message.complete,
+            }
+            before = self.phases.get(vehicle)
+            self.phases[vehicle] = now
+            if before is None:
+                changed = [f"mode {now['mode']}"] * bool(now["mode"]) + [f"active {now['active']}"]
+            else:
+                changed = [f"{name} {now[name]}" for name in ("helm", "mode", "active") if now[name] != before[name]]
+                changed += ["complete"] * (now["complete"] and not before["complete"])
+            if changed:
+                self.clear_status()
+                who = f"{vehicle}: " if fleet else ""
+                print(f"  t={message.t:8.2f}  {'phase':<10} {who}{'; '.join(changed)}", file=sys.stderr, flush=True)
 
     def status_due(self) -> bool:
         return self.status_line and time.monotonic() >= self.next_status

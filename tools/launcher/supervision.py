@@ -87,6 +87,11 @@ class Launcher:
                 self.event_pub = bus.publisher(keys.events(c, "launcher"))
                 self.end_pub = bus.publisher(keys.mission_end(c))
                 bus.token(keys.alive(c, "launcher", "launcher"))
+                # For people only; lossy: a display must never slow the mission down.
+                depth = 256 * len(self.mission.vehicle_names)
+                self.helm_progress = (
+                    None if self.console.quiet else bus.stream(keys.vehicle_topic(c, "*", "helm"), depth, True)
+                )
                 try:
                     self.start_apps(bus, log_path)
                     self.summary.startup_time = time.monotonic() - start_wall
@@ -100,6 +105,7 @@ class Launcher:
                         vehicles = self.mission.vehicle_names
                         self.latest_state = bus.stream(keys.vehicle_topic(c, "*", "state"), len(vehicles), True)
                     self.supervise()
+                    self.console.helm_phases(self.helm_progress, self.mission.fleet)  # the last step's
                 except LaunchError as exc:
                     self.fail(exc)
                 except KeyboardInterrupt:
@@ -126,7 +132,19 @@ class Launcher:
         self.summary.wall_time = now - start_wall
         if self.ended_at is not None:
             self.summary.shutdown_time = now - self.ended_at
+        self.summary.approaches = self.approaches()
         return self.summary
+
+    def approaches(self):
+        """The closest approaches the finished log shows (None without a log or states)."""
+        log = Path(self.summary.log) if self.summary.log else None
+        if log is None or not log.is_file() or not self.summary.startup_time:
+            return None
+        from nearsub.common.analysis.approach import log_approaches
+        from nearsub.common.runtime.logfile import read_log
+
+        states = [keys.vehicle_topic(self.community, name, "state") for name in self.mission.vehicle_names]
+        return log_approaches(read_log(log, states))
 
     def _on_signal(self, signum, frame) -> None:
         first = self.stop_requested is None
@@ -189,6 +207,7 @@ class Launcher:
         while True:
             if self.interrupted():  # the handler's KeyboardInterrupt is lost if it lands in a finalizer (__del__)
                 raise KeyboardInterrupt
+            self.console.helm_phases(self.helm_progress, self.mission.fleet)
             if self.console.status_due():
                 self.console.show_status(self.caller, self.latest_state, self.mission.fleet)
             mail = self.mailbox.get(timeout=0.05)
