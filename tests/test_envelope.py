@@ -276,3 +276,61 @@ def test_drawn_surrogate_window_is_where_the_blend_weight_is_positive(vehicle):
     acting = r_lat[weight > 0]
     assert acting.size and low <= acting.min() and acting.max() <= high
     assert acting.min() - low < 0.002 and high - acting.max() < 0.002  # the ramps are about 5 cm (0.0006)
+
+
+def _hull_patch(ax):
+    """The filled submarine outline: the patch whose vertices reach both tips."""
+    return max(ax.patches, key=lambda p: np.ptp(p.get_xy()[:, 0]))
+
+
+def test_the_map_is_in_metres_at_equal_aspect_with_the_hull_to_scale_and_says_what_a_cell_is():
+    """Read back from the matplotlib objects: x and y in metres on the same scale, the hull's
+    outline spanning the SUBOFF hull's length and radius, the cells where their starts are, and a
+    title line naming one cell's start, speed, duration and behaviour."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from nearsub.common.physics.hull import SUB_BOW_X, SUB_STERN_X
+    from nearsub.tools.commands.envelope import collision_probability_figure, draw_envelope
+
+    summary = env.compute_envelope(SMALL).summary()
+    assert summary["x_m"] == pytest.approx((np.asarray(summary["r_long"]) * L_SUB).tolist())
+    assert summary["y_m"] == pytest.approx((np.asarray(summary["r_lat"]) * L_SUB).tolist())
+    fig, ax = plt.subplots()
+    draw_envelope(ax, summary)
+    sampled = env.compute_sampled(SMALL, env.Sampling(2, seed=0)).summary()
+    sampled_fig = collision_probability_figure(sampled)
+    for axes in (ax, sampled_fig.axes[0]):
+        assert axes.get_aspect() == 1.0  # one metre along x is one metre along y
+        assert "[m]" in axes.get_xlabel() and "[m]" in axes.get_ylabel()
+        hull = _hull_patch(axes).get_xy()
+        assert hull[:, 0].min() == pytest.approx(SUB_STERN_X, abs=1e-6)
+        assert hull[:, 0].max() == pytest.approx(SUB_BOW_X, abs=1e-6)
+        assert hull[:, 1].max() == pytest.approx(R_SUB, abs=1e-3)
+        x_lo, x_hi = axes.get_xlim()
+        half_cell = 0.5 * (summary["x_m"][1] - summary["x_m"][0])
+        assert (x_lo, x_hi) == pytest.approx((summary["x_m"][0] - half_cell, summary["x_m"][-1] + half_cell))
+        y_lo, y_hi = axes.get_ylim()
+        assert y_lo == 0.0 and y_hi > summary["y_m"][-1]  # from the axis: the whole half-hull shows
+        mesh = axes.collections[0].get_coordinates()  # the cells' corners
+        assert mesh[..., 0].min() == pytest.approx(x_lo) and mesh[..., 1].max() == pytest.approx(y_hi)
+        title = axes.get_title()
+        assert "one cell: a sdv starts at the cell's centre, heading 0 (along the submarine) at 1.5 m/s" in title
+        assert "flies 8 s (waypoints, d_lead 3 L)" in title
+    plt.close("all")
+
+
+def test_redraw_draws_a_stored_envelope_again_from_its_json_alone(tmp_path, capsys):
+    from nearsub.tools.cli import main
+
+    stored = tmp_path / "small.json"
+    env.save_summary(env.compute_envelope(SMALL).summary(), stored)
+    out = tmp_path / "again.png"
+    assert main(["envelope", "--redraw", str(stored), "-o", str(out)]) == 0
+    assert out.stat().st_size > 10_000 and f"wrote {out}" in capsys.readouterr().out
+    other = tmp_path / "other.json"
+    other.write_text('{"config": {}}')
+    assert main(["envelope", "--redraw", str(other), "-o", str(tmp_path / "x.png")]) == 2
+    assert "--redraw" in capsys.readouterr().err and not (tmp_path / "x.png").exists()

@@ -238,6 +238,8 @@ class Envelope:
             "fractions": {name: counts[name] / feasible if feasible else 0.0 for name in OUTCOMES[:-1]},
             "r_long": self.r_long.tolist(),
             "r_lat": self.r_lat.tolist(),
+            "x_m": (self.r_long * L_SUB).tolist(),  # the cell centres in metres (submarine frame)
+            "y_m": (self.r_lat * L_SUB).tolist(),
             "outcome_names": list(OUTCOMES),
             "outcome": outcome.reshape(len(self.r_long), len(self.r_lat)).tolist(),
             "wall_time": round(self.wall_time, 3),
@@ -415,6 +417,8 @@ class SampledEnvelope:
             "feasible_cells": int(feasible.sum()),
             "r_long": self.r_long.tolist(),
             "r_lat": self.r_lat.tolist(),
+            "x_m": (self.r_long * L_SUB).tolist(),  # the cell centres in metres (submarine frame)
+            "y_m": (self.r_lat * L_SUB).tolist(),
             "outcome_names": list(OUTCOMES),
             "probability": {name: grid(p[:, code]) for code, name in enumerate(OUTCOMES)},
             "expected_fractions": {

@@ -3,6 +3,7 @@
     nearsub envelope --vehicle sdv --behaviour nuv_compensation --sea-state 5
     nearsub envelope --vehicle small medium large --sea-state 0 6 --workers 2    # a sweep
     nearsub envelope --compare A.json B.json -o compare.png
+    nearsub envelope --redraw A.json -o A.png   # an envelope's PNG again from its JSON
     nearsub envelope --vehicle sdv --cell-mission=-0.3,0.065 -o cell.toml   # replay one cell
     nearsub envelope --thesis-figures [--scheduler tcp://HOST:8786]   # into ./thesis-envelopes
     nearsub envelope --thesis-figures --reuse [DIR]   # draw from DIR (OUT/data), flying only what is missing
@@ -66,6 +67,9 @@ def add_parser(sub) -> None:
         "-o", "--out", default=None, help="output folder, or FILE.png for one envelope (default: envelopes/)"
     )
     p.add_argument("--compare", nargs=2, metavar=("A.json", "B.json"), help="draw two envelopes side by side")
+    p.add_argument(
+        "--redraw", metavar="STEM.json", help="draw an envelope's PNG again from its JSON (default ./STEM.png)"
+    )
     p.add_argument(
         "--thesis-figures",
         action="store_true",
@@ -228,31 +232,58 @@ def _edges(centres):
     return np.concatenate([[2 * centres[0] - mid[0]], mid, [2 * centres[-1] - mid[-1]]])
 
 
+def cell_run(config: dict) -> str:
+    """What one cell's run is, in a line for the figures: start state, duration, speed, behaviour."""
+    speed = config["u_sub"] + config["u_ot"]
+    helm = config["behaviour"].replace("_", " ")
+    waves = f", sea state {config['sea_state']}" if config["sea_state"] else ""
+    return (
+        f"one cell: a {config['vehicle']} starts at the cell's centre, heading 0 (along the submarine) at "
+        f"{speed:g} m/s,\nand flies {config['duration']:g} s ({helm}, d_lead {config['d_lead']:g} L) along a "
+        f"track-line through its start; the submarine at {config['u_sub']:g} m/s{waves}"
+    )
+
+
+def draw_cells_frame(ax, summary: dict):
+    """The frame of an envelope's map in metres at equal aspect: x along the submarine (bow to the
+    right), y lateral, from its axis, with the hull to scale (hull.py's SUBOFF profile). Returns
+    the cell centres and edges in metres (x, y, x_edges, y_edges)."""
+    import numpy as np
+
+    from nearsub.common.physics.hull import L_SUB, submarine_outline
+
+    x, y = np.asarray(summary["r_long"]) * L_SUB, np.asarray(summary["r_lat"]) * L_SUB
+    x_edges, y_edges = _edges(x), _edges(y)
+    hx, hy = submarine_outline()
+    ax.fill(hx, hy, color=HULL_COLOUR, zorder=3)
+    ax.set_aspect("equal")
+    ax.set_xlim(x_edges[[0, -1]])
+    ax.set_ylim(min(0.0, y_edges[0]), y_edges[-1])
+    ax.set_xlabel("x along the submarine [m]  (from its centre of buoyancy, bow to the right)")
+    ax.set_ylabel("y lateral [m]")
+    return x, y, x_edges, y_edges
+
+
 def draw_envelope(ax, summary: dict, title: str | None = None) -> None:
-    """Cells coloured by outcome over the submarine's outline, in R_long, R_lat, with the window
-    where the residual GP corrects the LF drawn dashed (the LF acts at every cell)."""
+    """Cells coloured by outcome over the submarine's hull, in metres, with the window where the
+    residual GP corrects the LF drawn dashed (the LF acts at every cell)."""
     import numpy as np
     from matplotlib.colors import BoundaryNorm, ListedColormap
 
     from nearsub.common.analysis.batch import OUTCOMES
-    from nearsub.common.physics.hull import L_SUB, submarine_outline
+    from nearsub.common.analysis.envelope import surrogate_window
+    from nearsub.common.physics.hull import L_SUB
     from nearsub.common.surrogate import domain
 
-    r_long, r_lat = np.asarray(summary["r_long"]), np.asarray(summary["r_lat"])
-    outcome = np.asarray(summary["outcome"])
+    _, _, x_edges, y_edges = draw_cells_frame(ax, summary)
     ax.pcolormesh(
-        _edges(r_long),
-        _edges(r_lat),
-        outcome.T,
+        x_edges,
+        y_edges,
+        np.asarray(summary["outcome"]).T,
         cmap=ListedColormap(COLOURS),
         norm=BoundaryNorm(np.arange(len(OUTCOMES) + 1) - 0.5, len(OUTCOMES)),
-        edgecolors="white",
-        linewidth=0.3,
+        linewidth=0,  # cells can be a few pixels tall: white edges would wash them out
     )
-    hx, hy = submarine_outline()
-    ax.fill(hx / L_SUB, hy / L_SUB, color=HULL_COLOUR, zorder=3)
-    from nearsub.common.analysis.envelope import surrogate_window
-
     window = surrogate_window(summary["config"]["vehicle"])
     if window is None:
         note = "the residual GP never corrects the LF on this hull: it fails constraint (4.6) or (4.7)"
@@ -263,21 +294,17 @@ def draw_envelope(ax, summary: dict, title: str | None = None) -> None:
             transform=ax.transAxes,
             ha="center",
             va="top",
-            fontsize=8,
+            fontsize=7,
             zorder=5,
             bbox={"facecolor": "white", "edgecolor": "black", "linestyle": "--", "linewidth": 0.8},
         )
     else:
-        low, high = window
-        (x_lo, x_hi) = domain.BOUNDS[0]
+        low, high = (L_SUB * r for r in window)
+        x_lo, x_hi = (L_SUB * r for r in domain.BOUNDS[0])
         ax.plot([x_lo, x_hi, x_hi, x_lo, x_lo], [low, low, high, high, low], "k--", linewidth=0.8, zorder=4)
-    ax.set_xlim(_edges(r_long)[[0, -1]])
-    ax.set_ylim(_edges(r_lat)[[0, -1]])
-    ax.set_xlabel("R_long = x / L_sub  (bow to the right)")
-    ax.set_ylabel("R_lat = y / L_sub")
     fractions = summary["fractions"]
     text = ", ".join(f"{LABELS[k]} {100 * fractions[name]:.0f}%" for k, name in enumerate(OUTCOMES[:-1]))
-    ax.set_title((title or summary["label"]) + f"\n{text}", fontsize=9)
+    ax.set_title((title or summary["label"]) + f"\n{text}\n{cell_run(summary['config'])}", fontsize=8)
 
 
 def legend_handles() -> list:
@@ -291,6 +318,17 @@ def legend_handles() -> list:
     return handles
 
 
+PANEL_WIDTH = 12.0  # [in]: a cell a third of a metre tall stays a few pixels tall at 110 dpi
+
+
+def _map_aspect(summary: dict) -> float:
+    """Height over width of an envelope's map in metres (`draw_cells_frame`'s limits)."""
+    import numpy as np
+
+    x, y = _edges(np.asarray(summary["r_long"])), _edges(np.asarray(summary["r_lat"]))
+    return (y[-1] - min(0.0, y[0])) / (x[-1] - x[0])
+
+
 def draw_panels(panels: list[tuple[str, dict]], columns: int, suptitle: str, path: Path) -> Path:
     """Panels (caption, summary) in rows of `columns`, one legend below."""
     import matplotlib
@@ -300,8 +338,12 @@ def draw_panels(panels: list[tuple[str, dict]], columns: int, suptitle: str, pat
 
     rows = -(-len(panels) // columns)
     legend_height = 0.55  # [in]
-    height = 2.9 * rows + 0.4 + legend_height
-    fig, axes = plt.subplots(rows, columns, figsize=(7.0 * columns, height), squeeze=False)
+    # Equal aspect: a panel is as tall as its map's extent in metres makes it at PANEL_WIDTH, plus
+    # its four title lines and the x label.
+    spans = [_map_aspect(summary) for _, summary in panels]
+    height = sum((PANEL_WIDTH - 0.9) * max(spans[r * columns : (r + 1) * columns]) + 1.7 for r in range(rows))
+    height += 0.4 + legend_height
+    fig, axes = plt.subplots(rows, columns, figsize=(PANEL_WIDTH * columns, height), squeeze=False)
     for ax, (caption, summary) in zip(axes.ravel(), panels, strict=False):
         draw_envelope(ax, summary, caption)
     for ax in axes.ravel()[len(panels) :]:
@@ -388,6 +430,8 @@ def fractions_line(summary: dict) -> str:
 def envelope_command(args) -> int:
     if args.compare:
         return compare_command(args)
+    if args.redraw:
+        return redraw_command(args)
     if args.thesis_figures:
         return thesis_command(args)
     configs = configs_from_args(args)
@@ -457,10 +501,38 @@ def compare_command(args) -> int:
     return 0
 
 
+def redraw_command(args) -> int:
+    """The PNG of a stored envelope, plain or sampled (P(collision)), drawn from its JSON alone."""
+    source = Path(args.redraw)
+    try:
+        summary = json.loads(source.read_text())
+    except (OSError, ValueError) as exc:
+        raise InputError(f"--redraw {source}: {exc}") from None
+    if "config" not in summary or not ({"outcome", "probability"} & set(summary)):
+        raise InputError(f"--redraw {source}: not an envelope summary (no config, outcome or probability grid)")
+    out = output_file(Path(args.out or source.with_suffix(".png").name), source=source, parents=True)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    if "probability" in summary:
+        draw_collision_probability(summary, out)
+    else:
+        draw_panels([(summary["label"], summary)], 1, "Operating envelope", out)
+    print(f"wrote {out}")
+    return 0
+
+
 # --------------------------------------------------------------------------------- sampled envelopes
 def draw_collision_probability(summary: dict, path: Path) -> Path:
-    """P(collision) per cell over the submarine's outline, with contours, the cells marked safe
-    (P(collision) < safe_below) dotted and infeasible cells grey."""
+    import matplotlib.pyplot as plt
+
+    fig = collision_probability_figure(summary)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def collision_probability_figure(summary: dict):
+    """P(collision) per cell over the submarine's hull in metres, with contours, the cells marked
+    safe (P(collision) < safe_below) dotted and infeasible cells grey."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -470,45 +542,37 @@ def draw_collision_probability(summary: dict, path: Path) -> Path:
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
-    from nearsub.common.physics.hull import L_SUB, submarine_outline
-
-    r_long, r_lat = np.asarray(summary["r_long"]), np.asarray(summary["r_lat"])
     p = summary["probability"]
     collision = np.asarray(p["collision"], dtype=float)
     infeasible = np.asarray(p["infeasible"]) == 1.0
-    fig, ax = plt.subplots(figsize=(7.5, 3.9))
+    fig, ax = plt.subplots(figsize=(PANEL_WIDTH, (PANEL_WIDTH - 2.0) * _map_aspect(summary) + 2.4))
+    x, y, x_edges, y_edges = draw_cells_frame(ax, summary)
     mesh = ax.pcolormesh(
-        _edges(r_long),
-        _edges(r_lat),
+        x_edges,
+        y_edges,
         np.ma.masked_where(infeasible, collision).T,
         cmap="Reds",
         vmin=0.0,
         vmax=1.0,
-        edgecolors="white",
-        linewidth=0.3,
+        linewidth=0,
     )
     grey = ListedColormap([COLOURS[-1]])
-    ax.pcolormesh(_edges(r_long), _edges(r_lat), np.ma.masked_where(~infeasible, collision).T, cmap=grey)
-    if len(r_long) > 1 and len(r_lat) > 1:
-        lines = ax.contour(r_long, r_lat, collision.T, levels=[0.05, 0.5, 0.95], colors="black", linewidths=0.8)
+    ax.pcolormesh(x_edges, y_edges, np.ma.masked_where(~infeasible, collision).T, cmap=grey)
+    if len(x) > 1 and len(y) > 1:
+        lines = ax.contour(x, y, collision.T, levels=[0.05, 0.5, 0.95], colors="black", linewidths=0.8)
         ax.clabel(lines, fmt=lambda v: f"{100 * v:.0f}%", fontsize=7)
     safe = np.asarray(summary["marked_safe"], dtype=bool)
     i, j = np.nonzero(safe)
-    ax.plot(r_long[i], r_lat[j], "o", color="#1a9850", markersize=2.5, zorder=4)
-    hx, hy = submarine_outline()
-    ax.fill(hx / L_SUB, hy / L_SUB, color=HULL_COLOUR, zorder=3)
-    ax.set_xlim(_edges(r_long)[[0, -1]])
-    ax.set_ylim(_edges(r_lat)[[0, -1]])
-    ax.set_xlabel("R_long = x / L_sub  (bow to the right)")
-    ax.set_ylabel("R_lat = y / L_sub")
-    fig.colorbar(mesh, ax=ax, label="P(collision)")
+    ax.plot(x[i], y[j], "o", color="#1a9850", markersize=2.5, zorder=4)
+    fig.colorbar(mesh, ax=ax, label="P(collision)", shrink=0.6)
     sampling = summary["sampling"]
     waves = ", random wave phase" if sampling["wave_phase"] == "random" else ""
     f = summary["expected_fractions"]
     ax.set_title(
         f"{summary['label']}\nK = {sampling['samples']} posterior samples{waves}; expected collision "
         f"{100 * f['collision']:.1f}%, close call {100 * f['close_call']:.1f}%; "
-        f"{int(safe.sum())} of {summary['feasible_cells']} cells P(collision) < {100 * summary['safe_below']:g}%",
+        f"{int(safe.sum())} of {summary['feasible_cells']} cells P(collision) < {100 * summary['safe_below']:g}%"
+        f"\n{cell_run(summary['config'])}",
         fontsize=8,
     )
     handles = [
@@ -517,11 +581,9 @@ def draw_collision_probability(summary: dict, path: Path) -> Path:
         Patch(facecolor=HULL_COLOUR, label="submarine"),
         Patch(facecolor=COLOURS[-1], label=LABELS[-1]),
     ]
-    ax.legend(handles=handles, loc="upper right", fontsize=7, framealpha=0.9)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    fig.legend(handles=handles, loc="lower center", ncol=4, fontsize=7, frameon=False)
+    fig.tight_layout(rect=(0, 0.08, 1, 1))
+    return fig
 
 
 def sampled_command(configs: list, args) -> int:
