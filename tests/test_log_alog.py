@@ -115,7 +115,7 @@ def test_events_and_controls_are_text_variables(exported):
 
 @pytest.mark.skipif(
     shutil.which("alogsort") is None or shutil.which("aloggrep") is None,
-    reason="MOOS-IvP's alogsort and aloggrep are not on PATH (see the README's MOOS-IvP build)",
+    reason="MOOS-IvP's alogsort and aloggrep are not on PATH (see docs/running.md's MOOS-IvP build)",
 )
 def test_moos_ivps_own_tools_read_it(exported, tmp_path):
     """Where MOOS-IvP is installed: alogsort finds nothing to re-sort and aloggrep keeps the NAV_*

@@ -1,5 +1,5 @@
 """nearsub's MOOS sim against MOOS-IvP itself, wherever it is on PATH (built from source as the
-README says; CI cannot fetch it, so these are skipped there, saying which program is missing):
+docs/running.md says; CI cannot fetch it, so these are skipped there, saying which program is missing):
 the real MOOSDB (its wire protocol, the DB going away), and MOOS-IvP's alpha mission flown by
 pHelmIvP and pMarinePIDV22 with nearsub's sim in place of uSimMarineV22."""
 
@@ -48,7 +48,7 @@ def flight_budget(duration: float) -> float:
 def need(*programs: str) -> None:
     missing = [p for p in programs if shutil.which(p) is None]
     if missing:
-        pytest.skip(f"MOOS-IvP is not on PATH (missing {', '.join(missing)}); build it as the README says")
+        pytest.skip(f"MOOS-IvP is not on PATH (missing {', '.join(missing)}); build it as docs/running.md says")
 
 
 def free_port() -> int:

@@ -1,6 +1,6 @@
 """Two hosts, with credentials: the router in one Linux network namespace, listening on its veth
 address, and the launcher with every app in another, connecting across the veth pair
-(README, "Connecting apps on several hosts"). The trajectory equals the in-process run, which
+(docs/network.md, "Connecting apps on several hosts"). The trajectory equals the in-process run, which
 the single-host tests show equal to a single-host launch."""
 
 from __future__ import annotations
