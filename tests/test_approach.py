@@ -83,7 +83,7 @@ def test_without_a_submarine_there_is_no_hull_approach():
 
 
 def test_log_info_reports_each_vehicles_hull_approach_and_the_closest_pair(tmp_path, capsys):
-    """launch_two logged for 30 s: `log info --json` gives what the in-process run's own states
+    """launch_two logged for 10 s: `log info --json` gives what the in-process run's own states
     give (the fleet figures measure the same clearances pose by pose)."""
     from test_every_mission_views import logged_run
 
@@ -93,7 +93,7 @@ def test_log_info_reports_each_vehicles_hull_approach_and_the_closest_pair(tmp_p
     from nearsub.common.mission.schema import load_mission
     from nearsub.tools.cli import main
 
-    mission = load_mission(ROOT / "missions" / "launch_two.toml", ["time_limit=30.0"])
+    mission = load_mission(ROOT / "missions" / "launch_two.toml", ["time_limit=10.0"])
     path = tmp_path / "launch_two.mcap"
     logged_run(mission, path)
     assert main(["log", "info", "--json", str(path)]) == 0
