@@ -13,7 +13,6 @@ from nearsub.common.mission import cores
 from nearsub.common.moos import bridge
 from nearsub.common.moos.config import Datum, MoosConfigError, parse_moos, sim_config
 from nearsub.common.moos.sim import MoosSim, sim_mission
-from nearsub.common.physics import hull
 from nearsub.common.physics.vehicles import get_vehicle
 from nearsub.common.runtime.messages import Input
 

@@ -65,7 +65,8 @@ def posterior_rows(X, A, B, ZT, alpha_s, linv_columns, s2, y_mean, y_std, with_s
     rows X (rows, d) into mean and std: one row at a time, in a fixed order, so a row's bits do
     not depend on how many rows are asked together (the sim's one vehicle, the surrogate server's
     query, the batch engine's hundreds). Per output j: z = x A[j] + B[j], e_i = exp(-|z - z_i|^2)
-    (the squared differences summed over the inputs in their order, from zero), the mean sum_i e_i alpha_i y_std + y_mean;
+    (the squared differences summed over the inputs in their order, from zero), the mean
+    sum_i e_i alpha_i y_std + y_mean;
     v = L^-1 e from `linv_columns` (m, n (n + 1) / 2), the columns of the lower-triangular L^-1
     (scaled by s2) packed one after the other from their diagonal down, added to v in column
     order (element-wise, so each v_i is the same sum however the loop is vectorised; a third

@@ -121,7 +121,15 @@ def nav_variables(state, t: float, placement: Placement, datum: Datum | None, pr
 
 
 def node_report(
-    name: str, x: float, y: float, heading: float, speed: float, t: float, kind: str, length: float | None, color: str = ""
+    name: str,
+    x: float,
+    y: float,
+    heading: float,
+    speed: float,
+    t: float,
+    kind: str,
+    length: float | None,
+    color: str = "",
 ) -> str:
     """A NODE_REPORT line as pNodeReporter writes it (NodeRecord::getSpec); no LENGTH if None."""
     text = f"NAME={name},X={x:.2f},Y={y:.2f},SPD={speed:.2f},HDG={heading:.2f},DEP=0,TYPE={kind},TIME={t:.2f}"
