@@ -27,4 +27,6 @@ python3 -m venv .venv
 .venv/bin/python -m pip install --quiet -e '.[dev]'
 # numba compiles the LF's kernels once into its cache here, not in a mission's first processes.
 .venv/bin/python -c 'from nearsub.common.hydro.low_fidelity import compile_kernels; compile_kernels()'
-exec .venv/bin/python -m pytest "$@"
+# Two workers: most tests wait on processes and clocks, so two at once halve the wall time on 2 cores.
+# Another -n given after (e.g. `-n 0` for one process) wins.
+exec .venv/bin/python -m pytest -n 2 "$@"
