@@ -429,3 +429,26 @@ def test_sustained_inflow_turbulence_is_its_own_case(tmp_path):
         "cfd", "case", "--config", "0", "0.08", "3.5", "0", "20", "8", "--sustain-inflow", "-o", str(tmp_path / "x")
     )
     assert refused.returncode == 2 and "--sustain-inflow" in refused.stderr
+
+
+def _saved(folder: Path, spec: rans.CaseSpec, status: str, iterations: int) -> None:
+    convergence = rans.Convergence(status, "", iterations, iterations // 5, {"X": 0.0, "Y": 0.0, "N": 0.0}, {})
+    result = rans.Result(spec.case_id, spec.kind, spec.level, spec.wall_function, spec.y_plus, 1, 2, 1.0, 1.0,
+                         {"X": 0.0, "Y": 0.0, "N": 0.0}, {}, convergence)  # fmt: skip
+    folder.mkdir(parents=True)
+    (folder / "result.json").write_text(json.dumps(result.to_json()))
+
+
+def test_a_case_residual_control_stopped_before_its_forces_settled_is_continued(tmp_path):
+    """Residual control (p at 1e-4) stopped the two-body stations after 150-230 of their 800
+    iterations, some with their forces still moving: such a case is run again from its work
+    folder, without residual control, while one with only its artefacts left stays as it is."""
+    specs = [rans.two_body_case((-0.45, 0.0391 + 0.001 * i, 3.4, 0.0, 19.55, 10.0)) for i in range(4)]
+    work, kept = tmp_path / "work", tmp_path / "kept"
+    _saved(work / specs[0].case_id, specs[0], "not converged", 169)  # stopped early: continue
+    _saved(work / specs[1].case_id, specs[1], "not converged", specs[1].end_iteration)  # ran to its end
+    _saved(work / specs[2].case_id, specs[2], "converged", 172)
+    _saved(kept / specs[3].case_id, specs[3], "not converged", 169)  # no work folder to continue from
+    assert rans_campaign.unfinished(specs, work, kept) == [specs[0]]
+    assert "residualControl" in rans.FV_SOLUTION["SIMPLE"]
+    assert "residualControl" not in rans.FV_SOLUTION_TO_END["SIMPLE"]

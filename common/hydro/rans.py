@@ -537,6 +537,13 @@ FV_SOLUTION = {
     "relaxationFactors": {"equations": {"U": 0.9, ".*": 0.7}},
 }
 
+# A case whose forces had not settled when residual control stopped it (about 150-230 iterations on
+# the two-body stations, with p's residual at 1e-4) is continued from there without residual
+# control, to its level's last iteration.
+FV_SOLUTION_TO_END = FV_SOLUTION | {
+    "SIMPLE": {k: v for k, v in FV_SOLUTION["SIMPLE"].items() if k != "residualControl"}
+}
+
 
 def _token(word: str):
     try:
@@ -836,6 +843,53 @@ def solve(spec: CaseSpec, folder, cores: int = 1) -> None:
     _run(case, ["simpleFoam"], cores, cores > 1)
 
 
+def stopped_early(spec: CaseSpec, result: Result) -> bool:
+    """A case residual control stopped before its forces settled, and before its last iteration."""
+    return result.convergence.status == "not converged" and result.convergence.iterations < spec.end_iteration - 1
+
+
+def saved_result(folder) -> Result | None:
+    """The result.json of a case folder, if it holds a readable one."""
+    path = Path(folder) / "result.json"
+    try:
+        return Result.from_json(json.loads(path.read_text()))
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
+def continue_case(spec: CaseSpec, folder, cores: int, previous: Result) -> Result:
+    """Continue a case that stopped early (`stopped_early`) from its latest time, without residual
+    control, to its level's last iteration; the verdict is taken again over the whole force
+    history. The earlier solver log is kept as log.simpleFoam.<its last iteration>."""
+    from foamlib import FoamCase
+
+    openfoam_environment()
+    folder = Path(folder)
+    system = folder / "system"
+    _write(system / "fvSolution", _foam_entries(FV_SOLUTION_TO_END))
+    _write(system / "controlDict", _control(spec, restart=True))
+    log = folder / "log.simpleFoam"
+    if log.is_file():
+        shutil.move(log, folder / f"log.simpleFoam.{previous.convergence.iterations}")
+    start = time.monotonic()
+    failure = None
+    try:
+        _run(FoamCase(folder), ["simpleFoam"], cores, cores > 1)
+    except CaseError as exc:
+        failure = str(exc)
+    result = read_result(
+        spec,
+        folder,
+        cells=previous.cells,
+        cores=cores,
+        mesh_seconds=previous.mesh_seconds,
+        solve_seconds=previous.solve_seconds + time.monotonic() - start,
+        failure=failure,
+    )
+    (folder / "result.json").write_text(json.dumps(result.to_json(), indent=1) + "\n")
+    return result
+
+
 def cell_count(folder) -> int:
     """Cells of the (possibly decomposed) mesh, from the owner files' headers."""
     folder = Path(folder)
@@ -851,12 +905,16 @@ def cell_count(folder) -> int:
 def run_case(spec: CaseSpec, folder, cores: int = 1) -> Result:
     """Write, mesh and solve one case; the Result (convergence verdict included) is also saved as
     result.json in the folder. A solver that stops with an error gives a diverged Result, not an
-    exception; a case that cannot be meshed raises CaseError."""
+    exception; a case that cannot be meshed raises CaseError. A case stopped early
+    (`stopped_early`) is continued, at once or, from a folder that holds one, when run again."""
 
     missing = openfoam_missing()
     if missing:
         raise CaseError(missing)
     folder = Path(folder)
+    previous = saved_result(folder)
+    if previous is not None and stopped_early(spec, previous):
+        return continue_case(spec, folder, cores, previous)
     write_case(spec, folder, cores)
     start = time.monotonic()
     cells = mesh_case(folder, cores)
@@ -877,6 +935,8 @@ def run_case(spec: CaseSpec, folder, cores: int = 1) -> Result:
         failure=failure,
     )
     (folder / "result.json").write_text(json.dumps(result.to_json(), indent=1) + "\n")
+    if stopped_early(spec, result):
+        return continue_case(spec, folder, cores, result)
     return result
 
 

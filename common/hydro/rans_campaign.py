@@ -147,18 +147,22 @@ ARTEFACT_EXCLUDED = ("polyMesh", "triSurface")  # meshes and the STL (regenerate
 def finished(case_id: str, work_dir: Path, export_dir: Path | None) -> rans.Result | None:
     """The result of a finished case (in the work folder or among the exported artefacts)."""
     for folder in (work_dir / case_id, *((export_dir / case_id,) if export_dir else ())):
-        path = folder / "result.json"
-        if path.is_file():
-            try:
-                return rans.Result.from_json(json.loads(path.read_text()))
-            except (ValueError, KeyError, TypeError):
-                continue
+        if (result := rans.saved_result(folder)) is not None:
+            return result
     return None
 
 
 def unfinished(specs: Iterable[rans.CaseSpec], work_dir: Path, export_dir: Path | None) -> list[rans.CaseSpec]:
-    """The cases still to run, in order."""
-    return [s for s in specs if finished(s.case_id, work_dir, export_dir) is None]
+    """The cases still to run, in order: those without a result, and those stopped early
+    (`rans.stopped_early`) whose work folder is there to continue them."""
+    todo = []
+    for spec in specs:
+        here = rans.saved_result(work_dir / spec.case_id)
+        if (here is not None and rans.stopped_early(spec, here)) or finished(
+            spec.case_id, work_dir, export_dir
+        ) is None:
+            todo.append(spec)
+    return todo
 
 
 def export_artefacts(case_folder: Path, destination: Path) -> Path:
