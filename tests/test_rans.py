@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from conftest import nearsub
+from nearsub.common.analysis import rans_comparison
 from nearsub.common.hydro import rans, rans_campaign
 from nearsub.common.hydro.rans_geometry import Body, enclosed_volume, open_edges, read_stl, write_stl
 from nearsub.common.physics.hull import SUBOFF_SCALE, suboff_properties
@@ -382,7 +383,7 @@ def test_comparison_table_arithmetic():
     stations = rans_campaign.TWO_BODY_STATIONS
     held = next(s for s in stations if s.held_out)
     kept = next(s for s in stations if not s.held_out)
-    results = rans_campaign.two_body_converged(
+    results = rans_comparison.two_body_converged(
         [
             _result(held.row, (-1.0e-3, -4.0e-4, 2.0e-4)),
             _result(kept.row, (-2.0e-3, 1.0e-4, -1.0e-4)),
@@ -392,13 +393,13 @@ def test_comparison_table_arithmetic():
     assert len(results) == 2 and results[0].inputs[0] <= results[1].inputs[0]
     order = [1 if r.inputs == held.row else 0 for r in results]
     hf = np.array([[-1.5e-3, 2.0e-4, -1.0e-4], [-1.2e-3, -2.0e-4, 3.0e-4]])
-    rows = rans_campaign.comparison_rows(results, {"panel HF": hf})
+    rows = rans_comparison.comparison_rows(results, {"panel HF": hf})
     by_held = {r["held_out"]: r for r in rows}
     assert by_held[True]["station"] == held.name and by_held[False]["station"] == kept.name
     i_held = order.index(1)
     assert by_held[True]["panel HF - RANS"] == pytest.approx((hf[i_held] - [-1.0e-3, -4.0e-4, 2.0e-4]).tolist())
     assert by_held[True]["panel HF rel"][1] == pytest.approx((hf[i_held][1] + 4.0e-4) / 4.0e-4)
-    summary = rans_campaign.comparison_summary(rows, ["panel HF"])["panel HF"]
+    summary = rans_comparison.comparison_summary(rows, ["panel HF"])["panel HF"]
     diffs = np.abs(np.array([r["panel HF - RANS"] for r in rows]))
     assert summary["mae"] == pytest.approx(diffs.mean(axis=0).tolist())
     assert summary["mae_held_out"] == pytest.approx(np.abs(by_held[True]["panel HF - RANS"]).tolist())

@@ -8,4 +8,5 @@
 - approach: a run's closest approaches to the hull and between UUVs (launch summary, log info).
 - validation: the thesis section 5.10 validation cases.
 - albench: the NMMF benchmark runner (repeats in parallel processes) and its summaries.
+- rans_comparison: two-body RANS stations against the panel HF, the LF and the shipped model.
 """

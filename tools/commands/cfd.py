@@ -16,8 +16,6 @@ import json
 import sys
 from pathlib import Path
 
-import numpy as np
-
 from ..support.arguments import integer, number
 from ..support.errors import InputError
 from ..support.outputs import output_folder
@@ -179,6 +177,8 @@ COMPARE_FILES = ("two-body-compare.md", "two-body-compare.csv", "two-body-compar
 
 def _compare_markdown(rows: list[dict], summary: dict, fidelities) -> list[str]:
     """The side-by-side table (x 1e-3) and the summary as markdown lines."""
+    import numpy as np
+
     note = (
         "Values x 1e-3; differences are the fidelity minus RANS. X' > 0 forward, Y' > 0 away from the submarine, "
         "N' > 0 bow away; the mean absolute differences (MAE) below are x 1e-3 too."
@@ -219,6 +219,7 @@ def _compare_figure(rows: list[dict], fidelities, path: Path) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import numpy as np
 
     fig, axes = plt.subplots(3, 1, figsize=(max(8, 0.45 * len(rows) + 3), 9), sharex=True)
     x = np.arange(len(rows))
@@ -255,20 +256,23 @@ def _compare_figure(rows: list[dict], fidelities, path: Path) -> None:
 def compare_command(args) -> int:
     import csv
 
-    from nearsub.common.hydro import rans_campaign
+    import numpy as np
+
+    from nearsub.common.analysis import rans_comparison
+    from nearsub.common.hydro import rans
 
     out = output_folder(Path(args.out), "-o")
     targets = [out / name for name in COMPARE_FILES]
     if not args.force and (busy := [t for t in targets if t.exists()]):
         raise InputError(f"-o {out}: {busy[0].name} exists; give a new folder or --force")
     found = _found(args)
-    results = rans_campaign.two_body_converged(found)
+    results = rans_comparison.two_body_converged(found)
     if not results:
         raise InputError(f"--from {' '.join(map(str, args.sources or []))}: no converged two-body case to compare")
-    fidelities = rans_campaign.FIDELITIES
-    values = rans_campaign.fidelity_values(np.array([r.inputs for r in results]))
-    rows = rans_campaign.comparison_rows(results, values)
-    summary = rans_campaign.comparison_summary(rows, fidelities)
+    fidelities = rans_comparison.FIDELITIES
+    values = rans_comparison.fidelity_values(np.array([r.inputs for r in results]))
+    rows = rans_comparison.comparison_rows(results, values)
+    summary = rans_comparison.comparison_summary(rows, fidelities)
     out.mkdir(parents=True, exist_ok=True)
     skipped = sorted(r.case_id for r in found if r.kind == "two-body" and not r.convergence.usable)
     lines = _compare_markdown(rows, summary, fidelities)
@@ -282,7 +286,7 @@ def compare_command(args) -> int:
                 "case",
                 "station",
                 "held_out",
-                *rans_campaign.rans.CONFIGURATION,
+                *rans.CONFIGURATION,
                 "level",
                 "cells",
                 "minutes",
@@ -292,7 +296,7 @@ def compare_command(args) -> int:
             ]
         )
         for r in rows:
-            for k, o in enumerate(rans_campaign.OUTPUTS):
+            for k, o in enumerate(rans_comparison.OUTPUTS):
                 writer.writerow(
                     [
                         r["case"],
