@@ -27,6 +27,11 @@ python3 -m venv .venv
 .venv/bin/python -m pip install --quiet -e '.[dev]'
 # numba compiles the LF's kernels once into its cache here, not in a mission's first processes.
 .venv/bin/python -c 'from nearsub.common.hydro.low_fidelity import compile_kernels; compile_kernels()'
-# Two workers: most tests wait on processes and clocks, so two at once halve the wall time on 2 cores.
-# Another -n given after (e.g. `-n 0` for one process) wins.
-exec .venv/bin/python -m pytest -n 2 "$@"
+# The default run on two workers: most tests wait on processes and clocks, so two at once halve its
+# wall time on 2 cores. A marked suite (-m reliability, slow, soak, cfd) loads the machine on purpose
+# or runs long alone: one process. An -n given here wins either way.
+workers=(-n 2)
+for arg in "$@"; do
+    if [ "$arg" = "-m" ]; then workers=(-n 0); fi
+done
+exec .venv/bin/python -m pytest "${workers[@]}" "$@"
