@@ -453,3 +453,17 @@ def test_a_case_residual_control_stopped_before_its_forces_settled_is_continued(
     assert rans_campaign.unfinished(specs, work, kept) == [specs[0]]
     assert "residualControl" in rans.FV_SOLUTION["SIMPLE"]
     assert "residualControl" not in rans.FV_SOLUTION_TO_END["SIMPLE"]
+
+
+def test_the_fitted_scale_uses_the_training_stations_of_the_medium_mesh_only():
+    def row(hf, truth, held_out=False, level="medium"):
+        return {"panel HF": hf, "RANS": truth, "held_out": held_out, "level": level}
+
+    rows = [
+        row([-1.0e-3, 2.0e-4, -1.0e-4], [-0.9e-3, 1.6e-4, -0.7e-4]),
+        row([-2.0e-3, -1.0e-4, 3.0e-4], [-1.8e-3, -0.8e-4, 2.1e-4]),
+        row([-1.0e-3, 1.0e-4, 1.0e-4], [5.0, 5.0, 5.0], held_out=True),  # never fitted to
+        row([-1.0e-3, 1.0e-4, 1.0e-4], [5.0, 5.0, 5.0], level="fine"),  # the grid study's other meshes
+    ]
+    assert rans_comparison.fitted_scale(rows) == pytest.approx([0.9, 0.8, 0.7])
+    assert np.isnan(rans_comparison.fitted_scale(rows[2:])).all()

@@ -17,6 +17,9 @@ OUTPUTS = ("X", "Y", "N")
 # answers), and what the product flies (LF + w delta(x_c): interaction.discrepancy_weight, 0 beyond
 # (4.5) and outside table 4.2's box).
 FIDELITIES = ("panel HF", "LF", "model", "flown")
+# The panel HF times one factor per output fitted on the training stations: how much of its
+# difference from RANS one scale explains (`fitted_scale`).
+SCALED = "panel HF x rho"
 
 
 def two_body_converged(found: Iterable[rans.Result]) -> list[rans.Result]:
@@ -87,3 +90,16 @@ def comparison_summary(rows: list[dict], fidelities: Iterable[str] = FIDELITIES)
             "sign_agrees": signs.mean(axis=0).tolist(),
         }
     return out
+
+
+def fitted_scale(rows: list[dict]) -> np.ndarray:
+    """Per output, the rho for which rho * (panel HF) is closest to RANS in least squares over the
+    medium-mesh stations kept for training (not held out): the autoregressive link between two
+    fidelities of Kennedy & O'Hagan (2000) with a constant scale and no discrepancy of its own.
+    NaN where there is no training station."""
+    train = [r for r in rows if not r["held_out"] and r["level"] == "medium"]
+    if not train:
+        return np.full(len(OUTPUTS), np.nan)
+    hf = np.array([r["panel HF"] for r in train], dtype=float)
+    truth = np.array([r["RANS"] for r in train], dtype=float)
+    return (hf * truth).sum(axis=0) / (hf * hf).sum(axis=0)
