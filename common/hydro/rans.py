@@ -80,6 +80,11 @@ DIVERGED_COEFFICIENT = 0.1  # |X'|, |Y'| or |N'| above this is no flow round a h
 # blew up in the layer cells at the submarine's bow stagnation point within 10 iterations, under
 # every relaxation tried (docs/hydro/rans/README.md, "The two-body divergence").
 FIRST_ORDER_START = 50
+# The symmetry planes are OpenFOAM's `symmetry` patches, which take each face's own normal:
+# snappyHexMesh's layers moved points of the z = 0 plane on the fine two-body mesh (1.09 M cells)
+# off it, and simpleFoam refused the `symmetryPlane` type there ("not planar"). On a plane both
+# types are the same condition.
+SYMMETRY = "symmetry"
 
 
 class CaseError(Exception):
@@ -328,13 +333,13 @@ def _block_mesh(spec: CaseSpec, dom: Domain) -> dict:
     patches = [
         ("inlet", {"type": "patch", "faces": [[1, 2, 6, 5]]}),  # +x: the stream comes from ahead
         ("outlet", {"type": "patch", "faces": [[0, 4, 7, 3]]}),
-        ("symmetryZ", {"type": "symmetryPlane", "faces": [[0, 3, 2, 1]]}),
+        ("symmetryZ", {"type": SYMMETRY, "faces": [[0, 3, 2, 1]]}),
         ("top", {"type": "patch", "faces": [[4, 5, 6, 7]]}),
         ("sideFar", {"type": "patch", "faces": [[3, 7, 6, 2]]}),
     ]
     near_side = ("sideNear", {"type": "patch", "faces": [[0, 1, 5, 4]]})
     if spec.quarter:
-        near_side = ("symmetryY", {"type": "symmetryPlane", "faces": [[0, 1, 5, 4]]})
+        near_side = ("symmetryY", {"type": SYMMETRY, "faces": [[0, 1, 5, 4]]})
     patches.append(near_side)
     return {
         "scale": 1,
@@ -583,7 +588,7 @@ def _fields(spec: CaseSpec) -> dict[str, tuple[str, dict]]:
     def boundary(inlet, outlet, wall, internal):
         out = {"inlet": inlet, "outlet": outlet}
         out |= {p: {"type": "slip"} for p in far}
-        out |= {p: {"type": "symmetryPlane"} for p in sym}
+        out |= {p: {"type": SYMMETRY} for p in sym}
         out |= {w: dict(wall) for w in walls}
         out[proc] = {"type": "processor", "value": internal}
         return out
