@@ -15,7 +15,7 @@ OUTPUTS = ("X", "Y", "N")
 # The other fidelities at a station, against RANS: the panel HF (high_fidelity, MEDIUM panels),
 # the LF, the shipped surrogate's prediction (LF + delta at the point, as `nearsub surrogate`
 # answers), and what the product flies (LF + w delta(x_c): interaction.discrepancy_weight, 0 beyond
-# (4.5) and outside table 4.2's box).
+# (4.5) and outside table 4.2's box; the LF's field held at its inner edge inside the widest radius).
 FIDELITIES = ("panel HF", "LF", "model", "flown")
 # The panel HF times one factor per output fitted on the training stations: how much of its
 # difference from RANS one scale explains (`fitted_scale`).
@@ -31,7 +31,7 @@ def two_body_converged(found: Iterable[rans.Result]) -> list[rans.Result]:
 def fidelity_values(rows: np.ndarray) -> dict[str, np.ndarray]:
     """[X', Y', N'] (n, 3) of each of FIDELITIES at configuration rows (n, 6)."""
     from nearsub.common.hydro.high_fidelity import MEDIUM, hf_coefficients
-    from nearsub.common.hydro.low_fidelity import lf_coefficients
+    from nearsub.common.hydro.low_fidelity import lf_coefficients, lf_increment_terms
     from nearsub.common.surrogate import interaction
     from nearsub.common.surrogate.model import load_surrogate
 
@@ -40,7 +40,10 @@ def fidelity_values(rows: np.ndarray) -> dict[str, np.ndarray]:
     surrogate = load_surrogate()
     model = np.asarray(surrogate.predict(rows, return_std=False).mean, dtype=float)
     delta, _ = surrogate.discrepancy(interaction.discrepancy_inputs(rows.copy()), return_std=False)
-    flown = lf + interaction.discrepancy_weight(rows)[:, None] * np.asarray(delta, dtype=float)
+    # The loop holds the LF's field at its inner edge where the UUV reaches inside the submarine's
+    # widest radius (the tapering stern), where `lf_coefficients` is NaN: the flown value is that.
+    held_lf = np.asarray(lf_increment_terms(rows)[0], dtype=float)
+    flown = held_lf + interaction.discrepancy_weight(rows)[:, None] * np.asarray(delta, dtype=float)
     hf = np.asarray(hf_coefficients(rows, panels=MEDIUM), dtype=float)
     return {"panel HF": hf, "LF": lf, "model": model, "flown": flown}
 
