@@ -285,6 +285,7 @@ def compare_command(args) -> int:
     rows = rans_comparison.comparison_rows(results, values)
     summary = rans_comparison.comparison_summary(rows, fidelities)
     out.mkdir(parents=True, exist_ok=True)
+    _compare_figure(rows, fidelities, targets[2])  # first: a failure while drawing leaves no table behind
     skipped = sorted(r.case_id for r in found if r.kind == "two-body" and not r.convergence.usable)
     lines = _compare_markdown(rows, summary, fidelities)
     trained = sum(1 for r in rows if not r["held_out"] and r["level"] == "medium")
@@ -329,7 +330,6 @@ def compare_command(args) -> int:
                         *(f"{r[c][k]:.6e}" for name in fidelities for c in (name, f"{name} - RANS")),
                     ]
                 )
-    _compare_figure(rows, fidelities, targets[2])
     print("\n".join(lines))
     print(f"wrote {', '.join(str(t) for t in targets)}")
     return 0
