@@ -120,6 +120,26 @@ def test_two_body_case_places_the_uuv_from_the_row(tmp_path):
     assert shells["uuv"]["levels"][0][1] == rans.domain(spec).surface_levels[0]
 
 
+def test_the_uuv_alone_is_the_station_s_uuv_without_the_submarine(tmp_path):
+    """The free stream of a two-body station: the same UUV, water, speed and heading, no submarine;
+    a quarter domain at zero heading; one case per speed, heading and hull the stations need."""
+    row = rans_campaign.TWO_BODY_STATIONS[0].row
+    pair, alone = rans.two_body_case(row), rans.uuv_alone_case(row)
+    (uuv,) = alone.bodies
+    assert alone.kind == "uuv-alone" and uuv.x == uuv.y == 0.0
+    assert (uuv.length, uuv.diameter, uuv.psi) == (pair.body.length, pair.body.diameter, pair.body.psi)
+    assert (alone.speed, alone.rho, alone.nu, alone.level) == (pair.speed, pair.rho, pair.nu, pair.level)
+    assert alone.quarter and not rans.uuv_alone_case((0, 0, 3.4, 5.0, 19.55, 10)).quarter
+    assert alone.start_iterations == pair.start_iterations
+    assert rans_campaign.free_stream_key(alone.inputs) == rans_campaign.free_stream_key(row)
+    folder = rans.write_case(alone, tmp_path / "alone")
+    assert "forces_submarine" not in _foam(folder / "system/controlDict")["functions"]
+    needed = {rans_campaign.free_stream_key(s.row) for s in rans_campaign.TWO_BODY_STATIONS}
+    suite = rans_campaign.suite("uuv-alone")
+    assert {rans_campaign.free_stream_key(s.inputs) for s in suite} == needed and len(suite) == len(needed)
+    assert [s.quarter for s in suite] == sorted((s.quarter for s in suite), reverse=True)  # cheap ones first
+
+
 # --- forces, nondimensionalisation, verdict ------------------------------------------------------
 
 

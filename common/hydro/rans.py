@@ -118,7 +118,7 @@ class CaseSpec:
     SUBOFF model in the validation)."""
 
     case_id: str
-    kind: str  # "suboff" or "two-body"
+    kind: str  # "suboff", "two-body" or "uuv-alone"
     bodies: tuple[Body, ...]
     speed: float  # [m/s], stream -speed x
     rho: float
@@ -127,7 +127,8 @@ class CaseSpec:
     wall_function: str = "nutk"
     y_plus: float = 50.0
     quarter: bool = False  # a second symmetry plane y = 0 (axisymmetric body at zero drift)
-    inputs: tuple[float, ...] | None = None  # the project's row for a two-body case
+    # the project's row for a two-body case; (u_kn, psi_deg, d_ratio, ld_ratio) for a UUV alone
+    inputs: tuple[float, ...] | None = None
     iterations: int | None = None  # default: the level's
     sustain_inflow: bool = False  # SST's sustaining terms for the inflow turbulence (Spalart & Rumsey 2007)
 
@@ -145,9 +146,9 @@ class CaseSpec:
 
     @property
     def start_iterations(self) -> int:
-        """Iterations solved with first-order upwind for U before the case's own schemes (two-body
-        cases only: the SUBOFF cases are stable without, and their validation was run so)."""
-        return min(FIRST_ORDER_START, self.end_iteration // 4) if self.kind == "two-body" else 0
+        """Iterations solved with first-order upwind for U before the case's own schemes (not for
+        SUBOFF: its cases are stable without, and their validation was run so)."""
+        return 0 if self.kind == "suboff" else min(FIRST_ORDER_START, self.end_iteration // 4)
 
     def describe(self) -> dict:
         out = asdict(self)
@@ -243,6 +244,38 @@ def two_body_case(
         wall_function=wall_function,
         y_plus=y_plus,
         inputs=tuple(row.tolist()),
+        iterations=iterations,
+    )
+
+
+def uuv_alone_case(
+    row, level: str = "medium", wall_function: str = "nutk", y_plus: float = 50.0, iterations: int | None = None
+) -> CaseSpec:
+    """The Explorer UUV of a two-body configuration row alone, at the row's speed, heading and hull
+    (u_kn, psi_deg, d_ratio, ld_ratio; R_long and R_lat are ignored), with the same water, mesh
+    level and wall treatment: its forces are the free-stream part of the two-body case's, so that
+    the two give the interaction alone (`rans_comparison`). A quarter domain at zero heading."""
+    _check_options(level, wall_function, y_plus)
+    row = np.asarray(row, dtype=float).reshape(-1)
+    if row.shape != (len(CONFIGURATION),) or not np.all(np.isfinite(row)):
+        raise CaseError(f"configuration {row.tolist()}: needs 6 finite values {', '.join(CONFIGURATION)}")
+    _, _, speed, psi, diameter, length = (float(c[0]) for c in input_columns(row[None, :]))
+    if not speed > 0:
+        raise CaseError(f"u_kn {row[2]:g}: the speed must be positive")
+    if length < 3.0 * diameter:
+        raise CaseError(f"ld_ratio {row[5]:g}: the Explorer hull needs L/D >= 3")
+    return CaseSpec(
+        case_id="uuv-" + "_".join(f"{v:g}" for v in row[2:]) + _case_suffix(level, wall_function, y_plus),
+        kind="uuv-alone",
+        bodies=(Body("uuv", "explorer", length, diameter, 0.0, 0.0, psi),),
+        speed=speed,
+        rho=SEA_WATER_RHO,
+        nu=NU,
+        level=level,
+        wall_function=wall_function,
+        y_plus=y_plus,
+        quarter=psi == 0.0,
+        inputs=tuple(row[2:].tolist()),
         iterations=iterations,
     )
 

@@ -129,6 +129,8 @@ def suite(name: str) -> list[rans.CaseSpec]:
         ]
     if name == "two-body":
         return [rans.two_body_case(s.row, "medium") for s in TWO_BODY_STATIONS]
+    if name == "uuv-alone":
+        return [rans.uuv_alone_case(row, "medium") for row in free_stream_rows()]
     if name == "two-body-grid":
         return [rans.two_body_case(GRID_STATION.row, level) for level in ("coarse", "medium", "fine")]
     if name == "smoke":
@@ -136,7 +138,19 @@ def suite(name: str) -> list[rans.CaseSpec]:
     raise rans.CaseError(f"--suite {name!r}: choose one of {', '.join(SUITES)}")
 
 
-SUITES = ("suboff-validation", "two-body", "two-body-grid", "smoke")
+SUITES = ("suboff-validation", "two-body", "two-body-grid", "uuv-alone", "smoke")
+
+
+def free_stream_key(inputs) -> tuple[float, ...]:
+    """(u_kn, psi_deg, d_ratio, ld_ratio) of a two-body row, or of a UUV-alone case's inputs."""
+    return tuple(round(float(v), 6) for v in tuple(inputs)[-4:])
+
+
+def free_stream_rows() -> list[tuple[float, ...]]:
+    """One row per UUV alone that the `two-body` suite's stations need (their speed, heading and
+    hull), zero headings first (their quarter domains are the cheapest)."""
+    keys = sorted({free_stream_key(s.row) for s in TWO_BODY_STATIONS}, key=lambda k: (k[1] != 0.0, k))
+    return [(0.0, 0.0, *k) for k in keys]
 
 
 # --- finished cases and their artefacts ----------------------------------------------------------

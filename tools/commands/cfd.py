@@ -368,7 +368,9 @@ def _case_arguments(p, suite: bool = False) -> None:
         help="a two-body configuration in the project's order (thesis table 4.2)",
     )
     if suite:
-        which.add_argument("--suite", help="a named set of cases: suboff-validation, two-body, two-body-grid, smoke")
+        which.add_argument(
+            "--suite", help="a named set of cases: suboff-validation, two-body, two-body-grid, uuv-alone, smoke"
+        )
     p.add_argument("--level", default="medium", help="mesh: smoke, coarse, medium (default), fine")
     p.add_argument("--wall-function", default="nutk", help="nutk (default) or spalding")
     p.add_argument(
