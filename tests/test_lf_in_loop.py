@@ -89,10 +89,12 @@ def test_increment_is_continuous_across_the_lateral_edge_of_constraint_4_5(model
     beyond = y > edge + 1e-3
     np.testing.assert_allclose(seen.model[beyond], seen.model[beyond][:1] * np.ones((beyond.sum(), 1)), rtol=0.02)
     assert no_jump(seen.lf)  # the LF increment knows nothing of (4.5)
+    assert no_jump(seen.viscous)  # nor does the viscous correction
     assert np.all(np.abs(seen.applied[-1]) > 0)  # and it goes on beyond it
     delta = seen.model - seen.delta_free
     steps = np.abs(np.diff(seen.applied, axis=0))
     allowed = dw[:, None] * np.abs(delta[1:]) + np.abs(np.diff(seen.lf, axis=0)) + np.abs(np.diff(delta, axis=0))
+    allowed += np.abs(np.diff(seen.viscous, axis=0))
     assert np.all(steps <= allowed + 1e-9)
 
 
@@ -149,8 +151,9 @@ def test_the_applied_force_is_what_the_dynamics_add(model):
     command = np.zeros((len(states), 2))
     added = body_forces(states, command, SDV, seen.interaction) - body_forces(states, command, SDV)
     np.testing.assert_allclose(added, seen.applied, rtol=1e-12, atol=1e-9)
-    corrected = seen.lf + seen.delta_weight[:, None] * (seen.model - seen.delta_free)
+    corrected = seen.lf + seen.delta_weight[:, None] * (seen.model - seen.delta_free) + seen.viscous
     np.testing.assert_allclose(seen.forces, corrected, rtol=1e-13, atol=1e-12)
+    assert np.any(seen.viscous != 0.0)  # beside the hull the viscous correction is in the sum
 
 
 def test_the_increment_holds_no_free_stream_difference_of_the_two_models(model):
@@ -162,7 +165,7 @@ def test_the_increment_holds_no_free_stream_difference_of_the_two_models(model):
     finite = np.isfinite(hf).all(axis=1)
     X, hf = X[finite], hf[finite]
     table = increment_table(model)
-    increment, _, delta, _, lf, free, w, _ = lf_in_loop_increment(
+    increment, _, delta, _, lf, free, w, _, _ = lf_in_loop_increment(
         model, X, X[:, 0] * 88.86, X[:, 1] * 88.86, SDV, table, with_std=False
     )
     full = w == 1.0
@@ -355,10 +358,11 @@ def test_guard_engages_before_the_compensation_reaches_the_hull(model):
 
 
 def test_guarded_compensation_mission_keeps_the_tip_clearance(model):
-    """N_uv compensation in a mission beside the SDV's afterbody, 0.72 m of tip clearance on the
+    """N_uv compensation in a mission beside the SDV's afterbody, 0.67 m of tip clearance on the
     track, guard clearance 0.7 m: the helm's progress carries the guard's state, the offset it flew
     never exceeds the guard's limit (which does bind), and the heading it asks for never brings a
-    tip closer than the clearance (or than the track itself does)."""
+    tip closer than the clearance (or than the track itself does). (At 0.72 m on the track the guard
+    bound with the panel-trained increment, not with the viscous correction's weaker bow-in moment.)"""
     mission = load_mission(
         ALPHA,
         [
@@ -366,12 +370,12 @@ def test_guarded_compensation_mission_keeps_the_tip_clearance(model):
             "environment.u_sub=1.5",
             "vehicle=sdv",
             "start.x=-25",
-            "start.y=5.9",
+            "start.y=5.85",
             "start.psi_deg=0",
             "start.speed=1.5",
             "apps.helm.behaviour=nuv_compensation",
             "apps.helm.guard_clearance=0.7",
-            "apps.helm.legs=[{points = [[60.0, 5.9]], speed = 1.5, lead = 15.9, lead_to_start = true}]",
+            "apps.helm.legs=[{points = [[60.0, 5.85]], speed = 1.5, lead = 15.9, lead_to_start = true}]",
             "time_limit=30",
         ],
     )

@@ -171,7 +171,15 @@ def run_batch(
 
         rho, mode = mission.environment.rho, sim.interaction
         return interaction_at(
-            surrogate, x, vehicle, rho, mode, with_std=False, weighted_only=True, delta=own if sampled else None
+            surrogate,
+            x,
+            vehicle,
+            rho,
+            mode,
+            with_std=False,
+            weighted_only=True,
+            delta=own if sampled else None,
+            viscous=mission.surrogate.viscous,
         )
 
     for step in range(mission.max_steps):

@@ -93,6 +93,7 @@ class HelmCore:
         # it: the interaction increment in "increment" mode, the surrogate's total otherwise.
         # The sim's applied forces are the same numbers in "thesis" as in "replace" mode.
         self.interaction_mode = "increment" if mission.apps.sim.interaction == "increment" else "replace"
+        self.viscous = mission.surrogate.viscous
         # The forces are an input whenever the sim has them, compensating or not, so a
         # compensating helm swapped in holds them from its predecessor's handover.
         self.inputs = ("state", "forces") if sim_forces(mission) else ("state",)
@@ -125,7 +126,9 @@ class HelmCore:
             f = self.forces
             forces = np.array([[f.X_s, f.Y_s, f.N_s]])
             return dynamics.Interaction(forces, np.array([f.weight]), self.interaction_mode), f.applied_N
-        seen = interaction().interaction_at(self.surrogate, x, self.vehicle, self.rho, self.interaction_mode)
+        seen = interaction().interaction_at(
+            self.surrogate, x, self.vehicle, self.rho, self.interaction_mode, viscous=self.viscous
+        )
         return seen.interaction, float(seen.applied[0, 2])
 
     def iterate(self, step: int, t: float) -> Iteration:
@@ -292,6 +295,7 @@ class SimCore:
         self.vehicle = mission.vehicle_model
         self.rho = mission.environment.rho
         self.interaction_mode = mission.apps.sim.interaction
+        self.viscous = mission.surrogate.viscous
         wanted = sim_forces(mission)
         if wanted and surrogate is None:
             raise ValueError("the sim's interaction forces need the surrogate (a force model)")
@@ -324,7 +328,9 @@ class SimCore:
         return [("forces", forces_message(self.seen, step, t, self.role))]
 
     def ask(self) -> InteractionAt:
-        return interaction().interaction_at(self.surrogate, self.x, self.vehicle, self.rho, self.interaction_mode)
+        return interaction().interaction_at(
+            self.surrogate, self.x, self.vehicle, self.rho, self.interaction_mode, viscous=self.viscous
+        )
 
     def new_mail(self, mail: dict[str, Message]) -> None:
         self.inp = mail.get("input", self.inp)
@@ -397,7 +403,8 @@ class SimCore:
 def forces_message(seen: InteractionAt, step: int, t: float, source: str) -> Forces:
     """The forces topic for one vehicle's `interaction_at` answer."""
     values = {}
-    for prefix, array in (("", seen.forces), ("applied_", seen.applied), ("model_", seen.model), ("lf_", seen.lf)):
+    parts = (("", seen.forces), ("applied_", seen.applied), ("model_", seen.model), ("lf_", seen.lf))
+    for prefix, array in (*parts, ("viscous_", seen.viscous)):
         names = ("X_s", "Y_s", "N_s") if prefix == "" else ("X", "Y", "N")
         values.update({f"{prefix}{name}": float(v) for name, v in zip(names, array[0], strict=True)})
     values.update({f"std_{name}": float(v) for name, v in zip("XYN", seen.std[0], strict=True)})

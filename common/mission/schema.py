@@ -234,6 +234,14 @@ class SimSettings(AppSettings):
 
 class SurrogateSettings(Strict):
     model: str = Field(default="", description="model file; empty = the shipped model")
+    viscous: bool = Field(
+        default=True,
+        description=(
+            "in increment mode, take the interaction towards RANS near the RANS stations with the model's "
+            "viscous correction, where it has one (docs/hydro/rans/README.md); false flies the panel-trained "
+            "increment alone"
+        ),
+    )
 
 
 class LoggerSettings(Strict):

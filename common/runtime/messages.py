@@ -129,7 +129,8 @@ class Forces(Message):
     LF - LF_free at the true pose and delta_weight the weight of delta (NaN when the mode does not
     use them). in_domain and constraints_ok: table 4.2 and (4.4)-(4.7); `outside` names every
     input and constraint the state is outside of; lf_held: the LF held its field at 1 cm from the
-    submarine's widest radius (`low_fidelity.lf_increment_terms`)."""
+    submarine's widest radius (`low_fidelity.lf_increment_terms`); viscous_X/Y/N: the viscous
+    correction's part of X_s/Y_s/N_s (`surrogate.viscous`; zero without one)."""
 
     X_s: float
     Y_s: float
@@ -152,6 +153,9 @@ class Forces(Message):
     delta_weight: float = math.nan
     outside: list[str] = Field(default_factory=list)
     lf_held: bool = False
+    viscous_X: float = 0.0
+    viscous_Y: float = 0.0
+    viscous_N: float = 0.0
 
 
 class Tick(Message):

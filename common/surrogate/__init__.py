@@ -15,4 +15,5 @@
 - sampling_kernel: the compiled kernels of `sampling`.
 - query: the surrogate server's query and reply messages.
 - campaign_cases: a surrogate input as the dimensional case a CFD user sets up.
+- viscous: the viscous correction, a model's increment taken towards RANS near the RANS stations.
 """

@@ -235,24 +235,25 @@ def load_table(path: str | os.PathLike) -> FreeStreamTable:
     return FreeStreamTable(axes, values, meta)
 
 
+TABLE_SUFFIX = "-free-stream.npz"
+
+
 def default_table_path() -> Path:
     """The shipped table, the free stream of the shipped surrogate (package data `data/*`)."""
-    return sg.default_model_path().with_name("surrogate-free-stream.npz")
+    return sg.companion_paths(None, TABLE_SUFFIX)[0]
 
 
 def table_path_for(model_path: str | os.PathLike) -> Path:
     """Where the table of a model file lives: next to it, `<stem>-free-stream.npz`."""
     model_path = Path(model_path)
-    return model_path.with_name(f"{model_path.stem}-free-stream.npz")
+    return model_path.with_name(f"{model_path.stem}{TABLE_SUFFIX}")
 
 
 def find_table(model_id: str | None, model_path: str | os.PathLike | None) -> tuple[FreeStreamTable | None, list[Path]]:
-    """The table made for the surrogate `model_id`: the one next to its model file, else the
-    shipped one if it was made for the same model; None if neither. Also returns where it looked."""
-    candidates = [table_path_for(model_path)] if model_path is not None else []
-    candidates.append(default_table_path())
+    """The table made for the surrogate `model_id` (`model.companion_paths`), or None; also
+    returns where it looked."""
     searched: list[Path] = []
-    for path in dict.fromkeys(p.resolve() for p in candidates):
+    for path in sg.companion_paths(model_path, TABLE_SUFFIX):
         searched.append(path)
         if model_id is not None and path.exists():
             table = load_table(path)

@@ -13,10 +13,12 @@ added to (5.11) is [LF(x) - LF_free(x)] + w(x) [delta(x_c) - (HF_free(x_c) - LF_
 distance dependence at the true pose x, at any heading; the residual GP delta corrects it at x_c,
 x clamped into where it was trained, less its free-stream part (the two models' difference for
 the UUV alone, no interaction), with a weight w of position, speed and the constraints that never
-depends on the heading. The LF runs here, in the process that needs the force (the sim, the helm,
-the batch engine): it costs well under a millisecond, and computing it where it is used keeps one
-code path for in-process, multi-process and batch runs, so they agree bit for bit; the surrogate
-server answers only delta (`discrepancy`).
+depends on the heading. Where a viscous correction was fitted for the model (`viscous`: a GP of
+RANS's interaction at the RANS stations), it takes the increment towards RANS near them. The
+LF runs here, in the process that needs the force (the sim, the helm, the batch engine): it
+costs well under a millisecond, and computing it where it is used keeps one code path for
+in-process, multi-process and batch runs, so they agree bit for bit; the surrogate server
+answers only delta (`discrepancy`).
 
 A force model is anything with `predict(inputs) -> surrogate.Prediction` (and, for the LF in the
 loop, `kind` and `discrepancy`): the in-process `surrogate.Surrogate`, or
@@ -42,6 +44,7 @@ from nearsub.common.physics.vehicles import Vehicle
 from nearsub.common.surrogate import domain
 from nearsub.common.surrogate import free_stream as fs
 from nearsub.common.surrogate import query as sg
+from nearsub.common.surrogate import viscous as vc
 from nearsub.common.surrogate.query import ServiceError
 
 # Width of the ramp inside each bound, as a fraction of the input's range (table 4.2): 0.08 deg of
@@ -199,7 +202,8 @@ class InteractionAt:
     increment, the prediction otherwise; `lf` the LF increment LF(x) - LF_free(x) (NaN when the
     mode does not use it); `delta_free` the free-stream part of delta, HF_free(x_c) - LF_free(x_c),
     which the increment leaves out (NaN likewise); `delta_weight` the weight of delta (NaN
-    likewise), so forces = lf + delta_weight (model - delta_free). All in N and N m,
+    likewise), `viscous` the viscous correction's change (zero without one), so forces = lf +
+    delta_weight (model - delta_free) + viscous. All in N and N m,
     frame convention. `outside_mask` (n, 10) says which inputs (table 4.2) and constraints
     (4.4)-(4.7) the state is outside of (`outside`), `lf_held` where the LF held its field at the
     table's inner edge (the UUV within 1 cm of the submarine's widest radius, `low_fidelity`)."""
@@ -212,6 +216,7 @@ class InteractionAt:
     lf: np.ndarray
     delta_free: np.ndarray
     delta_weight: np.ndarray
+    viscous: np.ndarray
     in_domain: np.ndarray
     constraints_ok: np.ndarray
     outside_mask: np.ndarray
@@ -294,6 +299,25 @@ def increment_table(model: ForceModel) -> fs.FreeStreamTable:
     return table
 
 
+_CORRECTIONS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # force model -> its correction or None
+
+
+def viscous_correction(model: ForceModel) -> vc.ViscousCorrection | None:
+    """The viscous correction fitted for this model (`viscous.find`, cached per model object), or
+    None: a model without one flies the increment as it is."""
+    try:
+        return _CORRECTIONS[model]
+    except (KeyError, TypeError):
+        pass
+    path = getattr(getattr(model, "loaded", None), "path", None)
+    found = vc.find(getattr(model, "model_id", None), path)
+    try:
+        _CORRECTIONS[model] = found
+    except TypeError:
+        pass
+    return found
+
+
 def interaction_at(
     model: ForceModel,
     state: np.ndarray,
@@ -304,6 +328,7 @@ def interaction_at(
     weighted_only: bool = False,
     free_stream: fs.FreeStreamTable | None = None,
     delta: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
+    viscous: bool = True,
 ) -> InteractionAt:
     """Ask the force model about the state(s) (6,) or (n, 6) and build the dynamics' input. The
     fields are (n, 3) and (n,) arrays; `interaction` has the shape of `state` ((3,) and () for one
@@ -322,7 +347,9 @@ def interaction_at(
     model: the prediction minus that free-stream value at the same clipped inputs, with the blend
     weight; "replace" and "thesis": the prediction with the blend weight. `delta(x_c, rows)`, for
     the LF-in-the-loop increment only, replaces the model's mean of delta at the rows `rows` of
-    `state` (a posterior function sample, `sampling.PosteriorSamples.rows`); its std is NaN."""
+    `state` (a posterior function sample, `sampling.PosteriorSamples.rows`); its std is NaN. With
+    `viscous`, the LF-in-the-loop increment adds the model's viscous correction if it has one
+    (`viscous_correction`); the other modes never do."""
     single = np.ndim(state) == 1
     state = np.atleast_2d(state)
     u, x, y, psi = state[:, U], state[:, X], state[:, Y], state[:, PSI]
@@ -335,8 +362,9 @@ def interaction_at(
     if mode == "increment":
         table = free_stream if free_stream is not None else increment_table(model)
     if mode == "increment" and getattr(model, "kind", None) == "lf_in_loop":
-        coefficients, weight, model_mean, spread, lf, delta_free, delta_weight, held = lf_in_loop_increment(
-            model, inputs, x, y, vehicle, table, with_std, weighted_only, delta, known
+        correction = viscous_correction(model) if viscous else None
+        coefficients, weight, model_mean, spread, lf, delta_free, delta_weight, held, rans = lf_in_loop_increment(
+            model, inputs, x, y, vehicle, table, with_std, weighted_only, delta, known, correction
         )
     elif delta is not None:
         raise ValueError(f'a sampled delta needs the "increment" mode and a model of kind "lf_in_loop", got {mode!r}')
@@ -355,10 +383,11 @@ def interaction_at(
         coefficients = model_mean - free
         lf, delta_free = np.full((n, 3), np.nan), np.full((n, 3), np.nan)
         delta_weight, held = np.full(n, np.nan), np.zeros(n, dtype=bool)
-    # One conversion for the five (n, 3) arrays (element-wise, so each gets its own bits).
-    parts = np.concatenate([coefficients, model_mean, spread, lf, delta_free])
-    converted = domain.to_forces(parts, np.concatenate((mirror,) * 5), np.concatenate((u,) * 5), vehicle.length, rho)
-    forces, model_forces, spread_forces, lf_forces, free_forces = converted.reshape(5, n, 3)
+        rans = np.zeros((n, 3))
+    # One conversion for the six (n, 3) arrays (element-wise, so each gets its own bits).
+    parts = np.concatenate([coefficients, model_mean, spread, lf, delta_free, rans])
+    converted = domain.to_forces(parts, np.concatenate((mirror,) * 6), np.concatenate((u,) * 6), vehicle.length, rho)
+    forces, model_forces, spread_forces, lf_forces, free_forces, rans_forces = converted.reshape(6, n, 3)
     safe = np.where(np.isfinite(forces), forces, 0.0)  # weight is 0 wherever they are not finite
     interaction = Interaction(safe[0], weight[0], mode) if single else Interaction(safe, weight, mode)
     flags = outside_mask(raw, known)
@@ -371,6 +400,7 @@ def interaction_at(
         lf=lf_forces,
         delta_free=free_forces,
         delta_weight=delta_weight,
+        viscous=rans_forces,
         in_domain=~flags[:, : len(domain.INPUT_NAMES)].any(axis=1),
         constraints_ok=~flags[:, len(domain.INPUT_NAMES) :].any(axis=1),
         outside_mask=flags,
@@ -402,12 +432,14 @@ def lf_in_loop_increment(
     weighted_only: bool = False,
     delta: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
     known: Known | None = None,
+    viscous: vc.ViscousCorrection | None = None,
 ):
     """The increment [LF(x) - LF_free(x)] + w(x) [delta(x_c) - (HF_free(x_c) - LF_free(x_c))] in
     coefficients (n, 3) at inputs (n, 6) (hull ratios clipped) of UUVs at CB positions x, y, with
     the dynamics' weight (the LF's reach, `lf_reach_weight`), and the parts: delta's mean and std
     (n, 3) at x_c, the LF increment (n, 3), delta's free-stream part (n, 3), w (n,) and where the
-    LF held its field (n,) (`low_fidelity.lf_increment_terms`).
+    LF held its field (n,) (`low_fidelity.lf_increment_terms`), and the viscous correction's mean
+    change (n, 3), already in the increment (zeros without `viscous`; `viscous.ViscousCorrection`).
 
     delta is the GP of HF - LF of the total coefficients, so it holds HF_free - LF_free, the two
     models' difference for the UUV alone, which is no interaction: it is taken out with the HF's
@@ -463,4 +495,9 @@ def lf_in_loop_increment(
             if with_std:
                 spread[asked] = std
     correction = np.where(delta_weight[:, None] > 0.0, delta_weight[:, None] * (mean - free), 0.0)
-    return lf + correction, reach, mean, spread, lf, free, delta_weight, held
+    increment = lf + correction
+    rans = np.zeros((n, 3))
+    if viscous is not None:
+        rans = viscous.blend(inputs, increment)
+        increment = increment + rans
+    return increment, reach, mean, spread, lf, free, delta_weight, held, rans

@@ -83,6 +83,15 @@ def default_model_path() -> Path:
     return Path(nearsub.__file__).resolve().parent / "data" / "surrogate.npz"
 
 
+def companion_paths(model_path: str | os.PathLike | None, suffix: str) -> list[Path]:
+    """Where a file made for one model (its free-stream table, its viscous correction) is looked
+    for, in order: next to the model file as `<stem><suffix>`, then the shipped one beside the
+    shipped model (`surrogate<suffix>`). A file there is used only if it names the model's id."""
+    candidates = [Path(model_path).with_name(f"{Path(model_path).stem}{suffix}")] if model_path is not None else []
+    candidates.append(default_model_path().with_name(f"surrogate{suffix}"))
+    return list(dict.fromkeys(p.resolve() for p in candidates))
+
+
 def _model_id(model: MultiOutputGP | MultiFidelitySurrogate | LFInLoopModel) -> str:
     """A short content hash of a fitted model (data and hyperparameters; for the LF-in-the-loop
     kind also the warping and the LF's identity): names a model in replies independently of where

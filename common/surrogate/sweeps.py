@@ -87,12 +87,13 @@ def physics_increments(inputs: np.ndarray, panels=high_fidelity.MEDIUM) -> dict[
 
 def applied_increments(model, inputs: np.ndarray, vehicle) -> np.ndarray:
     """The increment the sim applies in increment mode, [LF(x) - LF_free(x)] + w [delta(x_c) -
-    (HF_free(x_c) - LF_free(x_c))], in coefficients (n, 3) (`interaction.lf_in_loop_increment`; the
-    hull ratios are the vehicle's)."""
-    from nearsub.common.surrogate.interaction import increment_table, lf_in_loop_increment
+    (HF_free(x_c) - LF_free(x_c))] plus the model's viscous correction, in coefficients (n, 3)
+    (`interaction.lf_in_loop_increment`; the hull ratios are the vehicle's)."""
+    from nearsub.common.surrogate.interaction import increment_table, lf_in_loop_increment, viscous_correction
 
     x, y = inputs[:, 0] * L_SUB, inputs[:, 1] * L_SUB
-    increment, *_ = lf_in_loop_increment(model, inputs, x, y, vehicle, increment_table(model), with_std=False)
+    table, correction = increment_table(model), viscous_correction(model)
+    increment, *_ = lf_in_loop_increment(model, inputs, x, y, vehicle, table, with_std=False, viscous=correction)
     return increment
 
 
