@@ -48,14 +48,16 @@ def fidelity_values(rows: np.ndarray) -> dict[str, np.ndarray]:
     return {"panel HF": hf, "LF": lf, "model": model, "flown": flown}
 
 
-def comparison_rows(results: list[rans.Result], values: dict[str, np.ndarray]) -> list[dict]:
-    """One row per RANS result: its station, X', Y', N', and for each fidelity in `values` (arrays
-    (n, 3) in the order of `results`) its X', Y', N', the difference from RANS (other - RANS) and
-    that difference relative to |RANS|."""
+def comparison_rows(
+    results: list[rans.Result], values: dict[str, np.ndarray], truth: np.ndarray | None = None
+) -> list[dict]:
+    """One row per RANS result: its station, X', Y', N' (or the rows of `truth` (n, 3): its
+    interaction alone), and for each fidelity in `values` (arrays (n, 3) in the order of `results`)
+    its X', Y', N', the difference from RANS (other - RANS) and that difference relative to |RANS|."""
     out = []
     for i, r in enumerate(results):
         station = station_of(r.inputs)
-        rans_values = np.array([r.coefficients[k] for k in OUTPUTS])
+        rans_values = np.array([r.coefficients[k] for k in OUTPUTS]) if truth is None else np.asarray(truth[i])
         row = {
             "case": r.case_id,
             "station": station.name if station else "",
@@ -106,3 +108,88 @@ def fitted_scale(rows: list[dict]) -> np.ndarray:
     hf = np.array([r["panel HF"] for r in train], dtype=float)
     truth = np.array([r["RANS"] for r in train], dtype=float)
     return (hf * truth).sum(axis=0) / (hf * hf).sum(axis=0)
+
+
+# --- the interaction alone: each station less its UUV alone ---------------------------------------
+
+# The product's increment with the viscous correction fitted for the model (`surrogate.viscous`).
+CORRECTED = "flown + RANS correction"
+INTERACTION_FIDELITIES = ("panel HF", "LF", "flown")
+
+
+def uuv_alone(found: Iterable[rans.Result]) -> dict[tuple[float, ...], rans.Result]:
+    """The converged UUV-alone results by (u_kn, psi_deg, d_ratio, ld_ratio)."""
+    from nearsub.common.hydro.rans_campaign import free_stream_key
+
+    return {
+        free_stream_key(r.inputs): r
+        for r in found
+        if r.kind == "uuv-alone" and r.convergence.usable and r.inputs is not None and r.level == "medium"
+    }
+
+
+def rans_interaction(results: list[rans.Result], alone: dict) -> np.ndarray:
+    """(n, 3) RANS's interaction at each two-body result: its X', Y', N' less those of the same
+    UUV alone at the same speed, heading and hull (NaN where that case is missing)."""
+    from nearsub.common.hydro.rans_campaign import free_stream_key
+
+    out = np.full((len(results), 3), np.nan)
+    for i, r in enumerate(results):
+        free = alone.get(free_stream_key(r.inputs))
+        if free is not None:
+            out[i] = [r.coefficients[k] - free.coefficients[k] for k in OUTPUTS]
+    return out
+
+
+def flown_increment(rows: np.ndarray, model, correction=None) -> np.ndarray:
+    """(n, 3) the increment the product adds to (5.11) at configuration rows (n, 6), in
+    coefficients (`interaction.lf_in_loop_increment`), with the viscous `correction` or without."""
+    from types import SimpleNamespace
+
+    from nearsub.common.hydro.low_fidelity import input_columns
+    from nearsub.common.surrogate import interaction
+
+    rows = np.atleast_2d(np.asarray(rows, dtype=float))
+    x, y, _, _, _, length = input_columns(rows)
+    out = np.empty((len(rows), 3))
+    table = interaction.increment_table(model)
+    for i in range(len(rows)):  # one UUV each: every row its own hull
+        # The vehicle's length only guards the LF table's reach 260 m off the hull (LF_MAX_LENGTH),
+        # which a station beside it never needs: figure 4-4's 8.3 m UUV is compared as well.
+        uuv = SimpleNamespace(name="station UUV", length=min(float(length[i]), interaction.LF_MAX_LENGTH))
+        out[i] = interaction.lf_in_loop_increment(
+            model, rows[i : i + 1], x[i : i + 1], y[i : i + 1], uuv, table, with_std=False, viscous=correction
+        )[0][0]
+    return out
+
+
+def interaction_values(rows: np.ndarray, model, correction=None) -> dict[str, np.ndarray]:
+    """Interaction [X', Y', N'] (n, 3) of each fidelity at rows (n, 6): the panel HF less its UUV
+    alone, the LF less its own, the product's increment, and with a `correction` the increment
+    with it (CORRECTED)."""
+    from nearsub.common.hydro.high_fidelity import MEDIUM, hf_coefficients, hf_free_stream
+    from nearsub.common.hydro.low_fidelity import lf_coefficients, lf_free_stream
+
+    rows = np.atleast_2d(np.asarray(rows, dtype=float))
+    out = {
+        "panel HF": np.asarray(hf_coefficients(rows, panels=MEDIUM), dtype=float) - hf_free_stream(rows, MEDIUM),
+        "LF": np.asarray(lf_coefficients(rows), dtype=float) - lf_free_stream(rows),
+        "flown": flown_increment(rows, model),
+    }
+    if correction is not None:
+        out[CORRECTED] = flown_increment(rows, model, correction)
+    return out
+
+
+def correction_training(results: list[rans.Result], target: np.ndarray) -> tuple:
+    """The stations a viscous correction is fitted on: medium mesh, not held out, with a RANS
+    interaction. Returns their rows (m, 6), RANS's interaction there (m, 3) and their case ids."""
+    keep = [
+        i
+        for i, r in enumerate(results)
+        if r.level == "medium"
+        and not ((s := station_of(r.inputs)) is not None and s.held_out)
+        and np.all(np.isfinite(target[i]))
+    ]
+    rows = np.array([results[i].inputs for i in keep], dtype=float)
+    return rows, target[keep], [results[i].case_id for i in keep]

@@ -18,7 +18,7 @@ from pathlib import Path
 
 from ..support.arguments import integer, number
 from ..support.errors import InputError
-from ..support.outputs import output_folder
+from ..support.outputs import output_file, output_folder
 from ..support.schedulers import scheduler_address
 
 DEFAULT_WORK_DIR = Path("cfd-runs")
@@ -173,6 +173,7 @@ def report_command(args) -> int:
 
 
 COMPARE_FILES = ("two-body-compare.md", "two-body-compare.csv", "two-body-compare.png")
+INTERACTION_FILES = ("two-body-interaction.md", "two-body-interaction.csv", "two-body-interaction.png")
 
 
 def _compare_markdown(rows: list[dict], summary: dict, fidelities) -> list[str]:
@@ -214,14 +215,14 @@ def _compare_markdown(rows: list[dict], summary: dict, fidelities) -> list[str]:
     return lines
 
 
-def _compare_figure(rows: list[dict], fidelities, path: Path) -> None:
+def _compare_figure(rows: list[dict], fidelities, path: Path, title: str | None = None) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     import numpy as np
 
-    from nearsub.common.analysis.rans_comparison import SCALED
+    from nearsub.common.analysis.rans_comparison import CORRECTED, SCALED
 
     fig, axes = plt.subplots(3, 1, figsize=(max(8, 0.45 * len(rows) + 3), 9), sharex=True)
     x = np.arange(len(rows))
@@ -232,6 +233,7 @@ def _compare_figure(rows: list[dict], fidelities, path: Path) -> None:
         "model": ("tab:orange", "D"),
         "flown": ("tab:red", "x"),
         SCALED: ("tab:purple", "+"),
+        CORRECTED: ("tab:brown", "*"),
     }
     for k, (ax, out) in enumerate(zip(axes, ("X'", "Y'", "N'"), strict=True)):
         for name in ("RANS", *fidelities):
@@ -254,51 +256,21 @@ def _compare_figure(rows: list[dict], fidelities, path: Path) -> None:
         fontsize=7,
     )
     axes[0].set_title(
-        "Two-body stations: RANS (OpenFOAM) against the panel HF, the LF, the shipped model and the scaled "
-        "panel HF (* held out)"
+        (title or "Two-body stations")
+        + ": RANS (OpenFOAM) against the panel HF, the LF and the shipped model's (* held out)"
     )
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
 
-def compare_command(args) -> int:
+def _compare_csv(rows: list[dict], fidelities, path: Path) -> None:
     import csv
-
-    import numpy as np
 
     from nearsub.common.analysis import rans_comparison
     from nearsub.common.hydro import rans
 
-    out = output_folder(Path(args.out), "-o")
-    targets = [out / name for name in COMPARE_FILES]
-    if not args.force and (busy := [t for t in targets if t.exists()]):
-        raise InputError(f"-o {out}: {busy[0].name} exists; give a new folder or --force")
-    found = _found(args)
-    results = rans_comparison.two_body_converged(found)
-    if not results:
-        raise InputError(f"--from {' '.join(map(str, args.sources or []))}: no converged two-body case to compare")
-    fidelities = (*rans_comparison.FIDELITIES, rans_comparison.SCALED)
-    values = rans_comparison.fidelity_values(np.array([r.inputs for r in results]))
-    rho = rans_comparison.fitted_scale(rans_comparison.comparison_rows(results, values))
-    values[rans_comparison.SCALED] = values["panel HF"] * rho
-    rows = rans_comparison.comparison_rows(results, values)
-    summary = rans_comparison.comparison_summary(rows, fidelities)
-    out.mkdir(parents=True, exist_ok=True)
-    _compare_figure(rows, fidelities, targets[2])  # first: a failure while drawing leaves no table behind
-    skipped = sorted(r.case_id for r in found if r.kind == "two-body" and not r.convergence.usable)
-    lines = _compare_markdown(rows, summary, fidelities)
-    trained = sum(1 for r in rows if not r["held_out"] and r["level"] == "medium")
-    lines += [
-        "",
-        f"{rans_comparison.SCALED}: the panel HF times rho = {rho[0]:.3f} (X'), {rho[1]:.3f} (Y'), {rho[2]:.3f} (N'), "
-        f"fitted by least squares to RANS on the {trained} medium-mesh stations not held out; its held-out "
-        "MAE is a fair test of the fit.",
-    ]
-    if skipped:
-        lines += ["", "Not compared (not converged): " + ", ".join(skipped)]
-    targets[0].write_text("\n".join(lines) + "\n")
-    with targets[1].open("w", newline="") as f:
+    with path.open("w", newline="") as f:
         writer = csv.writer(f)
         writer.writerow(
             [
@@ -330,9 +302,126 @@ def compare_command(args) -> int:
                         *(f"{r[c][k]:.6e}" for name in fidelities for c in (name, f"{name} - RANS")),
                     ]
                 )
+
+
+def compare_command(args) -> int:
+    import numpy as np
+
+    from nearsub.common.analysis import rans_comparison
+
+    out = output_folder(Path(args.out), "-o")
+    targets = [out / name for name in COMPARE_FILES]
+    if not args.force and (busy := [t for t in (*targets, *(out / n for n in INTERACTION_FILES)) if t.exists()]):
+        raise InputError(f"-o {out}: {busy[0].name} exists; give a new folder or --force")
+    found = _found(args)
+    results = rans_comparison.two_body_converged(found)
+    if not results:
+        raise InputError(f"--from {' '.join(map(str, args.sources or []))}: no converged two-body case to compare")
+    fidelities = (*rans_comparison.FIDELITIES, rans_comparison.SCALED)
+    values = rans_comparison.fidelity_values(np.array([r.inputs for r in results]))
+    rho = rans_comparison.fitted_scale(rans_comparison.comparison_rows(results, values))
+    values[rans_comparison.SCALED] = values["panel HF"] * rho
+    rows = rans_comparison.comparison_rows(results, values)
+    summary = rans_comparison.comparison_summary(rows, fidelities)
+    out.mkdir(parents=True, exist_ok=True)
+    _compare_figure(rows, fidelities, targets[2])  # first: a failure while drawing leaves no table behind
+    skipped = sorted(r.case_id for r in found if r.kind == "two-body" and not r.convergence.usable)
+    lines = _compare_markdown(rows, summary, fidelities)
+    trained = sum(1 for r in rows if not r["held_out"] and r["level"] == "medium")
+    lines += [
+        "",
+        f"{rans_comparison.SCALED}: the panel HF times rho = {rho[0]:.3f} (X'), {rho[1]:.3f} (Y'), {rho[2]:.3f} (N'), "
+        f"fitted by least squares to RANS on the {trained} medium-mesh stations not held out; its held-out "
+        "MAE is a fair test of the fit.",
+    ]
+    if skipped:
+        lines += ["", "Not compared (not converged): " + ", ".join(skipped)]
+    targets[0].write_text("\n".join(lines) + "\n")
+    _compare_csv(rows, fidelities, targets[1])
+    interaction_lines = _interaction_compare(found, out)
+    if interaction_lines:
+        (out / INTERACTION_FILES[0]).write_text("\n".join(interaction_lines) + "\n")
+        targets += [out / name for name in INTERACTION_FILES]
     print("\n".join(lines))
     print(f"wrote {', '.join(str(t) for t in targets)}")
     return 0
+
+
+def _interaction_inputs(found):
+    """The converged two-body results that have their UUV alone, RANS's interaction there and the
+    product's fidelities' (`rans_comparison.interaction_values`, without a correction)."""
+    import numpy as np
+
+    from nearsub.common.analysis import rans_comparison
+
+    results = rans_comparison.two_body_converged(found)
+    truth = rans_comparison.rans_interaction(results, rans_comparison.uuv_alone(found))
+    keep = np.isfinite(truth).all(axis=1)
+    results, truth = [r for r, k in zip(results, keep, strict=True) if k], truth[keep]
+    return results, truth
+
+
+def correct_command(args) -> int:
+    """Fit the viscous correction of a model to the RANS stations kept for training."""
+
+    from nearsub.common.analysis import rans_comparison
+    from nearsub.common.surrogate import viscous
+    from nearsub.common.surrogate.model import default_model_path, load_surrogate
+
+    source = Path(args.model) if args.model else default_model_path()
+    out = output_file(args.out, "-o", source=source, source_is="the model it reads")
+    if out.exists() and not args.force:
+        raise InputError(f"-o {out}: exists; give a new file or --force")
+    model = load_surrogate(source)
+    if model.kind != "lf_in_loop":
+        raise InputError(f"--model {source}: of kind {model.kind!r}; a correction needs an LF-in-the-loop model")
+    found = _found(args)
+    results, truth = _interaction_inputs(found)
+    rows, target, ids = rans_comparison.correction_training(results, truth)
+    if len(ids) < 4:
+        raise InputError(
+            f"--from {' '.join(map(str, args.sources or []))}: {len(ids)} training station(s) with their UUV alone; "
+            "a correction needs at least 4 (nearsub cfd run --suite two-body, then --suite uuv-alone)"
+        )
+    flown = rans_comparison.flown_increment(rows, model)
+    meta = {
+        "surrogate_model_id": model.model_id,
+        "surrogate_model": str(source),
+        "stations": ids,
+        "command": "nearsub cfd correct " + " ".join(sys.argv[3:]),
+    }
+    correction = viscous.fit(rows, target, flown, meta)
+    viscous.save(out, correction)
+    print(f"fitted on {len(ids)} RANS stations (medium mesh, not held out) for model {model.model_id}")
+    print(f"{'output':7} {'form':9} " + " ".join(f"{'LOO MAE ' + f:>16}" for f in viscous.FORMS))
+    for j, name in enumerate(("X'", "Y'", "N'")):
+        errors = " ".join(f"{correction.meta['loo_mae'][f][j]:16.3e}" for f in viscous.FORMS)
+        print(f"{name:7} {correction.meta['forms'][j]:9} {errors}")
+    print(f"wrote {out}")
+    return 0
+
+
+def _interaction_compare(found, out: Path) -> list[str]:
+    """The interaction alone at the stations with a UUV-alone case: markdown lines, and the CSV
+    and figure in `out` (INTERACTION_FILES)."""
+    import numpy as np
+
+    from nearsub.common.analysis import rans_comparison
+    from nearsub.common.surrogate.interaction import viscous_correction
+    from nearsub.common.surrogate.model import load_surrogate
+
+    model = load_surrogate()
+    results, truth = _interaction_inputs(found)
+    if not results:
+        return []
+    correction = viscous_correction(model)
+    values = rans_comparison.interaction_values(np.array([r.inputs for r in results]), model, correction)
+    fidelities = tuple(values)
+    rows = rans_comparison.comparison_rows(results, values, truth)
+    summary = rans_comparison.comparison_summary(rows, fidelities)
+    _compare_figure(rows, fidelities, out / INTERACTION_FILES[2], "Interaction alone (each station less its UUV alone)")
+    _compare_csv(rows, fidelities, out / INTERACTION_FILES[1])
+    return _compare_markdown(rows, summary, fidelities)
 
 
 def cfd_command(args) -> int:
@@ -344,6 +433,7 @@ def cfd_command(args) -> int:
         "validate": validate_command,
         "report": report_command,
         "compare": compare_command,
+        "correct": correct_command,
     }
     try:
         return commands[args.cfd_command](args)
@@ -423,4 +513,19 @@ def add_parser(subparsers) -> None:
     )
     t.add_argument("-o", "--out", required=True, help="folder for the table (.md, .csv) and the figure (.png)")
     t.add_argument("--force", action="store_true", help="replace the files of an earlier comparison in --out")
+    t = sub.add_parser("correct", help="fit a model's viscous correction to the RANS stations kept for training")
+    t.add_argument(
+        "--from",
+        dest="sources",
+        nargs="+",
+        help=f"folders of finished cases (default {DEFAULT_WORK_DIR} and {DEFAULT_ARTEFACTS})",
+    )
+    t.add_argument("--model", help="the LF-in-the-loop model whose increment it corrects (default: the shipped model)")
+    t.add_argument(
+        "-o",
+        "--out",
+        required=True,
+        help="the correction file to write (.json); use it next to the model as <stem>-viscous.json",
+    )
+    t.add_argument("--force", action="store_true", help="replace an existing file")
     p.set_defaults(func=cfd_command)
