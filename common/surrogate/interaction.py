@@ -179,10 +179,12 @@ def prepare(mode: str) -> None:
         hydro_lf.submarine_field()
 
 
-def lf_reach_weight(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+def lf_reach_weight(x: np.ndarray, y: np.ndarray, clearance: np.ndarray | None = None) -> np.ndarray:
     """(n,) weight of the LF increment at CB positions x, y [m] (submarine frame): 1 up to LF_FULL
-    of clearance from the hull, 0 beyond LF_CUT, smooth between. Independent of the heading."""
-    clearance = proximity.hull_signed_distance(x, y)
+    of clearance from the hull, 0 beyond LF_CUT, smooth between. Independent of the heading.
+    `clearance`: `proximity.hull_signed_distance(x, y)`, if already known."""
+    if clearance is None:
+        clearance = proximity.hull_signed_distance(x, y)
     weight = 1.0 - smoothstep((clearance - LF_FULL) / (LF_CUT - LF_FULL))
     return np.where(np.isfinite(weight), weight, 0.0)  # a non-finite state: no interaction
 
@@ -456,7 +458,8 @@ def lf_in_loop_increment(
             f"field table serves at the increment's cut-off ({LF_CUT:g} m from the hull)"
         )
     n = len(inputs)
-    reach = lf_reach_weight(x, y)
+    clearance = proximity.hull_signed_distance(x, y)  # the LF's reach and the viscous correction's input
+    reach = lf_reach_weight(x, y, clearance)
     delta_weight = discrepancy_weight(inputs, known)
     near = reach > 0.0
     asked = near & (delta_weight > 0.0) if weighted_only else np.ones(n, dtype=bool)
@@ -498,6 +501,6 @@ def lf_in_loop_increment(
     increment = lf + correction
     rans = np.zeros((n, 3))
     if viscous is not None:
-        rans = viscous.blend(inputs, increment)
+        rans = viscous.blend(inputs, increment, clearance)
         increment = increment + rans
     return increment, reach, mean, spread, lf, free, delta_weight, held, rans

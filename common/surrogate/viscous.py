@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import json
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -71,13 +71,15 @@ def reach(inputs: np.ndarray) -> np.ndarray:
     return _fade(inputs[:, 1], R_LAT_FULL, R_LAT_CUT) * _fade(np.abs(inputs[:, 0]), R_LONG_FULL, R_LONG_CUT)
 
 
-def features(inputs: np.ndarray) -> np.ndarray:
+def features(inputs: np.ndarray, clearance: np.ndarray | None = None) -> np.ndarray:
     """The GPs' inputs (n, 3) at configuration rows (n, 6): R_long, log(clearance of the UUV's
-    centre from the hull / D_uuv) and psi_deg."""
+    centre from the hull / D_uuv) and psi_deg. `clearance` [m]: that clearance, if known (the
+    interaction computes it for the LF's reach); else from the rows."""
     inputs = np.atleast_2d(inputs)
-    diameter = D_SUB / inputs[:, 4]
-    clearance = hull_signed_distance(inputs[:, 0] * L_SUB, inputs[:, 1] * L_SUB) / diameter
-    return np.column_stack([inputs[:, 0], np.log(np.maximum(clearance, CLEARANCE_FLOOR)), inputs[:, 3]])
+    if clearance is None:
+        clearance = hull_signed_distance(inputs[:, 0] * L_SUB, inputs[:, 1] * L_SUB)
+    relative = clearance * (inputs[:, 4] / D_SUB)  # in UUV diameters
+    return np.column_stack([inputs[:, 0], np.log(np.maximum(relative, CLEARANCE_FLOOR)), inputs[:, 3]])
 
 
 @dataclass(frozen=True)
@@ -88,22 +90,31 @@ class ViscousCorrection:
 
     gp: MultiOutputGP
     meta: dict[str, Any]
+    # What every call needs, worked out once: each output's prior variance and form.
+    _prior: np.ndarray = field(init=False, repr=False)
+    _takeover: np.ndarray = field(init=False, repr=False)
+    _residual: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        forms = self.meta["forms"]
+        object.__setattr__(self, "_prior", np.array([gp.signal_variance for gp in self.gp.gps]))
+        object.__setattr__(self, "_takeover", np.array([form == "takeover" for form in forms]))
+        object.__setattr__(self, "_residual", np.array([form == "residual" for form in forms]))
 
     @property
     def model_id(self) -> str | None:
         """The model whose increment this corrects."""
         return self.meta.get("surrogate_model_id")
 
-    def blend(self, inputs: np.ndarray, increment: np.ndarray) -> np.ndarray:
+    def blend(self, inputs: np.ndarray, increment: np.ndarray, clearance: np.ndarray | None = None) -> np.ndarray:
         """The change (n, 3) that takes the product's `increment` (n, 3) at configuration rows
         (n, 6), mirrored as the surrogate's inputs are, towards RANS, times `reach`. Each row's value
-        has the same bits whatever the batch (`MultiOutputGP.predict_rows`)."""
+        has the same bits whatever the batch (`MultiOutputGP.predict_rows`). `clearance`: as in
+        `features`."""
         inputs = np.atleast_2d(inputs)
-        mean, std = self.gp.predict_rows(features(inputs), return_std=True)
-        prior = np.array([gp.signal_variance for gp in self.gp.gps])
-        takeover = np.array([form == "takeover" for form in self.meta["forms"]])
-        residual = np.array([form == "residual" for form in self.meta["forms"]])
-        share = np.where(takeover, np.maximum(1.0 - std * std / prior, 0.0), 1.0)
+        mean, std = self.gp.predict_rows(features(inputs, clearance), return_std=True)
+        takeover, residual = self._takeover, self._residual
+        share = np.where(takeover, np.maximum(1.0 - std * std / self._prior, 0.0), 1.0)
         change = np.where(takeover, share * (mean / SCALE - increment), np.where(residual, mean / SCALE, 0.0))
         return reach(inputs)[:, None] * change
 
