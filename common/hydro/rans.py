@@ -206,22 +206,29 @@ def suboff_case(
     )
 
 
+def _configuration(row, level: str, wall_function: str, y_plus: float) -> tuple[np.ndarray, tuple[float, ...]]:
+    """A checked configuration row (6,) and its dimensional x, y [m], speed [m/s], psi [rad],
+    diameter and length [m] (`low_fidelity.input_columns`); CaseError names what is wrong."""
+    _check_options(level, wall_function, y_plus)
+    row = np.asarray(row, dtype=float).reshape(-1)
+    if row.shape != (len(CONFIGURATION),) or not np.all(np.isfinite(row)):
+        raise CaseError(f"configuration {row.tolist()}: needs 6 finite values {', '.join(CONFIGURATION)}")
+    columns = tuple(float(c[0]) for c in input_columns(row[None, :]))
+    if not columns[2] > 0:
+        raise CaseError(f"u_kn {row[2]:g}: the speed must be positive")
+    if columns[5] < 3.0 * columns[4]:
+        raise CaseError(f"ld_ratio {row[5]:g}: the Explorer hull needs L/D >= 3")
+    return row, columns
+
+
 def two_body_case(
     row, level: str = "medium", wall_function: str = "nutk", y_plus: float = 50.0, iterations: int | None = None
 ) -> CaseSpec:
     """The full-scale submarine and the Explorer UUV at a configuration row [R_long, R_lat, u_kn,
     psi_deg, d_ratio, ld_ratio] (thesis table 4.2), in sea water (docs/hydro/README.md)."""
-    _check_options(level, wall_function, y_plus)
-    row = np.asarray(row, dtype=float).reshape(-1)
-    if row.shape != (len(CONFIGURATION),) or not np.all(np.isfinite(row)):
-        raise CaseError(f"configuration {row.tolist()}: needs 6 finite values {', '.join(CONFIGURATION)}")
-    x, y, speed, psi, diameter, length = (float(c[0]) for c in input_columns(row[None, :]))
-    if not speed > 0:
-        raise CaseError(f"u_kn {row[2]:g}: the speed must be positive")
+    row, (x, y, speed, psi, diameter, length) = _configuration(row, level, wall_function, y_plus)
     if y <= 0:
         raise CaseError(f"R_lat {row[1]:g}: the UUV sits on the +y side of the submarine (R_lat > 0)")
-    if length < 3.0 * diameter:
-        raise CaseError(f"ld_ratio {row[5]:g}: the Explorer hull needs L/D >= 3")
     clearance = float(closest_distance(x, y, psi, length, diameter))
     # The mesher needs a few surface cells between the hulls: refuse a gap under a fifth of a UUV
     # diameter (touching or overlapping hulls included).
@@ -255,15 +262,7 @@ def uuv_alone_case(
     (u_kn, psi_deg, d_ratio, ld_ratio; R_long and R_lat are ignored), with the same water, mesh
     level and wall treatment: its forces are the free-stream part of the two-body case's, so that
     the two give the interaction alone (`rans_comparison`). A quarter domain at zero heading."""
-    _check_options(level, wall_function, y_plus)
-    row = np.asarray(row, dtype=float).reshape(-1)
-    if row.shape != (len(CONFIGURATION),) or not np.all(np.isfinite(row)):
-        raise CaseError(f"configuration {row.tolist()}: needs 6 finite values {', '.join(CONFIGURATION)}")
-    _, _, speed, psi, diameter, length = (float(c[0]) for c in input_columns(row[None, :]))
-    if not speed > 0:
-        raise CaseError(f"u_kn {row[2]:g}: the speed must be positive")
-    if length < 3.0 * diameter:
-        raise CaseError(f"ld_ratio {row[5]:g}: the Explorer hull needs L/D >= 3")
+    row, (_, _, speed, psi, diameter, length) = _configuration(row, level, wall_function, y_plus)
     return CaseSpec(
         case_id="uuv-" + "_".join(f"{v:g}" for v in row[2:]) + _case_suffix(level, wall_function, y_plus),
         kind="uuv-alone",

@@ -240,23 +240,15 @@ TABLE_SUFFIX = "-free-stream.npz"
 
 def default_table_path() -> Path:
     """The shipped table, the free stream of the shipped surrogate (package data `data/*`)."""
-    return sg.companion_paths(None, TABLE_SUFFIX)[0]
+    return sg.companion_path(sg.default_model_path(), TABLE_SUFFIX)
 
 
 def table_path_for(model_path: str | os.PathLike) -> Path:
     """Where the table of a model file lives: next to it, `<stem>-free-stream.npz`."""
-    model_path = Path(model_path)
-    return model_path.with_name(f"{model_path.stem}{TABLE_SUFFIX}")
+    return sg.companion_path(model_path, TABLE_SUFFIX)
 
 
 def find_table(model_id: str | None, model_path: str | os.PathLike | None) -> tuple[FreeStreamTable | None, list[Path]]:
-    """The table made for the surrogate `model_id` (`model.companion_paths`), or None; also
+    """The table made for the surrogate `model_id` (`model.find_companion`), or None; also
     returns where it looked."""
-    searched: list[Path] = []
-    for path in sg.companion_paths(model_path, TABLE_SUFFIX):
-        searched.append(path)
-        if model_id is not None and path.exists():
-            table = load_table(path)
-            if table.surrogate_model_id == model_id:
-                return table, searched
-    return None, searched
+    return sg.find_companion(model_id, model_path, TABLE_SUFFIX, load_table)

@@ -29,6 +29,7 @@ import math
 import os
 import sys
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -83,13 +84,29 @@ def default_model_path() -> Path:
     return Path(nearsub.__file__).resolve().parent / "data" / "surrogate.npz"
 
 
-def companion_paths(model_path: str | os.PathLike | None, suffix: str) -> list[Path]:
-    """Where a file made for one model (its free-stream table, its viscous correction) is looked
-    for, in order: next to the model file as `<stem><suffix>`, then the shipped one beside the
-    shipped model (`surrogate<suffix>`). A file there is used only if it names the model's id."""
-    candidates = [Path(model_path).with_name(f"{Path(model_path).stem}{suffix}")] if model_path is not None else []
-    candidates.append(default_model_path().with_name(f"surrogate{suffix}"))
-    return list(dict.fromkeys(p.resolve() for p in candidates))
+def companion_path(model_path: str | os.PathLike, suffix: str) -> Path:
+    """A file made for one model, next to its file: `<stem><suffix>`."""
+    model_path = Path(model_path)
+    return model_path.with_name(f"{model_path.stem}{suffix}")
+
+
+def find_companion(
+    model_id: str | None, model_path: str | os.PathLike | None, suffix: str, load: Callable[[Path], Any]
+) -> tuple[Any | None, list[Path]]:
+    """A file made for the model `model_id` (its free-stream table, its viscous correction): the
+    one next to the model file (`companion_path`), else the shipped one beside the shipped model
+    (`surrogate<suffix>`), used only if it names that model (its `surrogate_model_id`); None if
+    neither. Also returns where it looked."""
+    candidates = [companion_path(model_path, suffix)] if model_path is not None else []
+    candidates.append(companion_path(default_model_path(), suffix))
+    searched: list[Path] = []
+    for path in dict.fromkeys(p.resolve() for p in candidates):
+        searched.append(path)
+        if model_id is not None and path.exists():
+            found = load(path)
+            if found.surrogate_model_id == model_id:
+                return found, searched
+    return None, searched
 
 
 def _model_id(model: MultiOutputGP | MultiFidelitySurrogate | LFInLoopModel) -> str:

@@ -12,7 +12,7 @@ is a smaller R_lat, and RANS's interaction follows the gap (docs/hydro/rans/two-
 It is the top level of the thesis's multi-fidelity structure (section 2.5) with the lower levels
 as its prior where it has no data; the GPs have a zero prior mean (outputs not normalised).
 
-A correction belongs to the model whose increment it corrects (`model_id`): it is used only with
+A correction belongs to the model whose increment it corrects (`surrogate_model_id`): it is used only with
 that model (`find`), and a retrained model needs a new fit (`nearsub cfd correct`). It is in
 coefficients, nondimensionalised by the UUV's own length, and learned mostly on the SDV's hull:
 docs/hydro/rans/README.md says what that assumes for other UUVs.
@@ -102,7 +102,7 @@ class ViscousCorrection:
         object.__setattr__(self, "_residual", np.array([form == "residual" for form in forms]))
 
     @property
-    def model_id(self) -> str | None:
+    def surrogate_model_id(self) -> str | None:
         """The model whose increment this corrects."""
         return self.meta.get("surrogate_model_id")
 
@@ -222,20 +222,14 @@ SUFFIX = "-viscous.json"
 
 def default_path() -> Path:
     """The shipped correction, of the shipped surrogate (package data `data/*`)."""
-    return sg.companion_paths(None, SUFFIX)[0]
+    return sg.companion_path(sg.default_model_path(), SUFFIX)
 
 
 def path_for(model_path: str | os.PathLike) -> Path:
     """Where the correction of a model file lives: next to it, `<stem>-viscous.json`."""
-    model_path = Path(model_path)
-    return model_path.with_name(f"{model_path.stem}{SUFFIX}")
+    return sg.companion_path(model_path, SUFFIX)
 
 
 def find(model_id: str | None, model_path: str | os.PathLike | None) -> ViscousCorrection | None:
-    """The correction made for the surrogate `model_id` (`model.companion_paths`), or None."""
-    for path in sg.companion_paths(model_path, SUFFIX):
-        if model_id is not None and path.exists():
-            correction = load(path)
-            if correction.model_id == model_id:
-                return correction
-    return None
+    """The correction made for the surrogate `model_id` (`model.find_companion`), or None."""
+    return sg.find_companion(model_id, model_path, SUFFIX, load)[0]

@@ -442,6 +442,15 @@ def cfd_command(args) -> int:
         return 2
 
 
+def _from_argument(p) -> None:
+    p.add_argument(
+        "--from",
+        dest="sources",
+        nargs="+",
+        help=f"folders of finished cases (default {DEFAULT_WORK_DIR} and {DEFAULT_ARTEFACTS})",
+    )
+
+
 def _case_arguments(p, suite: bool = False) -> None:
     which = p.add_mutually_exclusive_group()
     which.add_argument(
@@ -497,29 +506,14 @@ def add_parser(subparsers) -> None:
         ("report", "a table of the finished cases"),
     ):
         t = sub.add_parser(name, help=text)
-        t.add_argument(
-            "--from",
-            dest="sources",
-            nargs="+",
-            help=f"folders of finished cases (default {DEFAULT_WORK_DIR} and {DEFAULT_ARTEFACTS})",
-        )
+        _from_argument(t)
         t.add_argument("--json", action="store_true")
     t = sub.add_parser("compare", help="two-body stations: RANS against the panel HF, the LF and the shipped model")
-    t.add_argument(
-        "--from",
-        dest="sources",
-        nargs="+",
-        help=f"folders of finished cases (default {DEFAULT_WORK_DIR} and {DEFAULT_ARTEFACTS})",
-    )
+    _from_argument(t)
     t.add_argument("-o", "--out", required=True, help="folder for the table (.md, .csv) and the figure (.png)")
     t.add_argument("--force", action="store_true", help="replace the files of an earlier comparison in --out")
     t = sub.add_parser("correct", help="fit a model's viscous correction to the RANS stations kept for training")
-    t.add_argument(
-        "--from",
-        dest="sources",
-        nargs="+",
-        help=f"folders of finished cases (default {DEFAULT_WORK_DIR} and {DEFAULT_ARTEFACTS})",
-    )
+    _from_argument(t)
     t.add_argument("--model", help="the LF-in-the-loop model whose increment it corrects (default: the shipped model)")
     t.add_argument(
         "-o",
