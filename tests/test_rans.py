@@ -487,3 +487,24 @@ def test_the_fitted_scale_uses_the_training_stations_of_the_medium_mesh_only():
     ]
     assert rans_comparison.fitted_scale(rows) == pytest.approx([0.9, 0.8, 0.7])
     assert np.isnan(rans_comparison.fitted_scale(rows[2:])).all()
+
+
+def test_the_two_body_gci_needs_all_three_meshes_converged_and_judges_each_output():
+    from types import SimpleNamespace
+
+    def result(level, x, y, n, usable=True):
+        case = rans.two_body_case(rans_campaign.GRID_STATION.row, level).case_id
+        return case, SimpleNamespace(coefficients={"X": x, "Y": y, "N": n}, convergence=SimpleNamespace(usable=usable))
+
+    # X' converges monotonically (GCI small), Y' barely (GCI large), N' oscillates (undefined)
+    found = dict(
+        [
+            result("coarse", -1.00, -0.100, 0.030),
+            result("medium", -0.96, -0.070, 0.036),
+            result("fine", -0.95, -0.050, 0.033),
+        ]
+    )
+    gci = rans_campaign.two_body_gci(found)
+    assert gci["X"]["meets"] and not gci["Y"]["meets"] and not gci["N"]["meets"]
+    assert np.isnan(gci["N"]["gci_fine"])
+    assert rans_campaign.two_body_gci(dict([*list(found.items())[:2], result("fine", 0, 0, 0, usable=False)])) is None
