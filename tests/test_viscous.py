@@ -133,3 +133,28 @@ def test_correct_writes_a_new_file_and_refuses_to_overwrite(tmp_path, capsys):
     assert "exists" in capsys.readouterr().err
     assert main(["cfd", "correct", "--from", str(tmp_path), "-o", str(tmp_path / "d.json")]) == 2
     assert "training station" in capsys.readouterr().err
+    for model in (tmp_path / "missing.npz", out):  # no file; a file that is not a model
+        assert main(["cfd", "correct", "--model", str(model), "-o", str(tmp_path / "e.json")]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("nearsub cfd correct: --model") and len(err.strip().splitlines()) == 1
+
+
+def test_an_unreadable_correction_beside_a_model_is_one_line_naming_it(tmp_path):
+    import shutil
+
+    from nearsub.common.surrogate.model import default_model_path
+
+    model_file = tmp_path / "m.npz"
+    shutil.copy(default_model_path(), model_file)
+    viscous.path_for(model_file).write_text("not json")
+    model = load_surrogate(model_file)
+    state = np.array([1.75, 0.0, 0.0, -0.45 * 88.86, 0.0391 * 88.86, 0.0])
+    with pytest.raises(interaction.IncrementError, match="m-viscous.json") as caught:
+        interaction.interaction_at(
+            model, state, SDV, 1025.0, "increment", free_stream=interaction.increment_table(load_surrogate())
+        )
+    assert len(str(caught.value).splitlines()) == 1 and "surrogate.viscous = false" in str(caught.value)
+    off = interaction.interaction_at(
+        model, state, SDV, 1025.0, "increment", free_stream=interaction.increment_table(load_surrogate()), viscous=False
+    )
+    assert np.all(off.viscous == 0.0)

@@ -306,13 +306,19 @@ _CORRECTIONS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # force m
 
 def viscous_correction(model: ForceModel) -> vc.ViscousCorrection | None:
     """The viscous correction fitted for this model (`viscous.find`, cached per model object), or
-    None: a model without one flies the increment as it is."""
+    None: a model without one flies the increment as it is. A correction file that cannot be read
+    raises IncrementError, naming it."""
     try:
         return _CORRECTIONS[model]
     except (KeyError, TypeError):
         pass
     path = getattr(getattr(model, "loaded", None), "path", None)
-    found = vc.find(getattr(model, "model_id", None), path)
+    try:
+        found = vc.find(getattr(model, "model_id", None), path)
+    except vc.CorrectionFileError as exc:
+        raise IncrementError(
+            f"surrogate.viscous = true: {exc} (set surrogate.viscous = false to fly without it)"
+        ) from None
     try:
         _CORRECTIONS[model] = found
     except TypeError:

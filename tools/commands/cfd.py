@@ -378,12 +378,16 @@ def correct_command(args) -> int:
     from nearsub.common.analysis import rans_comparison
     from nearsub.common.surrogate import viscous
     from nearsub.common.surrogate.model import default_model_path, load_surrogate
+    from nearsub.common.surrogate.modelfile import ModelFileError
 
     source = Path(args.model) if args.model else default_model_path()
     out = output_file(args.out, "-o", source=source, source_is="the model it reads")
     if out.exists() and not args.force:
         raise InputError(f"-o {out}: exists; give a new file or --force")
-    model = load_surrogate(source)
+    try:
+        model = load_surrogate(source)
+    except (ModelFileError, OSError) as exc:
+        raise InputError(f"--model {source}: {exc}") from None
     if model.kind != "lf_in_loop":
         raise InputError(f"--model {source}: of kind {model.kind!r}; a correction needs an LF-in-the-loop model")
     found = _found(args)
