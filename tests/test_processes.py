@@ -118,3 +118,19 @@ def test_an_app_heeds_sigint_though_its_launcher_started_it_with_sigint_ignored(
     assert process.stdout.readline().strip() == "ready"
     processes.stop([process], wait=10.0)
     assert process.returncode == -signal.SIGINT
+
+
+def test_a_scheduler_nobody_listens_on_is_one_line_naming_it():
+    """`--scheduler` of envelope, train and cfd run: an address without a Dask scheduler is bad
+    input (a LookupError: one line and exit 2 on the command line), not a traceback."""
+    import dask
+    import pytest
+
+    with socket.socket() as s:  # a free port, closed again: nothing listens there
+        s.bind(("127.0.0.1", 0))
+        address = f"tcp://127.0.0.1:{s.getsockname()[1]}"
+    with dask.config.set({"distributed.comm.timeouts.connect": "2s"}):
+        with pytest.raises(processes.SchedulerError, match=f"--scheduler {address}: cannot reach") as caught:
+            with processes.task_client(scheduler=address):
+                pass
+    assert isinstance(caught.value, LookupError) and len(str(caught.value).splitlines()) == 1

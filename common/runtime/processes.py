@@ -150,6 +150,11 @@ def stop(
             time.sleep(0.02)
 
 
+class SchedulerError(LookupError):
+    """The Dask scheduler a command was given cannot be reached: bad input, one line (the command
+    line prints a LookupError so)."""
+
+
 @contextmanager
 def task_client(workers: int | None = None, scheduler: str | None = None) -> Iterator[object | None]:
     """Where `completed` runs its tasks: None (this process) when neither is given, else a Dask
@@ -169,7 +174,11 @@ def task_client(workers: int | None = None, scheduler: str | None = None) -> Ite
             n_workers=workers, threads_per_worker=1, host="127.0.0.1", dashboard_address=None, processes=True
         )
     try:
-        with Client(scheduler or cluster) as client:
+        try:
+            client = Client(scheduler or cluster)
+        except (OSError, TimeoutError) as exc:  # distributed's connect failures
+            raise SchedulerError(f"--scheduler {scheduler}: cannot reach the Dask scheduler ({exc})") from None
+        with client:
             yield client
     finally:
         if cluster is not None:
