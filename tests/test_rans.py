@@ -508,3 +508,14 @@ def test_the_two_body_gci_needs_all_three_meshes_converged_and_judges_each_outpu
     assert gci["X"]["meets"] and not gci["Y"]["meets"] and not gci["N"]["meets"]
     assert np.isnan(gci["N"]["gci_fine"])
     assert rans_campaign.two_body_gci(dict([*list(found.items())[:2], result("fine", 0, 0, 0, usable=False)])) is None
+
+
+def test_the_held_out_summary_counts_each_held_out_station_once_on_its_medium_mesh():
+    def row(diff, held_out, level="medium"):
+        return {"RANS": [1.0, 1.0, 1.0], "held_out": held_out, "level": level,
+                "panel HF": [1.0 + diff] * 3, "panel HF - RANS": [diff] * 3}  # fmt: skip
+
+    rows = [row(0.1, True), row(0.3, True), row(5.0, True, level="coarse"), row(1.0, False)]
+    summary = rans_comparison.comparison_summary(rows, ["panel HF"])["panel HF"]
+    assert summary["mae_held_out"] == pytest.approx([0.2] * 3)  # the coarse mesh of a station is left out
+    assert summary["mae"] == pytest.approx([1.6] * 3)  # every row
