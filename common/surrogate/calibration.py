@@ -21,12 +21,19 @@ TARGET_COVERAGE = 0.954
 SIGMAS = 2.0
 
 
+def loo_predictions(gp: GaussianProcess) -> tuple[np.ndarray, np.ndarray]:
+    """Each training point's leave-one-out mean and latent variance, in the GP's standardised
+    output units (Rasmussen & Williams 2006, eqs. 5.10-5.12)."""
+    k_inv_diag = np.einsum("ij,ij->j", gp._L_inv, gp._L_inv)  # diag(K^-1) = column norms of L^-1
+    mean = gp._ys - gp._alpha / k_inv_diag
+    latent_var = np.maximum(1.0 / k_inv_diag - gp.noise_variance, 1e-12 * gp.signal_variance)
+    return mean, latent_var
+
+
 def loo_z_scores(gp: GaussianProcess) -> np.ndarray:
     """Each training point's leave-one-out error over the latent std there (standardised units)."""
-    k_inv_diag = np.einsum("ij,ij->j", gp._L_inv, gp._L_inv)  # diag(K^-1) = column norms of L^-1
-    error = gp._alpha / k_inv_diag
-    latent_var = np.maximum(1.0 / k_inv_diag - gp.noise_variance, 1e-12 * gp.signal_variance)
-    return error / np.sqrt(latent_var)
+    mean, latent_var = loo_predictions(gp)
+    return (gp._ys - mean) / np.sqrt(latent_var)
 
 
 def coverage(z: np.ndarray) -> float:

@@ -32,6 +32,7 @@ from nearsub.common.learning.gp import MultiOutputGP
 from nearsub.common.physics.hull import D_SUB, L_SUB
 from nearsub.common.physics.proximity import hull_signed_distance
 from nearsub.common.surrogate import model as sg
+from nearsub.common.surrogate.calibration import loo_predictions
 
 FORMAT_NAME = "nearsub-viscous-correction"
 FORMAT_VERSION = 1
@@ -123,14 +124,6 @@ class ViscousCorrection:
 FORMS = ("none", "residual", "takeover")
 
 
-def _loo(gp) -> tuple[np.ndarray, np.ndarray]:
-    """Each training point's leave-one-out mean and variance (Rasmussen & Williams 2006, eqs.
-    5.10-5.12), in the GP's output units."""
-    k_inv_diag = np.einsum("ij,ij->j", gp._L_inv, gp._L_inv)
-    variance = 1.0 / k_inv_diag
-    return gp.y_train_ - gp._alpha * variance * gp.y_std_, np.maximum(variance * gp.y_std_**2 - gp.noise_variance, 0.0)
-
-
 def fit(
     rows: np.ndarray, interaction: np.ndarray, increment: np.ndarray, meta: dict[str, Any], n_restarts: int = 20
 ) -> ViscousCorrection:
@@ -154,7 +147,7 @@ def fit(
         model = fitted[form]
         columns = []
         for j, gp in enumerate(model.gps):
-            mean, variance = _loo(gp)
+            mean, variance = loo_predictions(gp)  # normalize=False: in the fitted units
             mean = mean / SCALE
             if form == "takeover":
                 share = np.maximum(1.0 - variance / gp.signal_variance, 0.0)
