@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from nearsub.common.analysis.approach import Track, approaches, closest_pair, hull_approach
+from nearsub.common.physics import encounters
 from nearsub.common.physics.hull import (
     L_SUB,
     R_SUB,
@@ -72,6 +73,21 @@ def test_the_closest_pair_is_the_surface_gap_at_the_step_they_came_closest():
     assert found.clearance == pytest.approx(1.0 - REMUS.diameter, abs=1e-12)
     assert found.t == pytest.approx(0.10)
     assert closest_pair({"auv1": a}) is None
+
+
+def test_crossing_uuvs_overlap_and_a_tip_passing_a_side_counts_from_the_tip():
+    # auv2 crosses auv1's axis at right angles (step 2: the axes cross, a collision of one
+    # diameter's overlap); at the other steps its CB is 3 m abeam of auv1's CB, to either side.
+    a = Track(np.arange(5), 0.05 * np.arange(5), *(np.zeros(5),) * 3, REMUS.length, REMUS.diameter)
+    b = _track(0.0, [6.0, 3.0, 0.0, -3.0, -6.0], -np.pi / 2)
+    found = closest_pair({"auv1": a, "auv2": b})
+    assert found.clearance == pytest.approx(-REMUS.diameter, abs=1e-12)
+    assert found.t == pytest.approx(0.10)
+    # Nose to nose, 2 m between the tips: the gap is tip to tip, not CB to CB.
+    nose = encounters.Capsule.of(REMUS.length, REMUS.diameter)
+    ahead = _track(2 * (nose.ahead + nose.radius) + 2.0, 0.0, np.pi)
+    gap = closest_pair({"auv1": _track(0.0, 0.0, 0.0), "auv2": ahead}).clearance
+    assert gap == pytest.approx(2.0, abs=1e-9)
 
 
 def test_without_a_submarine_there_is_no_hull_approach():

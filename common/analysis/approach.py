@@ -101,24 +101,18 @@ def hull_approach(track: Track) -> HullApproach:
 
 
 def pair_approach(a: str, track_a: Track, b: str, track_b: Track) -> PairApproach | None:
-    """When two UUVs came closest, at the steps both have a state (None if they share none). The
-    CB distance less both reaches bounds the clearance from below, so only the steps whose bound
-    could beat the best found so far are measured."""
+    """When two UUVs came closest (the first such step), at the steps both have a state (None if
+    they share none): every shared step measured at once."""
     _, ia, ib = np.intersect1d(track_a.step, track_b.step, assume_unique=True, return_indices=True)
+    if len(ia) == 0:
+        return None
     ca = encounters.Capsule.of(track_a.length, track_a.diameter)
     cb = encounters.Capsule.of(track_b.length, track_b.diameter)
-    lower = np.hypot(track_a.x[ia] - track_b.x[ib], track_a.y[ia] - track_b.y[ib])
-    lower -= encounters.reach(ca) + encounters.reach(cb)
-    best: PairApproach | None = None
-    for n in np.argsort(lower, kind="stable"):
-        if best is not None and lower[n] >= best.clearance:
-            break
-        ka, kb = ia[n], ib[n]
-        pose_a = (track_a.x[ka], track_a.y[ka], track_a.psi[ka])
-        gap = encounters.clearance(ca, pose_a, cb, (track_b.x[kb], track_b.y[kb], track_b.psi[kb]))
-        if best is None or gap < best.clearance:
-            best = PairApproach((a, b), float(gap), float(track_a.t[ka]))
-    return best
+    poses_a = np.stack([track_a.x[ia], track_a.y[ia], track_a.psi[ia]], axis=-1)
+    poses_b = np.stack([track_b.x[ib], track_b.y[ib], track_b.psi[ib]], axis=-1)
+    gaps = encounters.clearances(ca, poses_a, cb, poses_b)
+    n = int(np.argmin(gaps))
+    return PairApproach((a, b), float(gaps[n]), float(track_a.t[ia[n]]))
 
 
 def closest_pair(tracks: dict[str, Track]) -> PairApproach | None:

@@ -36,10 +36,10 @@ class Capsule:
         radius = diameter / 2
         return cls(nose - radius, length - nose - radius, radius)
 
-    def axis(self, x: float, y: float, psi: float) -> tuple[np.ndarray, np.ndarray]:
-        """The axis segment's two ends at CB (x, y), heading psi."""
-        direction = np.array([np.cos(psi), np.sin(psi)])
-        centre = np.array([x, y])
+    def axis(self, x: np.ndarray, y: np.ndarray, psi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The axis segments' two ends, (n, 2) each, at CBs (x, y), headings psi (arrays (n,))."""
+        direction = np.stack([np.cos(psi), np.sin(psi)], axis=-1)
+        centre = np.stack([x, y], axis=-1)
         return centre + self.ahead * direction, centre - self.behind * direction
 
 
@@ -57,38 +57,46 @@ def near_pairs(x: np.ndarray, y: np.ndarray, reaches: np.ndarray, margin: float)
     return list(zip(i[near].tolist(), j[near].tolist(), strict=True))
 
 
-def segment_distance(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarray) -> float:
-    """Least distance between the segments p0-p1 and q0-q1 in the plane. Two segments that do not
-    cross are closest at an end of one of them, so the least of the four end-to-segment
-    distances is the answer; crossing segments are at distance 0."""
-    if _cross(p0, p1, q0, q1):
-        return 0.0
-    return min(
-        _point_segment(p0, q0, q1), _point_segment(p1, q0, q1), _point_segment(q0, p0, p1), _point_segment(q1, p0, p1)
+def segment_distances(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
+    """Least distances (n,) between the segments p0-p1 and q0-q1 in the plane (ends (n, 2)). Two
+    segments that do not cross are closest at an end of one of them, so the least of the four
+    end-to-segment distances is the answer; crossing segments are at distance 0."""
+    ends = np.minimum.reduce(
+        [_point_segment(p0, q0, q1), _point_segment(p1, q0, q1), _point_segment(q0, p0, p1), _point_segment(q1, p0, p1)]
     )
+    return np.where(_cross(p0, p1, q0, q1), 0.0, ends)
 
 
-def _point_segment(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
-    ab = b - a
-    span = float(ab @ ab)
-    s = 0.0 if span == 0.0 else min(max(float((p - a) @ ab) / span, 0.0), 1.0)
-    return float(np.hypot(*(a + s * ab - p)))
+def _point_segment(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    ab, ap = b - a, p - a
+    span = ab[:, 0] * ab[:, 0] + ab[:, 1] * ab[:, 1]
+    along = ap[:, 0] * ab[:, 0] + ap[:, 1] * ab[:, 1]
+    s = np.clip(np.divide(along, span, out=np.zeros_like(span), where=span != 0.0), 0.0, 1.0)
+    return np.hypot(*(a + s[:, None] * ab - p).T)
 
 
-def _cross(p0, p1, q0, q1) -> bool:
+def _cross(p0, p1, q0, q1) -> np.ndarray:
     """Whether the segments properly cross (touching ends count through the distances)."""
 
-    def side(a, b, c) -> float:
-        return float((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]))
+    def side(a, b, c):
+        return (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
 
     d1, d2 = side(q0, q1, p0), side(q0, q1, p1)
     d3, d4 = side(p0, p1, q0), side(p0, p1, q1)
-    return d1 * d2 < 0 and d3 * d4 < 0
+    return (d1 * d2 < 0) & (d3 * d4 < 0)
+
+
+def clearances(a: Capsule, poses_a: np.ndarray, b: Capsule, poses_b: np.ndarray) -> np.ndarray:
+    """Clearances [m] (n,) between two UUVs at poses (n, 3) of x, y, psi: axis distance minus both
+    radii, at every row at once (a log's approaches measure whole tracks)."""
+    poses_a, poses_b = np.atleast_2d(poses_a), np.atleast_2d(poses_b)
+    distance = segment_distances(*a.axis(*poses_a.T), *b.axis(*poses_b.T))
+    return distance - a.radius - b.radius
 
 
 def clearance(a: Capsule, pose_a: tuple[float, float, float], b: Capsule, pose_b: tuple[float, float, float]) -> float:
-    """Clearance [m] between two UUVs at poses (x, y, psi): axis distance minus both radii."""
-    return segment_distance(*a.axis(*pose_a), *b.axis(*pose_b)) - a.radius - b.radius
+    """Clearance [m] between two UUVs at poses (x, y, psi)."""
+    return float(clearances(a, np.asarray(pose_a, float), b, np.asarray(pose_b, float))[0])
 
 
 @dataclass(frozen=True)
