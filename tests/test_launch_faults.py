@@ -90,6 +90,28 @@ def test_a_malformed_network_connect_is_refused_at_once(tmp_path, runtime_dir, e
 
 
 @pytest.mark.parametrize(
+    ("argv", "problem"),
+    [
+        (["--vehicles", "auv9"], "--vehicles auv9: no vehicle named 'auv9' (auv1, auv2)"),
+        (["--vehicles", "auv1,auv1"], "--vehicles auv1,auv1: auv1 is named twice"),
+        (["--join"], "--join: name the vehicles whose apps run on this host with --vehicles"),
+        (["--vehicles", "auv1", "--no-router"], "--vehicles auv1: the other vehicles' apps join from another host"),
+    ],
+)
+def test_a_fleet_split_that_cannot_run_is_refused_naming_the_option(tmp_path, runtime_dir, argv, problem):
+    """docs/network.md, "A fleet over several hosts": names of the mission's vehicles, each once,
+    and a router the other hosts reach (network.connect)."""
+    from test_fleet import TWO
+
+    router = [] if "--no-router" in argv else ["--set", 'network.connect=["tcp/127.0.0.1:9"]']
+    given = [a for a in argv if a != "--no-router"]
+    out = nearsub("launch", str(TWO), "--log", str(tmp_path / "logs"), *router, *given)
+    assert out.returncode == 2
+    assert one_line(out.stderr).startswith(f"nearsub launch: {problem}")
+    assert not (tmp_path / "logs").exists()
+
+
+@pytest.mark.parametrize(
     ("content", "problem"),
     [(None, "no such file"), ("not a model", "not a nearsub model file (not an .npz archive)")],
 )

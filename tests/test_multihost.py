@@ -15,13 +15,14 @@ import time
 from pathlib import Path
 
 import pytest
+from test_reliability import run_budget
 
 from conftest import ALPHA
 from helpers import per_topic
 from nearsub.common.mission.cores import build_cores
 from nearsub.common.mission.schema import load_mission
 from nearsub.common.runtime.lifecycle import Schedule, run_inprocess
-from nearsub.common.runtime.messages import encode
+from nearsub.common.runtime.messages import Event, decode, encode
 
 pytestmark = [pytest.mark.reliability, pytest.mark.timeout(600)]
 
@@ -112,3 +113,76 @@ def test_router_on_one_host_and_apps_on_another_with_credentials(two_hosts, tmp_
     logged = per_topic(Path(summary["log"]))
     for leaf in ("state", "desired", "input"):
         assert logged[f"remus100/{leaf}"] == [encode(m) for m in reference.topic(leaf)], leaf
+
+
+def test_a_fleet_split_over_two_hosts_equals_one_host_bit_for_bit(two_hosts, tmp_path, community):
+    """docs/network.md, "A fleet over several hosts": the router and the mission's launch (logger,
+    clock, auv1's apps) on one host, auv2's apps joining from the other across the veth pair. The
+    log equals the in-process run (which test_fleet_pipeline shows equal to one host's launch),
+    the checks between the vehicles included: a close call, then the collision that ends it."""
+    from test_fleet import TWO
+    from test_fleet_pipeline import MEET
+
+    from nearsub.common.mission.cores import run_mission
+
+    router_host, apps_host, address = two_hosts
+    endpoint = f"tcp/{address}:{PORT}"
+    secret = tmp_path / "mission.credentials"
+    env = dict(os.environ, NEARSUB_RUNTIME_DIR=str(tmp_path / "runtime"))
+    env.pop("NEARSUB_CREDENTIALS", None)
+    nearsub = [sys.executable, "-m", "nearsub"]
+    settings = [f"name={community}", MEET, f"network.connect={json.dumps([endpoint])}"]
+    mission = load_mission(TWO, settings)
+    given = [a for s in [*settings, f'network.credentials="{secret}"'] for a in ("--set", s)]
+    router = subprocess.Popen(
+        ["ip", "netns", "exec", router_host, *nearsub, "router", "--listen", endpoint, "--credentials", str(secret)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env=env,
+        process_group=0,
+    )
+    budget = 5 * mission.startup_timeout + run_budget(mission)
+    try:
+        end = time.monotonic() + mission.startup_timeout
+        line = ""
+        while "router listening on" not in line:
+            assert time.monotonic() < end and router.poll() is None, line
+            line = router.stdout.readline()
+        launch = ["launch", str(TWO), "--json", *given]
+        joined = subprocess.Popen(
+            ["ip", "netns", "exec", apps_host, *nearsub, *launch, "--log", str(tmp_path / "b"), "--join"]
+            + ["--vehicles", "auv2"],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            env=env,
+        )
+        main = subprocess.run(
+            ["ip", "netns", "exec", router_host, *nearsub, *launch, "--log", str(tmp_path / "a"), "--vehicles", "auv1"],
+            capture_output=True,
+            text=True,
+            env=env,
+            timeout=budget,
+        )
+        out, err = joined.communicate(timeout=budget)
+    finally:
+        os.killpg(router.pid, signal.SIGTERM)
+        router.wait(timeout=30)
+    summary = json.loads(main.stdout.strip().splitlines()[-1])
+    joined_summary = json.loads(out.strip().splitlines()[-1])
+    reference = run_mission(mission)
+    assert reference.outcome == "collision"
+    for found in (summary, joined_summary):
+        assert (found["outcome"], found["steps"]) == (reference.outcome, reference.steps), (main.stderr, err)
+    # Each host ran its own vehicle's apps; only the mission's launch ran the logger and the clock.
+    assert {"auv1/helm-1", "auv1/pid-1", "auv1/sim-1", "clock", "logger"} == set(summary["cpu"])
+    assert {"auv2/helm-1", "auv2/pid-1", "auv2/sim-1"} == set(joined_summary["cpu"])
+    logged = per_topic(Path(summary["log"]))
+    for vehicle in ("auv1", "auv2"):
+        for leaf in ("state", "desired", "input", "helm"):
+            assert logged[f"{vehicle}/{leaf}"] == [encode(m) for m in reference.topic(leaf, vehicle)], (vehicle, leaf)
+    assert logged["events/encounters"] == [encode(m) for m in reference.topic("events")]
+    # One app_joined event per app, from the mission's launch alone.
+    joins = [decode(p, Event, "") for p in per_topic(Path(summary["log"]), skip=())["events/launcher"]]
+    assert sorted(e.detail for e in joins if e.kind == "app_joined").count("auv2/sim-1 joined") == 1

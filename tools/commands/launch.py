@@ -28,6 +28,18 @@ def add_parser(subparsers) -> None:
     p.add_argument("--view-port", type=PORT, metavar="N", help="its port on 127.0.0.1 (default: a free one)")
     p.add_argument("--foxglove", action="store_true", help="also serve the mission to Foxglove (nearsub foxglove)")
     p.add_argument("--foxglove-port", type=PORT, metavar="N", help="its port on 127.0.0.1 (default: a free one)")
+    p.add_argument(
+        "--vehicles",
+        metavar="NAME,...",
+        help="a fleet over several hosts: start only these vehicles' apps here (the others join from "
+        "another host; needs network.connect)",
+    )
+    p.add_argument(
+        "--join",
+        action="store_true",
+        help="with --vehicles: join the mission launched on another host (these vehicles' apps only: "
+        "no logger, clock or surrogate server)",
+    )
     p.set_defaults(func=launch_command)
 
 
@@ -91,6 +103,32 @@ def check_room(folder: str, mission) -> None:
         )
 
 
+def vehicles_here(args, mission) -> list[str] | None:
+    """The vehicles whose apps this launch starts (`--vehicles`; None: all), checked against the
+    mission: a fleet, names it has, and a router the other hosts can reach."""
+    if args.vehicles is None:
+        if args.join:
+            raise InputError("--join: name the vehicles whose apps run on this host with --vehicles")
+        return None
+    names = [name.strip() for name in args.vehicles.split(",")]
+    if not mission.fleet:
+        raise InputError(
+            f"--vehicles {args.vehicles}: mission {mission.name!r} has no [[vehicles]]: one launch runs it"
+        )
+    known = mission.vehicle_names
+    for name in names:
+        if name not in known:
+            raise InputError(f"--vehicles {name}: no vehicle named {name!r} ({', '.join(known)})")
+        if names.count(name) > 1:
+            raise InputError(f"--vehicles {args.vehicles}: {name} is named twice")
+    if not mission.network.connect:
+        raise InputError(
+            f"--vehicles {args.vehicles}: the other vehicles' apps join from another host through the "
+            'mission\'s router: set network.connect (docs/network.md, "A fleet over several hosts")'
+        )
+    return names
+
+
 def launch_command(args) -> int:
     from ..launcher.status import Summary, exit_code, interrupted_reason
 
@@ -136,15 +174,20 @@ def _launch(args) -> int:
         if problem := model_file_problem(mission.surrogate.model):
             print(f"nearsub launch: surrogate.model = {mission.surrogate.model!r}: {problem}", file=sys.stderr)
             return 2
+    here = vehicles_here(args, mission)
     try:  # here, after every other check, so that a file in the way is named as the option
         Path(args.log).mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise InputError(f"--log {args.log}: cannot make a folder there ({exc.strerror})") from None
+    if args.join:  # no log, no claim: the mission's own launch holds both
+        summary = Launcher(mission, args.mission, args.log, args.json, extra, here, join=True).run()
+        print(json.dumps(summary.as_dict()) if args.json else summary.text())
+        return exit_code(summary)
     check_room(args.log, mission)
     # The claim is held until this process exits; a second launch of the name refuses at once.
     try:
         with registry.claim(mission.name):
-            summary = Launcher(mission, args.mission, args.log, quiet=args.json, companions=extra).run()
+            summary = Launcher(mission, args.mission, args.log, quiet=args.json, companions=extra, here=here).run()
     except registry.NameTaken as exc:
         print(f"nearsub launch: {exc}", file=sys.stderr)
         return 2

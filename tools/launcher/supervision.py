@@ -30,10 +30,29 @@ EXIT_GRACE = 2.0  # wall seconds to wait for the mission end after an app left w
 class Launcher:
     """One launch of `mission`: `run` starts its processes, supervises them until the mission ends
     and returns the Summary. `companions` are started with the run file and the apps' environment
-    once the apps are up (`launch --view`, `--foxglove`)."""
+    once the apps are up (`launch --view`, `--foxglove`).
 
-    def __init__(self, mission: Mission, mission_path: str | None, log_root: str, quiet: bool = False, companions=()):
+    A fleet over several hosts (docs/network.md, "A fleet over several hosts"): `here` names the
+    vehicles whose helm, pid and sim this launch starts (None: every vehicle); the others' are
+    started by a launch with `join` on another host, on the same router. The launch without
+    `join` is the mission's: the logger, the surrogate server, the clock (which waits for every
+    vehicle's apps wherever they run), the name on the bus, the registry entry, swaps and the
+    app_joined/app_left events. A joining launch starts its vehicles' apps only, supervises them
+    and ends with the mission (an app of its own that fails ends the mission, as on one host)."""
+
+    def __init__(
+        self,
+        mission: Mission,
+        mission_path: str | None,
+        log_root: str,
+        quiet: bool = False,
+        companions=(),
+        here: list[str] | None = None,
+        join: bool = False,
+    ):
         self.mission = mission
+        self.here = list(mission.vehicle_names) if here is None else list(here)
+        self.join = join
         self.companions = list(companions)  # each returns its process, which is stopped first
         self.mission_path = mission_path
         self.community = mission.name
@@ -78,15 +97,17 @@ class Launcher:
                 self.bus = bus
                 self.mailbox = Mailbox()
                 c = self.community
-                registration.claim_on_bus(bus, c, connect, self.mission.startup_timeout)
+                if not self.join:
+                    registration.claim_on_bus(bus, c, connect, self.mission.startup_timeout)
                 bus.subscribe(keys.all_events(c), self.mailbox)
                 bus.subscribe(keys.mission_end(c), self.mailbox)
-                bus.queryable(keys.launcher_control(c), self.mailbox)
                 self.caller = Caller(bus, c, "launcher")
-                bus.watch_liveliness(keys.all_alive(c), self.mailbox, history=False)
                 self.event_pub = bus.publisher(keys.events(c, "launcher"))
                 self.end_pub = bus.publisher(keys.mission_end(c))
-                bus.token(keys.alive(c, "launcher", "launcher"))
+                if not self.join:  # the mission's launch alone: one answer to a swap, one event per app
+                    bus.queryable(keys.launcher_control(c), self.mailbox)
+                    bus.watch_liveliness(keys.all_alive(c), self.mailbox, history=False)
+                    bus.token(keys.alive(c, "launcher", "launcher"))
                 # For people only; lossy: a display must never slow the mission down.
                 depth = 256 * len(self.mission.vehicle_names)
                 self.helm_progress = (
@@ -99,7 +120,8 @@ class Launcher:
                         f"mission {c} running: {len(processes.children) + (processes.router is not None)} "
                         f"processes up in {self.summary.startup_time:.2f} s"
                     )
-                    registration.register(self.mission, connect, log_path, self.credentials)
+                    if not self.join:
+                        registration.register(self.mission, connect, log_path, self.credentials)
                     processes.companions += [start(processes.run_file, processes.env) for start in self.companions]
                     if self.console.status_line:
                         vehicles = self.mission.vehicle_names
@@ -124,7 +146,8 @@ class Launcher:
             for signum, handler in previous_handlers.items():
                 signal.signal(signum, handler)
             processes.close()
-            registration.forget(self.mission)
+            if not self.join:
+                registration.forget(self.mission)
             if not processes.children:  # nothing ran: leave no half-empty log folder behind
                 shutil.rmtree(self.run_dir, ignore_errors=True)
         self.console.clear_status()
@@ -167,10 +190,11 @@ class Launcher:
         return endpoints
 
     def app_count(self) -> int:
-        """The apps `start_apps` starts: logger, surrogate server, a sim, pid and helm per vehicle, clock."""
+        """The apps `start_apps` starts: logger, surrogate server, a sim, pid and helm per vehicle
+        here, clock (a joining launch: its vehicles' apps alone)."""
         mission = self.mission
-        services = mission.apps.logger.enabled + mission.needs_surrogate
-        return services + len(ORDER) * (len(mission.vehicle_names) if mission.fleet else 1) + 1
+        services = 0 if self.join else mission.apps.logger.enabled + mission.needs_surrogate + 1
+        return services + len(ORDER) * (len(self.here) if mission.fleet else 1)
 
     def start_apps(self, bus: Bus, log_path: Path) -> None:
         """Start every process at once, so their imports overlap; the lock-stepped apps wait for
@@ -179,26 +203,30 @@ class Launcher:
         cores (the sim's LF tables) while the server loads its model: nobody asks it before step 0."""
         services, wanted = [], []
         mission, processes = self.mission, self.processes
-        if mission.apps.logger.enabled:
+        if mission.apps.logger.enabled and not self.join:
             extra = ["--output", str(log_path)]
             if self.mission_path:
                 extra += ["--mission-file", self.mission_path]
             processes.spawn("logger", "logger", "logger", extra)
             services.append("logger")
             self.summary.log = str(log_path)
-        if mission.needs_surrogate:
+        if mission.needs_surrogate and not self.join:
             processes.spawn("surrogate", "surrogate", "surrogate")
             services.append("surrogate")
-        after = [argument for role in services if role != "surrogate" for argument in ("--after", role)]
-        for vehicle in mission.vehicle_names if mission.fleet else [None]:
+        # A joining launch's apps wait for the mission's logger, wherever it runs.
+        logged = mission.apps.logger.enabled and (self.join or "logger" in services)
+        after = ["--after", "logger"] if logged else []
+        for vehicle in self.here if mission.fleet else [None]:
             serves = ["--vehicle", vehicle] if vehicle else []
             for role in reversed(ORDER):
                 app = keys.app_name(vehicle, role)
                 instance = processes.next_instance(app)
                 processes.spawn(role, instance, app, [*after, *serves])
                 wanted.append((app, instance))
-        processes.spawn("clock", "clock", "clock", ["--after", "surrogate"] if "surrogate" in services else [])
-        everyone = [(role, role) for role in services] + wanted + [("clock", "clock")]
+        everyone = [(role, role) for role in services] + wanted
+        if not self.join:
+            processes.spawn("clock", "clock", "clock", ["--after", "surrogate"] if "surrogate" in services else [])
+            everyone.append(("clock", "clock"))
         processes.wait_alive(bus, self.community, everyone, mission.startup_timeout, self.interrupted)
         self.clock_started = time.monotonic()  # the clock grants step 0 as soon as its token is up
 
