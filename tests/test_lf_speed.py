@@ -150,3 +150,20 @@ def test_batch_envelope_unchanged():
     np.testing.assert_array_equal(fast.outcome, slow.outcome)
     np.testing.assert_allclose(fast.final, slow.final, rtol=0, atol=1e-9)
     np.testing.assert_allclose(fast.closest, slow.closest, rtol=0, atol=1e-9)
+
+
+def test_a_batch_spread_over_threads_gives_each_row_the_bits_it_gets_alone():
+    """The batch engine's rows run on numba's threads (`lf_kernel.strip_forces_threaded`), the sim's
+    one row on one: the same arithmetic per row, so the same bits, the held flags included."""
+    rng = np.random.default_rng(5)
+    n = 4 * lf.THREADED_ROWS
+    rows = np.column_stack(
+        [rng.uniform(-0.6, 0.6, n), rng.uniform(0.03, 0.2, n), rng.uniform(1.0, 5.0, n), rng.uniform(-10, 10, n)]
+        + [np.full(n, 19.55), np.full(n, 10.0)]
+    )
+    together = lf.lf_increment_terms(rows)
+    assert together[2].any() and not together[2].all()  # some rows hold the field at the hull
+    for k in range(n):
+        alone = lf.lf_increment_terms(rows[k : k + 1])
+        for name, part, batch in zip(("with the submarine", "alone", "held"), alone, together, strict=True):
+            np.testing.assert_array_equal(part[0], batch[k], name)

@@ -18,7 +18,14 @@ STUBBORN = (
 
 def test_single_blas_thread_sets_the_variables_and_keeps_a_users_choice():
     env = processes.single_blas_thread({"OMP_NUM_THREADS": "4"})
-    assert env == {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "4", "MKL_NUM_THREADS": "1"}
+    assert env == {
+        "OPENBLAS_NUM_THREADS": "1",
+        "OMP_NUM_THREADS": "4",
+        "MKL_NUM_THREADS": "1",
+        "NUMBA_NUM_THREADS": "1",
+    }
+    # The `nearsub` command keeps numba's threads for its own sweeps (tools/cli.py).
+    assert "NUMBA_NUM_THREADS" not in processes.single_blas_thread({}, numba=False)
 
 
 def _malloc_thresholds():

@@ -62,7 +62,9 @@ def build_parser(command: str | None = None, every: bool = False) -> argparse.Ar
 
 
 def main(argv=None) -> int:
-    single_blas_thread()  # before any tool imports numpy; the apps it starts inherit it
+    # Before any tool imports numpy. numba's threads stay: a sweep in this process spreads its
+    # batches over them; the processes it starts get one (`processes.spawn_app`, task_client).
+    single_blas_thread(numba=False)
     argv = sys.argv[1:] if argv is None else list(argv)
     command = argv[0] if argv and argv[0] in TOOLS else None
     args = build_parser(command).parse_args(argv)

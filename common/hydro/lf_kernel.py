@@ -17,7 +17,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import config, njit, prange
+
+# Whether this process spreads a batch's rows over threads: not in the processes nearsub starts
+# (one numba thread each, `runtime.processes.single_blas_thread`), which then never start numba's
+# OpenMP pool, so the fork server's children stay safe to fork (GNU OpenMP is not fork-safe).
+THREADED = config.NUMBA_NUM_THREADS > 1
 
 RING_WEIGHTS = (0.25, 0.25, 0.5)  # ring-mean weights of the +eta, -eta, +z points (-z mirrors +z)
 
@@ -70,6 +75,142 @@ def field_values(cells, x_inner, r_inner, x_left, r_left, x, r, ux, ur):
         ur[i] = _horner(cells[a, b, 1], dx, dr)
 
 
+@njit(cache=True, inline="always")
+def _strip_row(
+    n,
+    x_c,
+    y_c,
+    cos_psi,
+    sin_psi,
+    diameter,
+    length,
+    friction_coefficient,
+    strip_row,
+    unit_xi,
+    unit_r,
+    unit_arc,
+    cells,
+    x_inner,
+    r_inner,
+    x_left,
+    r_left,
+    bounds,
+    hold,
+    with_submarine,
+    lf,
+    free,
+    held,
+):
+    """One row n of `strip_forces` (the scratch arrays are its own, so rows may run at once)."""
+    x_lo, x_hi, r_lo, r_hi = bounds[0], bounds[1], bounds[2], bounds[3]
+    w0, w1, w2 = RING_WEIGHTS
+    n_strips = unit_xi.shape[1]
+    guess_a = np.empty(3, dtype=np.int64)
+    guess_b = np.empty(3, dtype=np.int64)
+    cp = np.empty(3)
+    v_xi = np.empty(3)
+    v_eta = np.empty(3)
+    # Each ring point's cell is searched for at the row's first station, then walked from the
+    # previous station's: rows in any order cost the same.
+    guess_a[:] = -1
+    guess_b[:] = -1
+    c, s, d = cos_psi[n], sin_psi[n], diameter[n]
+    row = strip_row[n]
+    valid = True
+    near = False
+    y_force = 0.0
+    moment = 0.0
+    x_pressure = 0.0
+    friction = 0.0
+    free_moment = 0.0
+    free_friction = 0.0
+    xi_prev = arc_prev = area_prev = 0.0  # the previous station's values (set at j = 0)
+    y_prev = moment_prev = cp_prev = friction_prev = free_moment_prev = free_friction_prev = 0.0
+    for j in range(n_strips):
+        xi = unit_xi[row, j] * d
+        r = unit_r[row, j] * d
+        arc = unit_arc[row, j] * d
+        area = math.pi * (r * r)
+        if with_submarine:
+            axis_x = x_c[n] + xi * c
+            axis_y = y_c[n] + xi * s
+            for k in range(3):
+                # In the plane z = 0 the distance from the axis is |y| (hypot's value there).
+                if k == 0:
+                    px, py, pz = axis_x - r * s, axis_y + r * c, 0.0
+                    radial = abs(py)
+                elif k == 1:
+                    px, py, pz = axis_x + r * s, axis_y - r * c, 0.0
+                    radial = abs(py)
+                else:
+                    px, py, pz = axis_x, axis_y, r
+                    radial = math.hypot(py, pz)
+                if radial < r_lo:
+                    near = True
+                lookup = max(radial, r_lo) if hold else radial
+                ux = 0.0
+                ur = 0.0
+                if px >= x_lo and px <= x_hi and lookup >= r_lo and lookup <= r_hi:
+                    a = _interval(x_inner, px, guess_a[k])
+                    b = _interval(r_inner, lookup, guess_b[k])
+                    guess_a[k] = a
+                    guess_b[k] = b
+                    dx = px - x_left[a]
+                    dr = lookup - r_left[b]
+                    ux = _horner(cells[a, b, 0], dx, dr)
+                    ur = _horner(cells[a, b, 1], dx, dr)
+                else:
+                    valid = False
+                # Velocity per unit U in UUV body axes: stream -U x plus the perturbation.
+                safe_radial = radial if radial > 0.0 else 1.0
+                vx = -1.0 + ux
+                vy = ur * py / safe_radial
+                v_xi[k] = vx * c + vy * s
+                v_eta[k] = -vx * s + vy * c
+                speed2 = vx * vx + vy * vy
+                if k == 2:  # v_z = 0 at the +/-eta points
+                    vz = ur * pz / safe_radial
+                    speed2 += vz * vz
+                cp[k] = -speed2
+            cp_mean = w0 * cp[0] + w1 * cp[1] + w2 * cp[2]
+            v_eta_mean = w0 * v_eta[0] + w1 * v_eta[1] + w2 * v_eta[2]
+            u_axial = w0 * -v_xi[0] + w1 * -v_xi[1] + w2 * -v_xi[2]
+            dcp_deta = (cp[0] - cp[1]) / (2.0 * r) if r > 0.0 else 0.0
+            y_term = area * dcp_deta
+            moment_term = 2.0 * area * u_axial * v_eta_mean - xi * area * dcp_deta
+            friction_term = 2.0 * math.pi * r * (u_axial * u_axial)
+            if j > 0:
+                step = xi - xi_prev
+                y_force += step * (y_term + y_prev) / 2.0
+                moment += step * (moment_term + moment_prev) / 2.0
+                x_pressure += 0.5 * (area + area_prev) * (cp_mean - cp_prev)
+                friction += (arc - arc_prev) * (friction_term + friction_prev) / 2.0
+            y_prev, moment_prev, cp_prev, friction_prev = y_term, moment_term, cp_mean, friction_term
+        # The UUV alone: a uniform ring (no lateral gradient, no X pressure, no Y), axial speed
+        # cos psi and lateral sin psi at every point.
+        free_moment_term = 2.0 * area * c * s
+        free_friction_term = 2.0 * math.pi * r * (c * c)
+        if j > 0:
+            free_moment += (xi - xi_prev) * (free_moment_term + free_moment_prev) / 2.0
+            free_friction += (arc - arc_prev) * (free_friction_term + free_friction_prev) / 2.0
+        free_moment_prev, free_friction_prev = free_moment_term, free_friction_term
+        xi_prev, arc_prev, area_prev = xi, arc, area
+    length2 = length[n] * length[n]
+    length3 = length2 * length[n]
+    cf = friction_coefficient[n]
+    free[n, 0] = -cf * free_friction / length2
+    free[n, 1] = 0.0
+    free[n, 2] = free_moment / length3
+    held[n] = near
+    if with_submarine:
+        if valid:
+            lf[n, 0] = (-x_pressure - cf * friction) / length2
+            lf[n, 1] = -y_force / length2
+            lf[n, 2] = moment / length3
+        else:
+            lf[n, 0] = lf[n, 1] = lf[n, 2] = np.nan
+
+
 @njit(cache=True)
 def strip_forces(
     x_c,
@@ -110,111 +251,42 @@ def strip_forces(
     (A = 0 at both tips), N takes it by parts (the Munk moment, Munk 1924), X is the pressure on the
     changing section; ITTC-57 friction (thesis section 4.4) at the perimeter-weighted local axial
     speed. Integrals by the trapezoidal rule over the stations."""
-    x_lo, x_hi, r_lo, r_hi = bounds[0], bounds[1], bounds[2], bounds[3]
-    w0, w1, w2 = RING_WEIGHTS
-    n_strips = unit_xi.shape[1]
-    guess_a = np.empty(3, dtype=np.int64)
-    guess_b = np.empty(3, dtype=np.int64)
-    cp = np.empty(3)
-    v_xi = np.empty(3)
-    v_eta = np.empty(3)
     for n in range(x_c.shape[0]):
-        # Each ring point's cell is searched for at the row's first station, then walked from the
-        # previous station's: rows in any order cost the same.
-        guess_a[:] = -1
-        guess_b[:] = -1
-        c, s, d = cos_psi[n], sin_psi[n], diameter[n]
-        row = strip_row[n]
-        valid = True
-        near = False
-        y_force = 0.0
-        moment = 0.0
-        x_pressure = 0.0
-        friction = 0.0
-        free_moment = 0.0
-        free_friction = 0.0
-        xi_prev = arc_prev = area_prev = 0.0  # the previous station's values (set at j = 0)
-        y_prev = moment_prev = cp_prev = friction_prev = free_moment_prev = free_friction_prev = 0.0
-        for j in range(n_strips):
-            xi = unit_xi[row, j] * d
-            r = unit_r[row, j] * d
-            arc = unit_arc[row, j] * d
-            area = math.pi * (r * r)
-            if with_submarine:
-                axis_x = x_c[n] + xi * c
-                axis_y = y_c[n] + xi * s
-                for k in range(3):
-                    # In the plane z = 0 the distance from the axis is |y| (hypot's value there).
-                    if k == 0:
-                        px, py, pz = axis_x - r * s, axis_y + r * c, 0.0
-                        radial = abs(py)
-                    elif k == 1:
-                        px, py, pz = axis_x + r * s, axis_y - r * c, 0.0
-                        radial = abs(py)
-                    else:
-                        px, py, pz = axis_x, axis_y, r
-                        radial = math.hypot(py, pz)
-                    if radial < r_lo:
-                        near = True
-                    lookup = max(radial, r_lo) if hold else radial
-                    ux = 0.0
-                    ur = 0.0
-                    if px >= x_lo and px <= x_hi and lookup >= r_lo and lookup <= r_hi:
-                        a = _interval(x_inner, px, guess_a[k])
-                        b = _interval(r_inner, lookup, guess_b[k])
-                        guess_a[k] = a
-                        guess_b[k] = b
-                        dx = px - x_left[a]
-                        dr = lookup - r_left[b]
-                        ux = _horner(cells[a, b, 0], dx, dr)
-                        ur = _horner(cells[a, b, 1], dx, dr)
-                    else:
-                        valid = False
-                    # Velocity per unit U in UUV body axes: stream -U x plus the perturbation.
-                    safe_radial = radial if radial > 0.0 else 1.0
-                    vx = -1.0 + ux
-                    vy = ur * py / safe_radial
-                    v_xi[k] = vx * c + vy * s
-                    v_eta[k] = -vx * s + vy * c
-                    speed2 = vx * vx + vy * vy
-                    if k == 2:  # v_z = 0 at the +/-eta points
-                        vz = ur * pz / safe_radial
-                        speed2 += vz * vz
-                    cp[k] = -speed2
-                cp_mean = w0 * cp[0] + w1 * cp[1] + w2 * cp[2]
-                v_eta_mean = w0 * v_eta[0] + w1 * v_eta[1] + w2 * v_eta[2]
-                u_axial = w0 * -v_xi[0] + w1 * -v_xi[1] + w2 * -v_xi[2]
-                dcp_deta = (cp[0] - cp[1]) / (2.0 * r) if r > 0.0 else 0.0
-                y_term = area * dcp_deta
-                moment_term = 2.0 * area * u_axial * v_eta_mean - xi * area * dcp_deta
-                friction_term = 2.0 * math.pi * r * (u_axial * u_axial)
-                if j > 0:
-                    step = xi - xi_prev
-                    y_force += step * (y_term + y_prev) / 2.0
-                    moment += step * (moment_term + moment_prev) / 2.0
-                    x_pressure += 0.5 * (area + area_prev) * (cp_mean - cp_prev)
-                    friction += (arc - arc_prev) * (friction_term + friction_prev) / 2.0
-                y_prev, moment_prev, cp_prev, friction_prev = y_term, moment_term, cp_mean, friction_term
-            # The UUV alone: a uniform ring (no lateral gradient, no X pressure, no Y), axial speed
-            # cos psi and lateral sin psi at every point.
-            free_moment_term = 2.0 * area * c * s
-            free_friction_term = 2.0 * math.pi * r * (c * c)
-            if j > 0:
-                free_moment += (xi - xi_prev) * (free_moment_term + free_moment_prev) / 2.0
-                free_friction += (arc - arc_prev) * (free_friction_term + free_friction_prev) / 2.0
-            free_moment_prev, free_friction_prev = free_moment_term, free_friction_term
-            xi_prev, arc_prev, area_prev = xi, arc, area
-        length2 = length[n] * length[n]
-        length3 = length2 * length[n]
-        cf = friction_coefficient[n]
-        free[n, 0] = -cf * free_friction / length2
-        free[n, 1] = 0.0
-        free[n, 2] = free_moment / length3
-        held[n] = near
-        if with_submarine:
-            if valid:
-                lf[n, 0] = (-x_pressure - cf * friction) / length2
-                lf[n, 1] = -y_force / length2
-                lf[n, 2] = moment / length3
-            else:
-                lf[n, 0] = lf[n, 1] = lf[n, 2] = np.nan
+        _strip_row(
+            n, x_c, y_c, cos_psi, sin_psi, diameter, length, friction_coefficient, strip_row, unit_xi, unit_r,
+            unit_arc, cells, x_inner, r_inner, x_left, r_left, bounds, hold, with_submarine, lf, free, held,
+        )  # fmt: skip
+
+
+@njit(cache=True, parallel=True)
+def strip_forces_threaded(
+    x_c,
+    y_c,
+    cos_psi,
+    sin_psi,
+    diameter,
+    length,
+    friction_coefficient,
+    strip_row,
+    unit_xi,
+    unit_r,
+    unit_arc,
+    cells,
+    x_inner,
+    r_inner,
+    x_left,
+    r_left,
+    bounds,
+    hold,
+    with_submarine,
+    lf,
+    free,
+    held,
+):
+    """`strip_forces` with its rows spread over numba's threads (a batch of vehicles; each row the
+    same arithmetic, so the same bits, as one at a time)."""
+    for n in prange(x_c.shape[0]):
+        _strip_row(
+            n, x_c, y_c, cos_psi, sin_psi, diameter, length, friction_coefficient, strip_row, unit_xi, unit_r,
+            unit_arc, cells, x_inner, r_inner, x_left, r_left, bounds, hold, with_submarine, lf, free, held,
+        )  # fmt: skip

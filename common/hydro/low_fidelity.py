@@ -57,6 +57,11 @@ KNOT = 1852.0 / 3600.0  # [m/s]
 # (`_field_grid`).
 N_FRUSTA = 240
 N_STRIPS = 60  # UUV strips, cosine-spaced; nearsub's choice
+# Rows from which the strip model spreads them over numba's threads (`lf_kernel.strip_forces_threaded`,
+# the same bits per row). LF increment terms on 2 cores: 1 row 26 -> 28 us, 8 rows 68 -> 46, 750
+# rows 7.0 -> 3.0 ms. Processes a launcher or a Dask cluster starts have one thread each
+# (`runtime.processes.single_blas_thread`), so only a batch in one process (a sweep) uses the cores.
+THREADED_ROWS = 8
 _GAUSS_RULES = tuple(np.polynomial.legendre.leggauss(k) for k in (1, 2, 8, 32))
 
 
@@ -445,7 +450,8 @@ def _strip_model(inputs, n_strips: int, n_frusta: int | None, hold: bool):
     lf, free, held = np.empty((n, 3)), np.empty((n, 3)), np.empty(n, dtype=bool)
     with_submarine = n_frusta is not None
     table = submarine_field(n_frusta).kernel_table if with_submarine else _NO_TABLE
-    _kernel().strip_forces(
+    kernel = _kernel().strip_forces_threaded if _kernel().THREADED and n >= THREADED_ROWS else _kernel().strip_forces
+    kernel(
         x_c, y_c, np.cos(psi), np.sin(psi), diameter, length, ittc57(speed * length / NU),
         strip_row, unit_xi, unit_r, unit_arc, *table, hold, with_submarine, lf, free, held,
     )  # fmt: skip
@@ -488,4 +494,5 @@ def compile_kernels() -> None:
     lf_coefficients(row)
     lf_free_stream(row)
     lf_increment_terms(row)
+    lf_increment_terms(np.repeat(row, THREADED_ROWS, axis=0))  # the batch engine's threaded kernel
     proximity.classify(np.zeros(1), np.full(1, 5.5), np.zeros(1), 1.0, 0.2)  # a pose 0.3 m off the hull

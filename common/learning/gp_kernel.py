@@ -16,7 +16,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import config, njit, prange
+
+# Whether this process spreads a batch's rows over threads: not in the processes nearsub starts
+# (one numba thread each, `runtime.processes.single_blas_thread`), which then never start numba's
+# OpenMP pool, so the fork server's children stay safe to fork (GNU OpenMP is not fork-safe).
+THREADED = config.NUMBA_NUM_THREADS > 1
 
 
 @njit(cache=True)
@@ -59,6 +64,41 @@ def lml_gradient_sums(U, K, s2, alpha, Kinv_low):
     return out
 
 
+@njit(cache=True, inline="always")
+def _posterior_row(a, X, A, B, ZT, alpha_s, linv_columns, s2, y_mean, y_std, with_std, mean, std):
+    """Row a of `posterior_rows` (the scratch arrays are its own, so rows may run at once)."""
+    m, d, n = ZT.shape
+    z = np.empty(d)
+    e = np.empty(n)
+    v = np.empty(n)
+    for j in range(m):
+        for k in range(d):
+            z[k] = X[a, k] * A[j, k] + B[j, k]
+        total = 0.0
+        for i in range(n):
+            sq = 0.0
+            for k in range(d):
+                diff = ZT[j, k, i] - z[k]
+                sq += diff * diff
+            e[i] = math.exp(-sq)
+            total += e[i] * alpha_s[j, i]
+        mean[a, j] = total * y_std[j] + y_mean[j]
+        if with_std:
+            v[:] = 0.0
+            start = 0
+            for k in range(n):
+                ek = e[k]
+                column = linv_columns[j, start : start + n - k]
+                below = v[k:]
+                for i in range(n - k):
+                    below[i] += column[i] * ek
+                start += n - k
+            sum_sq = 0.0
+            for i in range(n):
+                sum_sq += v[i] * v[i]
+            std[a, j] = math.sqrt(max(s2[j] - sum_sq, 0.0)) * y_std[j]
+
+
 @njit(cache=True)
 def posterior_rows(X, A, B, ZT, alpha_s, linv_columns, s2, y_mean, y_std, with_std, mean, std):
     """Posterior mean (thesis (2.6)) and, with `with_std`, latent std (thesis (2.7)) (rows, m) of
@@ -71,34 +111,13 @@ def posterior_rows(X, A, B, ZT, alpha_s, linv_columns, s2, y_mean, y_std, with_s
     (scaled by s2) packed one after the other from their diagonal down, added to v in column
     order (element-wise, so each v_i is the same sum however the loop is vectorised; a third
     less CPU than BLAS trmv on the full matrix), and the variance s2 - v.v clipped at zero."""
-    m, d, n = ZT.shape
-    z = np.empty(d)
-    e = np.empty(n)
-    v = np.empty(n)
     for a in range(X.shape[0]):
-        for j in range(m):
-            for k in range(d):
-                z[k] = X[a, k] * A[j, k] + B[j, k]
-            total = 0.0
-            for i in range(n):
-                sq = 0.0
-                for k in range(d):
-                    diff = ZT[j, k, i] - z[k]
-                    sq += diff * diff
-                e[i] = math.exp(-sq)
-                total += e[i] * alpha_s[j, i]
-            mean[a, j] = total * y_std[j] + y_mean[j]
-            if with_std:
-                v[:] = 0.0
-                start = 0
-                for k in range(n):
-                    ek = e[k]
-                    column = linv_columns[j, start : start + n - k]
-                    below = v[k:]
-                    for i in range(n - k):
-                        below[i] += column[i] * ek
-                    start += n - k
-                sum_sq = 0.0
-                for i in range(n):
-                    sum_sq += v[i] * v[i]
-                std[a, j] = math.sqrt(max(s2[j] - sum_sq, 0.0)) * y_std[j]
+        _posterior_row(a, X, A, B, ZT, alpha_s, linv_columns, s2, y_mean, y_std, with_std, mean, std)
+
+
+@njit(cache=True, parallel=True)
+def posterior_rows_threaded(X, A, B, ZT, alpha_s, linv_columns, s2, y_mean, y_std, with_std, mean, std):
+    """`posterior_rows` with its rows spread over numba's threads (a batch; each row the same
+    arithmetic, so the same bits, as one at a time)."""
+    for a in prange(X.shape[0]):
+        _posterior_row(a, X, A, B, ZT, alpha_s, linv_columns, s2, y_mean, y_std, with_std, mean, std)

@@ -20,6 +20,10 @@ from typing import IO, NoReturn
 # results that pass through a dense solve then agree to the last bit between a process and the
 # workers it starts. The variables are read when numpy loads, so set them before that.
 BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+# And one numba thread in every process nearsub starts (apps, workers): the compiled LF and GP
+# kernels spread a batch's rows over numba's threads, which only a sweep in one process (the
+# `nearsub` command itself) should do; processes, not threads, scale the rest.
+NUMBA_THREAD_VARIABLE = "NUMBA_NUM_THREADS"
 
 # Stopping escalates per process group, as ros2 launch does: SIGINT lets an app end cleanly (the
 # logger closes its file), SIGTERM, then SIGKILL for one that ignores both.
@@ -27,10 +31,11 @@ STOP_LADDER = (signal.SIGINT, signal.SIGTERM, signal.SIGKILL)
 STOP_WAIT = 5.0  # wall seconds between two rungs
 
 
-def single_blas_thread(environ: MutableMapping[str, str] = os.environ) -> MutableMapping[str, str]:
+def single_blas_thread(environ: MutableMapping[str, str] = os.environ, numba: bool = True) -> MutableMapping[str, str]:
     """Ask for one BLAS thread in `environ` (this process's environment by default, which the
-    processes it starts inherit) and return it. A variable the user has set is left as it is."""
-    for name in BLAS_THREAD_VARIABLES:
+    processes it starts inherit) and return it; with `numba`, one numba thread too. A variable the
+    user has set is left as it is."""
+    for name in BLAS_THREAD_VARIABLES + ((NUMBA_THREAD_VARIABLE,) if numba else ()):
         environ.setdefault(name, "1")
     return environ
 
