@@ -186,3 +186,61 @@ def test_a_fleet_split_over_two_hosts_equals_one_host_bit_for_bit(two_hosts, tmp
     # One app_joined event per app, from the mission's launch alone.
     joins = [decode(p, Event, "") for p in per_topic(Path(summary["log"]), skip=())["events/launcher"]]
     assert sorted(e.detail for e in joins if e.kind == "app_joined").count("auv2/sim-1 joined") == 1
+
+
+def test_the_pipeline_bench_of_a_fleet_over_two_hosts_reports_each_hosts_share(two_hosts, tmp_path):
+    """`nearsub bench pipeline --vehicles 4 --host I/2` on each host (docs/network.md): host 1 runs
+    the clock, the logger and auv1-auv2 and reports the rate; host 2 joins with auv3-auv4."""
+    router_host, apps_host, address = two_hosts
+    endpoint = f"tcp/{address}:{PORT}"
+    secret = tmp_path / "mission.credentials"
+    env = dict(os.environ, NEARSUB_RUNTIME_DIR=str(tmp_path / "runtime"))
+    env.pop("NEARSUB_CREDENTIALS", None)
+    nearsub = [sys.executable, "-m", "nearsub"]
+    settings = [f"network.connect={json.dumps([endpoint])}", f'network.credentials="{secret}"']
+    bench = ["bench", "pipeline", "--vehicles", "4", "--repeats", "1", "--fleet-time", "5", "--json"]
+    bench += [a for s in settings for a in ("--set", s)]
+    router = subprocess.Popen(
+        ["ip", "netns", "exec", router_host, *nearsub, "router", "--listen", endpoint, "--credentials", str(secret)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env=env,
+        process_group=0,
+    )
+    mission = load_mission(ALPHA)
+    budget = 3 * (5 * mission.startup_timeout + 5.0 + mission.step_timeout + 15.0)  # three launches each
+    try:
+        end = time.monotonic() + mission.startup_timeout
+        line = ""
+        while "router listening on" not in line:
+            assert time.monotonic() < end and router.poll() is None, line
+            line = router.stdout.readline()
+        second = subprocess.Popen(
+            ["ip", "netns", "exec", apps_host, *nearsub, *bench, "--host", "2/2"],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            env=env,
+        )
+        first = subprocess.run(
+            ["ip", "netns", "exec", router_host, *nearsub, *bench, "--host", "1/2"],
+            capture_output=True,
+            text=True,
+            env=env,
+            timeout=budget,
+        )
+        out, err = second.communicate(timeout=budget)
+    finally:
+        os.killpg(router.pid, signal.SIGTERM)
+        router.wait(timeout=30)
+    assert first.returncode == 0 and second.returncode == 0, (first.stderr, err)
+    one, two = json.loads(first.stdout), json.loads(out)
+    assert one["host"]["vehicles"] == ["auv1", "auv2"] and two["host"]["vehicles"] == ["auv3", "auv4"]
+    fleet_one, fleet_two = one["alpha_x4"], two["alpha_x4"]
+    assert fleet_one["steps"] == fleet_two["steps"] == 100  # 5 s at dt 0.05
+    assert fleet_one["pipeline_steps_per_second"]["median"] > 0
+    assert {"clock", "logger"} <= set(fleet_one["cpu_ms_per_step_by_app"])
+    assert set(fleet_two["cpu_ms_per_step_by_app"]) == {
+        f"auv{k}/{role}-1" for k in (3, 4) for role in ("helm", "pid", "sim")
+    }

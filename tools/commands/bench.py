@@ -49,6 +49,14 @@ def add_parser(subparsers) -> None:
         "--fleet-time", type=number(above=0.0), default=60.0, metavar="T", help="simulated seconds of each fleet run"
     )
     t.add_argument(
+        "--host",
+        type=host_share,
+        metavar="I/K",
+        help="with one --vehicles N: this host's share of a fleet over K hosts on the router of --set "
+        "network.connect=...; host 1 runs the clock and logger and reports the rate, the others join "
+        "(docs/network.md)",
+    )
+    t.add_argument(
         "--set",
         action="append",
         default=[],
@@ -121,28 +129,63 @@ class AlphaFleet:
 FLEET_SPACING = 250.0  # m between two vehicles' copies of alpha (its survey spans 180 m by 160 m)
 
 
-def launch_once(source, log_dir: str, tag: str, *overrides: str):
-    """One launch at warp 0 through the multi-process launcher: its `Summary`."""
+def launch_once(source, log_dir: str, tag: str, *overrides: str, share: tuple[int, int] | None = None):
+    """One launch at warp 0 through the multi-process launcher: its `Summary`. With a `share`
+    (I, K) of a fleet over K hosts, this host's vehicles only (`fleet_share`), under a name every
+    host derives alike; host 1 runs the mission, the others join it."""
     from ..launcher.supervision import Launcher
 
-    mission = source.load([f"name=bench{tag}_{int(time.time())}", "warp=0", *overrides])
-    return Launcher(mission, source.path and str(source.path), log_dir, quiet=True).run()
+    name = f"bench{tag}" if share else f"bench{tag}_{int(time.time())}"
+    mission = source.load([f"name={name}", "warp=0", *overrides])
+    here = fleet_share(mission.vehicle_names, share) if share else None
+    join = bool(share) and share[0] > 1
+    return Launcher(mission, source.path and str(source.path), log_dir, quiet=True, here=here, join=join).run()
+
+
+def fleet_share(names: list[str], share: tuple[int, int]) -> list[str]:
+    """Host I of K's vehicles: the I-th of K nearly equal consecutive parts of `names`."""
+    index, hosts = share
+    size, extra = divmod(len(names), hosts)
+    start = (index - 1) * size + min(index - 1, extra)
+    return names[start : start + size + (index <= extra)]
+
+
+def host_share(text: str) -> tuple[int, int]:
+    """'1/2' -> (1, 2), for argparse."""
+    import argparse
+
+    index, _, hosts = text.partition("/")
+    try:
+        share = (int(index), int(hosts))
+    except ValueError:
+        share = (0, 0)
+    if not 1 <= share[0] <= share[1]:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a host's share I/K with 1 <= I <= K, such as 1/2")
+    return share
 
 
 def median_spread(values: list[float]) -> dict:
     return {"median": statistics.median(values), "min": min(values), "max": max(values)}
 
 
-def bench_mission(source, log_dir: str, repeats: int, verbose: bool, settings: Sequence[str] = ()) -> dict | None:
+def bench_mission(
+    source,
+    log_dir: str,
+    repeats: int,
+    verbose: bool,
+    settings: Sequence[str] = (),
+    share: tuple[int, int] | None = None,
+) -> dict | None:
     """Steps per second, CPU-ms per step of each process, start-up and shutdown time of one mission
     (a `MissionFile` or an `AlphaFleet`). A launch of a few steps costs the start-up and shutdown:
     the CPU per step is what a full run costs beyond it (each process's CPU read at the mission
-    end); per vehicle-step it is that divided by the vehicles. `settings`: overrides of every run."""
+    end); per vehicle-step it is that divided by the vehicles. `settings`: overrides of every run.
+    With a `share` of a fleet over hosts (`launch_once`): this host's processes and vehicles."""
     name = source.name
-    short = launch_once(source, log_dir, f"{name}_short", *settings, "time_limit=0.5")
+    short = launch_once(source, log_dir, f"{name}_short", *settings, "time_limit=0.5", share=share)
     runs = []
     for index in range(repeats):
-        summary = launch_once(source, log_dir, f"{name}{index}", *settings)
+        summary = launch_once(source, log_dir, f"{name}{index}", *settings, share=share)
         if summary.outcome not in ("completed", "time_limit", "collision"):
             print(
                 f"nearsub bench: {name} run {index + 1} ended with {summary.outcome}: {summary.reason}", file=sys.stderr
@@ -160,8 +203,8 @@ def bench_mission(source, log_dir: str, repeats: int, verbose: bool, settings: S
             print(f"  {name} run {index + 1}: {line}", file=sys.stderr)
     apps = sorted({app for _, per_app in runs for app in per_app})
     mission = source.load(list(settings))
-    local = [inprocess_rate(mission)[0] for _ in range(repeats)]
-    vehicles = len(mission.vehicle_names)
+    local = [inprocess_rate(mission)[0] for _ in range(repeats)] if not share else [0.0]
+    vehicles = len(fleet_share(mission.vehicle_names, share) if share else mission.vehicle_names)
     return {
         "mission": str(source.path or name),
         "vehicles": vehicles,
@@ -192,6 +235,10 @@ def vehicle_counts(text: str) -> list[int]:
 def bench_pipeline(args) -> int:
     import os
 
+    if args.host and (not args.vehicles or len(args.vehicles) > 1):
+        raise InputError(
+            f"--host {args.host[0]}/{args.host[1]}: give one fleet size with --vehicles, e.g. --vehicles 32"
+        )
     if args.vehicles:
         sources = [AlphaFleet(n, args.fleet_time) for n in args.vehicles]
     else:
@@ -200,9 +247,13 @@ def bench_pipeline(args) -> int:
 
     for source in sources:  # a bad file or --set: one line before any run
         try:
-            source.load(args.set)
+            mission = source.load(args.set)
         except (MissionError, OSError) as exc:
             raise InputError(str(exc)) from None
+        if args.host and not mission.network.connect:
+            raise InputError(
+                f"--host {args.host[0]}/{args.host[1]}: the hosts meet on one router: --set network.connect=..."
+            )
     load_before = os.getloadavg()[0]
     result = {
         "repeats": args.repeats,
@@ -212,11 +263,14 @@ def bench_pipeline(args) -> int:
     }
     with tempfile.TemporaryDirectory() as log_dir:
         for source in sources:
-            measured = bench_mission(source, log_dir, args.repeats, not args.json, args.set)
+            measured = bench_mission(source, log_dir, args.repeats, not args.json, args.set, args.host)
             if measured is None:
                 return 1
             result[source.name] = measured
-    if DEFAULT_MISSION in [source.path.resolve() for source in sources if source.path]:
+    if args.host:
+        result["host"] = {"share": list(args.host), "vehicles": fleet_share(mission.vehicle_names, args.host)}
+        result["moos_ivp"] = {"ran": False, "reason": "a fleet over hosts: comparison skipped"}
+    elif DEFAULT_MISSION in [source.path.resolve() for source in sources if source.path]:
         result["moos_ivp"] = moos_alpha.compare(DEFAULT_MISSION, args.repeats, not args.json)
     else:
         result["moos_ivp"] = {"ran": False, "reason": "it runs beside the alpha mission only: comparison skipped"}
@@ -227,7 +281,8 @@ def bench_pipeline(args) -> int:
     for source in sources:
         m = result[source.name]
         p, c = m["pipeline_steps_per_second"], m["pipeline_cpu_ms_per_step"]
-        print(f"{source.name} ({m['vehicles']} vehicles, {m['steps']} steps), over {args.repeats} runs:")
+        where = f" on host {args.host[0]} of {args.host[1]}, this host's processes" if args.host else ""
+        print(f"{source.name} ({m['vehicles']} vehicles{where}, {m['steps']} steps), over {args.repeats} runs:")
         print(f"  lock-stepped pipeline: median {p['median']:.0f} steps/s (min {p['min']:.0f}, max {p['max']:.0f})")
         by_app = ", ".join(f"{app} {ms:.2f}" for app, ms in m["cpu_ms_per_step_by_app"].items())
         if m["vehicles"] > 1:  # one line per process would not fit
@@ -236,7 +291,8 @@ def bench_pipeline(args) -> int:
         print(f"  CPU per step:          median {c['median']:.2f} ms over all processes ({by_app})")
         print(f"  CPU per vehicle-step:  median {v['median']:.2f} ms (min {v['min']:.2f}, max {v['max']:.2f})")
         local = m["inprocess_steps_per_second"]["median"]
-        print(f"  in-process loop:       median {local:.0f} steps/s ({local / p['median']:.1f}x the pipeline)")
+        if local > 0:
+            print(f"  in-process loop:       median {local:.0f} steps/s ({local / p['median']:.1f}x the pipeline)")
         up, down = m["startup_s"], m["shutdown_s"]
         print(
             f"  start-up {up['median']:.2f} s (min {up['min']:.2f}), shutdown {down['median']:.2f} s "
