@@ -133,17 +133,17 @@ def validate_command(args) -> int:
             f"\nGCI (coarse/medium/fine, ratio sqrt 2; Celik et al. 2008): observed order {g['p']:.2f}, "
             f"extrapolated X' {g['extrapolated']:.4e}, GCI_fine {g['gci_fine']:.2%}"
         )
-    station = rans_campaign.GRID_STATION
-    if table["two_body_gci"]:
-        target = f"target GCI_fine <= {rans_campaign.GCI_TARGET:.0%}"
-        print(f"\nTwo-body GCI at '{station.name}' {list(station.row)} ({target})")
-        for name, g in table["two_body_gci"].items():
+    target = f"target GCI_fine <= {rans_campaign.GCI_TARGET:.0%}"
+    stations = {s.name: s for s in rans_campaign.TWO_BODY_STATIONS}
+    for name, gci in table["two_body_gci"].items():
+        print(f"\nTwo-body GCI at '{name}' {list(stations[name].row)} ({target})")
+        for output, g in gci.items():
             print(
-                f"  {name}': observed order {g['p']:.2f}, extrapolated {g['extrapolated']:.4e}, "
+                f"  {output}': observed order {g['p']:.2f}, extrapolated {g['extrapolated']:.4e}, "
                 f"GCI_fine {g['gci_fine']:.2%}{' meets' if g['meets'] else ''}"
             )
-    else:
-        print(f"\nTwo-body GCI at '{station.name}': its coarse, medium and fine cases have not all converged yet")
+    if not table["two_body_gci"]:
+        print("\nTwo-body GCI: no station has its coarse, medium and fine cases all converged yet")
     print(
         "\nSUBOFF drift against thesis table 3.2 (x 1e-3; errors against EFD; targets: X', N' within 10 %, "
         "Y' within 10 % at 4.07 and 6.03 deg)"
