@@ -12,6 +12,7 @@ import signal
 import subprocess
 import sys
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -27,6 +28,7 @@ from nearsub.common.runtime.messages import Event, decode, encode
 pytestmark = [pytest.mark.reliability, pytest.mark.timeout(600)]
 
 PORT = 7447
+NEARSUB = [sys.executable, "-m", "nearsub"]
 
 
 def _ip(*args: str) -> None:
@@ -57,17 +59,13 @@ def two_hosts():
             subprocess.run(["ip", "netns", "del", host], capture_output=True)  # takes the veth pair with it
 
 
-def test_router_on_one_host_and_apps_on_another_with_credentials(two_hosts, tmp_path, community):
-    router_host, apps_host, address = two_hosts
-    endpoint = f"tcp/{address}:{PORT}"
-    secret = tmp_path / "mission.credentials"  # what the user copies to the other host
-    env = dict(os.environ, NEARSUB_RUNTIME_DIR=str(tmp_path / "runtime"))
-    env.pop("NEARSUB_CREDENTIALS", None)
-    nearsub = [sys.executable, "-m", "nearsub"]
-    settings = [f"name={community}", "time_limit=20", f"network.connect={json.dumps([endpoint])}"]
-    mission = load_mission(ALPHA, settings)
+@contextmanager
+def router_on(host: str, endpoint: str, secret: Path, env: dict, timeout: float):
+    """`nearsub router` in namespace `host`, listening on `endpoint` with the credentials `secret`
+    (made there: what the user copies to the other hosts), until the block ends. Yields the
+    line it printed once listening (within `timeout` seconds)."""
     router = subprocess.Popen(
-        ["ip", "netns", "exec", router_host, *nearsub, "router", "--listen", endpoint, "--credentials", str(secret)],
+        ["ip", "netns", "exec", host, *NEARSUB, "router", "--listen", endpoint, "--credentials", str(secret)],
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
         text=True,
@@ -75,14 +73,34 @@ def test_router_on_one_host_and_apps_on_another_with_credentials(two_hosts, tmp_
         process_group=0,
     )
     try:
-        end = time.monotonic() + mission.startup_timeout
-        lines = []
-        while not any("router listening on" in line for line in lines):
-            assert time.monotonic() < end and router.poll() is None, lines
-            lines.append(router.stdout.readline())
-        assert f"router listening on {endpoint}" in lines[-1] and str(secret) in lines[-1], lines
+        end = time.monotonic() + timeout
+        line = ""
+        while "router listening on" not in line:
+            assert time.monotonic() < end and router.poll() is None, line
+            line = router.stdout.readline()
+        yield line
+    finally:
+        os.killpg(router.pid, signal.SIGTERM)
+        router.wait(timeout=30)
 
-        on_apps_host = ["ip", "netns", "exec", apps_host, *nearsub]
+
+def host_environment(tmp_path: Path) -> dict:
+    """The tests' hosts share this runtime folder and no credentials from the environment."""
+    env = dict(os.environ, NEARSUB_RUNTIME_DIR=str(tmp_path / "runtime"))
+    env.pop("NEARSUB_CREDENTIALS", None)
+    return env
+
+
+def test_router_on_one_host_and_apps_on_another_with_credentials(two_hosts, tmp_path, community):
+    router_host, apps_host, address = two_hosts
+    endpoint = f"tcp/{address}:{PORT}"
+    secret = tmp_path / "mission.credentials"  # what the user copies to the other host
+    env = host_environment(tmp_path)
+    settings = [f"name={community}", "time_limit=20", f"network.connect={json.dumps([endpoint])}"]
+    mission = load_mission(ALPHA, settings)
+    with router_on(router_host, endpoint, secret, env, mission.startup_timeout) as line:
+        assert f"router listening on {endpoint}" in line and str(secret) in line, line
+        on_apps_host = ["ip", "netns", "exec", apps_host, *NEARSUB]
         stranger = subprocess.run(
             [*on_apps_host, "launch", str(ALPHA), "--log", str(tmp_path / "stranger"), "--set", "startup_timeout=2"]
             + [a for s in settings for a in ("--set", s)],
@@ -105,9 +123,6 @@ def test_router_on_one_host_and_apps_on_another_with_credentials(two_hosts, tmp_
         assert launch.returncode == 0, launch.stderr
         summary = json.loads(launch.stdout.strip().splitlines()[-1])
         assert summary["outcome"] == "time_limit" and summary["steps"] == mission.max_steps
-    finally:
-        os.killpg(router.pid, signal.SIGTERM)
-        router.wait(timeout=30)
 
     reference = run_inprocess(build_cores(mission), Schedule(mission.periods()), mission.dt, mission.max_steps)
     logged = per_topic(Path(summary["log"]))
@@ -128,47 +143,28 @@ def test_a_fleet_split_over_two_hosts_equals_one_host_bit_for_bit(two_hosts, tmp
     router_host, apps_host, address = two_hosts
     endpoint = f"tcp/{address}:{PORT}"
     secret = tmp_path / "mission.credentials"
-    env = dict(os.environ, NEARSUB_RUNTIME_DIR=str(tmp_path / "runtime"))
-    env.pop("NEARSUB_CREDENTIALS", None)
-    nearsub = [sys.executable, "-m", "nearsub"]
+    env = host_environment(tmp_path)
     settings = [f"name={community}", MEET, f"network.connect={json.dumps([endpoint])}"]
     mission = load_mission(TWO, settings)
     given = [a for s in [*settings, f'network.credentials="{secret}"'] for a in ("--set", s)]
-    router = subprocess.Popen(
-        ["ip", "netns", "exec", router_host, *nearsub, "router", "--listen", endpoint, "--credentials", str(secret)],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-        env=env,
-        process_group=0,
-    )
     budget = 5 * mission.startup_timeout + run_budget(mission)
-    try:
-        end = time.monotonic() + mission.startup_timeout
-        line = ""
-        while "router listening on" not in line:
-            assert time.monotonic() < end and router.poll() is None, line
-            line = router.stdout.readline()
-        launch = ["launch", str(TWO), "--json", *given]
+    with router_on(router_host, endpoint, secret, env, mission.startup_timeout):
+        launch = [*NEARSUB, "launch", str(TWO), "--json", *given]
         joined = subprocess.Popen(
-            ["ip", "netns", "exec", apps_host, *nearsub, *launch, "--log", str(tmp_path / "b"), "--join"]
-            + ["--vehicles", "auv2"],
+            ["ip", "netns", "exec", apps_host, *launch, "--log", str(tmp_path / "b"), "--join", "--vehicles", "auv2"],
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
             text=True,
             env=env,
         )
         main = subprocess.run(
-            ["ip", "netns", "exec", router_host, *nearsub, *launch, "--log", str(tmp_path / "a"), "--vehicles", "auv1"],
+            ["ip", "netns", "exec", router_host, *launch, "--log", str(tmp_path / "a"), "--vehicles", "auv1"],
             capture_output=True,
             text=True,
             env=env,
             timeout=budget,
         )
         out, err = joined.communicate(timeout=budget)
-    finally:
-        os.killpg(router.pid, signal.SIGTERM)
-        router.wait(timeout=30)
     summary = json.loads(main.stdout.strip().splitlines()[-1])
     joined_summary = json.loads(out.strip().splitlines()[-1])
     reference = run_mission(mission)
@@ -194,46 +190,28 @@ def test_the_pipeline_bench_of_a_fleet_over_two_hosts_reports_each_hosts_share(t
     router_host, apps_host, address = two_hosts
     endpoint = f"tcp/{address}:{PORT}"
     secret = tmp_path / "mission.credentials"
-    env = dict(os.environ, NEARSUB_RUNTIME_DIR=str(tmp_path / "runtime"))
-    env.pop("NEARSUB_CREDENTIALS", None)
-    nearsub = [sys.executable, "-m", "nearsub"]
+    env = host_environment(tmp_path)
     settings = [f"network.connect={json.dumps([endpoint])}", f'network.credentials="{secret}"']
-    bench = ["bench", "pipeline", "--vehicles", "4", "--repeats", "1", "--fleet-time", "5", "--json"]
+    bench = [*NEARSUB, "bench", "pipeline", "--vehicles", "4", "--repeats", "1", "--fleet-time", "5", "--json"]
     bench += [a for s in settings for a in ("--set", s)]
-    router = subprocess.Popen(
-        ["ip", "netns", "exec", router_host, *nearsub, "router", "--listen", endpoint, "--credentials", str(secret)],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-        env=env,
-        process_group=0,
-    )
     mission = load_mission(ALPHA)
     budget = 3 * (5 * mission.startup_timeout + 5.0 + mission.step_timeout + 15.0)  # three launches each
-    try:
-        end = time.monotonic() + mission.startup_timeout
-        line = ""
-        while "router listening on" not in line:
-            assert time.monotonic() < end and router.poll() is None, line
-            line = router.stdout.readline()
+    with router_on(router_host, endpoint, secret, env, mission.startup_timeout):
         second = subprocess.Popen(
-            ["ip", "netns", "exec", apps_host, *nearsub, *bench, "--host", "2/2"],
+            ["ip", "netns", "exec", apps_host, *bench, "--host", "2/2"],
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
             text=True,
             env=env,
         )
         first = subprocess.run(
-            ["ip", "netns", "exec", router_host, *nearsub, *bench, "--host", "1/2"],
+            ["ip", "netns", "exec", router_host, *bench, "--host", "1/2"],
             capture_output=True,
             text=True,
             env=env,
             timeout=budget,
         )
         out, err = second.communicate(timeout=budget)
-    finally:
-        os.killpg(router.pid, signal.SIGTERM)
-        router.wait(timeout=30)
     assert first.returncode == 0 and second.returncode == 0, (first.stderr, err)
     one, two = json.loads(first.stdout), json.loads(out)
     assert one["host"]["vehicles"] == ["auv1", "auv2"] and two["host"]["vehicles"] == ["auv3", "auv4"]

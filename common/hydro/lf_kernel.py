@@ -75,7 +75,7 @@ def field_values(cells, x_inner, r_inner, x_left, r_left, x, r, ux, ur):
         ur[i] = _horner(cells[a, b, 1], dx, dr)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _strip_row(
     n,
     x_c,
@@ -212,30 +212,7 @@ def _strip_row(
 
 
 @njit(cache=True)
-def strip_forces(
-    x_c,
-    y_c,
-    cos_psi,
-    sin_psi,
-    diameter,
-    length,
-    friction_coefficient,
-    strip_row,
-    unit_xi,
-    unit_r,
-    unit_arc,
-    cells,
-    x_inner,
-    r_inner,
-    x_left,
-    r_left,
-    bounds,
-    hold,
-    with_submarine,
-    lf,
-    free,
-    held,
-):
+def strip_forces(*arrays):
     """[X', Y', N'] of the strip model, row by row, into lf (with the submarine; NaN where a ring
     point lies outside the table's `bounds` (x_min, x_max, R_min, R_max)) and free (the UUV alone),
     and into held whether a point was closer to the axis than R_min (`hold`: then it sees the field
@@ -250,43 +227,18 @@ def strip_forces(
     theory, Newman 1977): f_y = -d/dxi[rho A U_x V_y] - A dp/dy; Y integrates the first term to zero
     (A = 0 at both tips), N takes it by parts (the Munk moment, Munk 1924), X is the pressure on the
     changing section; ITTC-57 friction (thesis section 4.4) at the perimeter-weighted local axial
-    speed. Integrals by the trapezoidal rule over the stations."""
-    for n in range(x_c.shape[0]):
-        _strip_row(
-            n, x_c, y_c, cos_psi, sin_psi, diameter, length, friction_coefficient, strip_row, unit_xi, unit_r,
-            unit_arc, cells, x_inner, r_inner, x_left, r_left, bounds, hold, with_submarine, lf, free, held,
-        )  # fmt: skip
+    speed. Integrals by the trapezoidal rule over the stations.
+
+    Arguments, in order: x_c, y_c, cos_psi, sin_psi, diameter, length, friction_coefficient,
+    strip_row, unit_xi, unit_r, unit_arc, cells, x_inner, r_inner, x_left, r_left, bounds, hold,
+    with_submarine, lf, free, held (`_strip_row`)."""
+    for n in range(arrays[0].shape[0]):
+        _strip_row(n, *arrays)
 
 
 @njit(cache=True, parallel=True)
-def strip_forces_threaded(
-    x_c,
-    y_c,
-    cos_psi,
-    sin_psi,
-    diameter,
-    length,
-    friction_coefficient,
-    strip_row,
-    unit_xi,
-    unit_r,
-    unit_arc,
-    cells,
-    x_inner,
-    r_inner,
-    x_left,
-    r_left,
-    bounds,
-    hold,
-    with_submarine,
-    lf,
-    free,
-    held,
-):
+def strip_forces_threaded(*arrays):
     """`strip_forces` with its rows spread over numba's threads (a batch of vehicles; each row the
     same arithmetic, so the same bits, as one at a time)."""
-    for n in prange(x_c.shape[0]):
-        _strip_row(
-            n, x_c, y_c, cos_psi, sin_psi, diameter, length, friction_coefficient, strip_row, unit_xi, unit_r,
-            unit_arc, cells, x_inner, r_inner, x_left, r_left, bounds, hold, with_submarine, lf, free, held,
-        )  # fmt: skip
+    for n in prange(arrays[0].shape[0]):
+        _strip_row(n, *arrays)

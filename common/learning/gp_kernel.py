@@ -64,7 +64,7 @@ def lml_gradient_sums(U, K, s2, alpha, Kinv_low):
     return out
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _posterior_row(a, X, A, B, ZT, alpha_s, linv_columns, s2, y_mean, y_std, with_std, mean, std):
     """Row a of `posterior_rows` (the scratch arrays are its own, so rows may run at once)."""
     m, d, n = ZT.shape
@@ -116,8 +116,8 @@ def posterior_rows(X, A, B, ZT, alpha_s, linv_columns, s2, y_mean, y_std, with_s
 
 
 @njit(cache=True, parallel=True)
-def posterior_rows_threaded(X, A, B, ZT, alpha_s, linv_columns, s2, y_mean, y_std, with_std, mean, std):
-    """`posterior_rows` with its rows spread over numba's threads (a batch; each row the same
-    arithmetic, so the same bits, as one at a time)."""
+def posterior_rows_threaded(X, *arrays):
+    """`posterior_rows` (the same arguments) with its rows spread over numba's threads (a batch;
+    each row the same arithmetic, so the same bits, as one at a time)."""
     for a in prange(X.shape[0]):
-        _posterior_row(a, X, A, B, ZT, alpha_s, linv_columns, s2, y_mean, y_std, with_std, mean, std)
+        _posterior_row(a, X, *arrays)
