@@ -59,6 +59,25 @@ INFLOW_VISCOSITY_RATIO = 10.0
 # section 3.3.3.3; 1.25 reaches the outer cells with 8 layers).
 LAYERS = 8
 LAYER_EXPANSION = 1.25
+# Below the log layer (a target y+ under 30: the buffer layer and the viscous sublayer, Pope 2000,
+# "Turbulent Flows", table 7.1), the first layer is a hundredth (y+ 10) to a thousandth (y+ 1) of
+# the surface cell it grows from; 8 layers by 1.25 stop far short of the outer cells and
+# snappyHexMesh added none (docs/hydro/rans/README.md, "Resistance"). There the measured body's
+# layers grow by 1.2, as the thesis's prism layers (section 3.3.3.3), until the last one is about a
+# fifth of the body's surface cell: 30 layers for y+ 1 on the medium SUBOFF mesh (15.6 um to 3.1
+# mm, 18.5 mm in all; the last face weight 0.13 and volume ratio 0.05, inside meshQualityDict's
+# 0.05 and 0.01).
+LOG_LAYER_Y_PLUS = 30.0
+RESOLVED_EXPANSION = 1.2
+RESOLVED_LAST_LAYER = 0.2
+# Such thin cells fail three of meshQualityDict's checks by their shape alone: the cell determinant
+# (0.001; these cells: 3e-11 by `checkMesh -allGeometry`), the face-decomposition tet quality and,
+# on the tapering stern, the face twist. snappyHexMesh removed their layers for these checks
+# alone, so they are switched off (the "disable" values of OpenFOAM v1912's
+# etc/caseDicts/meshQualityDict) in the `relaxed` set, used from the first layer iteration
+# (nRelaxedIter 0): castellation and snapping keep every check, the layers keep the others
+# (non-orthogonality, skewness, face weights, volume ratios, pyramid volumes).
+RESOLVED_LAYER_QUALITY = {"minDeterminant": -1.0, "minTetQuality": -1e30, "minTwist": -2.0}
 WALL_FUNCTIONS = {"nutk": "nutkWallFunction", "spalding": "nutUSpaldingWallFunction"}
 # The submarine beside a UUV is not measured: its first cell sits at y+ 300, still inside the log
 # layer of its boundary layer (about 1 m thick at the stern at full scale, thesis (3.10)), so that
@@ -293,6 +312,23 @@ def first_layer_thickness(spec: CaseSpec, body: Body | None = None) -> float:
     return 2.0 * y_plus * spec.nu / u_tau
 
 
+def resolves_sublayer(spec: CaseSpec) -> bool:
+    """The measured body's first cell sits below the log layer (LOG_LAYER_Y_PLUS)."""
+    return spec.y_plus < LOG_LAYER_Y_PLUS
+
+
+def boundary_layers(spec: CaseSpec, dom: Domain | None = None) -> tuple[int, float]:
+    """(layers, expansion ratio) on the measured body: LAYERS by LAYER_EXPANSION, or below the log
+    layer as many layers growing by RESOLVED_EXPANSION as reach RESOLVED_LAST_LAYER of its surface
+    cell. Other bodies always get LAYERS by LAYER_EXPANSION."""
+    if not resolves_sublayer(spec):
+        return LAYERS, LAYER_EXPANSION
+    dom = dom or domain(spec)
+    surface_cell = dom.background / 2 ** dom.surface_levels[0]
+    growth = math.log(RESOLVED_LAST_LAYER * surface_cell / first_layer_thickness(spec))
+    return max(LAYERS, 1 + round(growth / math.log(RESOLVED_EXPANSION))), RESOLVED_EXPANSION
+
+
 @dataclass(frozen=True)
 class Domain:
     lo: np.ndarray
@@ -406,8 +442,10 @@ def _snappy(spec: CaseSpec, dom: Domain) -> dict:
             shells.insert(0, [0.15 * near, level])
         regions[body.patch] = {"mode": "distance", "levels": shells}
         first = first_layer_thickness(spec, body)
+        count, expansion = boundary_layers(spec, dom) if body is spec.body else (LAYERS, LAYER_EXPANSION)
         layers[body.patch] = {
-            "nSurfaceLayers": LAYERS,
+            "nSurfaceLayers": count,
+            "expansionRatio": expansion,
             "firstLayerThickness": float(f"{first:.4g}"),
             "minThickness": float(f"{0.1 * first:.4g}"),
         }
@@ -429,6 +467,11 @@ def _snappy(spec: CaseSpec, dom: Domain) -> dict:
     regions["wake"] = {"mode": "inside", "levels": [[1e15, max(level - 2, 0)]]}
     regions["around"] = {"mode": "inside", "levels": [[1e15, max(level - 3, 0)]]}
     inside = dom.lo + (dom.hi - dom.lo) * np.array([0.0123, 0.9071, 0.9137])  # a far corner, in the fluid
+    quality = dict(MESH_QUALITY)
+    relaxed_layers = {}
+    if resolves_sublayer(spec):
+        quality["relaxed"] = dict(RESOLVED_LAYER_QUALITY)
+        relaxed_layers = {"nRelaxedIter": 0}
     return {
         "castellatedMesh": True,
         "snap": True,
@@ -460,7 +503,7 @@ def _snappy(spec: CaseSpec, dom: Domain) -> dict:
         "addLayersControls": {
             "relativeSizes": False,
             "layers": layers,
-            "expansionRatio": LAYER_EXPANSION,
+            "expansionRatio": boundary_layers(spec, dom)[1],
             "firstLayerThickness": float(f"{first_layer_thickness(spec):.4g}"),
             "minThickness": float(f"{0.1 * first_layer_thickness(spec):.4g}"),
             "nGrow": 0,
@@ -475,25 +518,29 @@ def _snappy(spec: CaseSpec, dom: Domain) -> dict:
             "minMedialAxisAngle": 90,
             "nBufferCellsNoExtrude": 0,
             "nLayerIter": 50,
+            **relaxed_layers,
         },
-        "meshQualityControls": {  # the values of OpenFOAM's etc/caseDicts/meshQualityDict
-            "maxNonOrtho": 65,
-            "maxBoundarySkewness": 20,
-            "maxInternalSkewness": 4,
-            "maxConcave": 80,
-            "minVol": 1e-13,
-            "minTetQuality": 1e-15,
-            "minArea": -1,
-            "minTwist": 0.02,
-            "minDeterminant": 0.001,
-            "minFaceWeight": 0.05,
-            "minVolRatio": 0.01,
-            "minTriangleTwist": -1,
-            "nSmoothScale": 4,
-            "errorReduction": 0.75,
-        },
+        "meshQualityControls": quality,
         "mergeTolerance": 1e-6,
     }
+
+
+MESH_QUALITY = {  # the values of OpenFOAM's etc/caseDicts/meshQualityDict
+    "maxNonOrtho": 65,
+    "maxBoundarySkewness": 20,
+    "maxInternalSkewness": 4,
+    "maxConcave": 80,
+    "minVol": 1e-13,
+    "minTetQuality": 1e-15,
+    "minArea": -1,
+    "minTwist": 0.02,
+    "minDeterminant": 0.001,
+    "minFaceWeight": 0.05,
+    "minVolRatio": 0.01,
+    "minTriangleTwist": -1,
+    "nSmoothScale": 4,
+    "errorReduction": 0.75,
+}
 
 
 def _control(spec: CaseSpec, end: int | None = None, restart: bool = False) -> dict:
@@ -1170,9 +1217,10 @@ def read_result(
     scale = coefficient_scale(spec, spec.body)
     convergence, mean = verdict(measured / scale, residuals, failure, spec.quarter)
     layers = layers_added(folder / "log.snappyHexMesh", spec.body.patch)
-    if convergence.status != "diverged" and layers is not None and layers < MIN_LAYER_SHARE * LAYERS:
+    wanted = boundary_layers(spec)[0]
+    if convergence.status != "diverged" and layers is not None and layers < MIN_LAYER_SHARE * wanted:
         convergence.status = "bad mesh"
-        convergence.reason = f"snappyHexMesh added {layers:.2g} of {LAYERS} boundary layers on {spec.body.patch}"
+        convergence.reason = f"snappyHexMesh added {layers:.2g} of {wanted} boundary layers on {spec.body.patch}"
     forces = {spec.body.patch: _named(mean * scale)}
     forces |= {patch: _named(h[-spread_window(len(h)) :].mean(axis=0)) for patch, h in histories.items() if len(h)}
     return Result(
