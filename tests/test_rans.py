@@ -411,6 +411,10 @@ def test_two_body_cases_start_first_order_and_suboff_does_not():
     assert rans.two_body_case(rans_campaign.TWO_BODY_STATIONS[0].row, "medium").start_iterations == 50
     assert rans.suboff_case(2.08).start_iterations == 0
     assert rans.two_body_case(rans_campaign.TWO_BODY_STATIONS[0].row, "medium", iterations=40).start_iterations == 10
+    # A SUBOFF case resolving its sublayer starts first order, for longer than the two-body cases.
+    resolved = rans.suboff_case(0.0, "medium", "spalding", 1.0)
+    assert resolved.start_iterations == rans.RESOLVED_FIRST_ORDER_START > rans.FIRST_ORDER_START
+    assert rans.suboff_case(0.0, "medium", "spalding", 30.0).start_iterations == 0
 
 
 def test_force_history_joins_the_stages_of_a_case(tmp_path):

@@ -99,6 +99,10 @@ DIVERGED_COEFFICIENT = 0.1  # |X'|, |Y'| or |N'| above this is no flow round a h
 # blew up in the layer cells at the submarine's bow stagnation point within 10 iterations, under
 # every relaxation tried (docs/hydro/rans/README.md, "The two-body divergence").
 FIRST_ORDER_START = 50
+# A case resolving its sublayer starts so too, for longer: on the medium SUBOFF mesh at y+ 1,
+# linearUpwind from a uniform start blew up at iteration 49 in the layer cells 3 cm behind the bow
+# (|U| 700 m/s at iteration 40); after 100 upwind iterations it ran on.
+RESOLVED_FIRST_ORDER_START = 100
 # The symmetry planes are OpenFOAM's `symmetry` patches, which take each face's own normal:
 # snappyHexMesh's layers moved points of the z = 0 plane on the fine two-body mesh (1.09 M cells)
 # off it, and simpleFoam refused the `symmetryPlane` type there ("not planar"). On a plane both
@@ -165,8 +169,11 @@ class CaseSpec:
 
     @property
     def start_iterations(self) -> int:
-        """Iterations solved with first-order upwind for U before the case's own schemes (not for
-        SUBOFF: its cases are stable without, and their validation was run so)."""
+        """Iterations solved with first-order upwind for U before the case's own schemes: a case
+        resolving its sublayer RESOLVED_FIRST_ORDER_START, a SUBOFF case with wall functions none
+        (stable without, and their validation was run so), the others FIRST_ORDER_START."""
+        if resolves_sublayer(self):
+            return min(RESOLVED_FIRST_ORDER_START, self.end_iteration // 4)
         return 0 if self.kind == "suboff" else min(FIRST_ORDER_START, self.end_iteration // 4)
 
     def describe(self) -> dict:
