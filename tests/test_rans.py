@@ -95,26 +95,27 @@ def test_drift_case_is_a_half_domain_with_the_chosen_wall_function(tmp_path):
     assert rans.first_layer_thickness(spec) == pytest.approx(rans.first_layer_thickness(rans.suboff_case(4.07)) * 0.6)
 
 
-def test_a_first_cell_below_the_log_layer_gets_layers_grown_to_the_outer_cells(tmp_path):
-    """Below y+ 30 the measured body's layers grow by 1.2 (thesis section 3.3.3.3) until the last
-    is about a fifth of its surface cell, and only the layer addition drops the checks that thin
-    cells fail by their shape; at y+ 30 and above the case is written as before."""
+def test_a_first_cell_below_the_log_layer_gets_the_thesis_prism_layers(tmp_path):
+    """Below y+ 30 the measured body's layers grow by 1.2 until they span Prandtl's boundary-layer
+    thickness (thesis section 3.3.3.3, (3.10)), and only the layer addition drops the checks that
+    thin cells fail by their shape; at y+ 30 and above the case is written as before."""
     spec = rans.suboff_case(0.0, "medium", "spalding", 1.0)
     shm = _foam(rans.write_case(spec, tmp_path / "r") / "system/snappyHexMeshDict")
     controls = shm["addLayersControls"]
     count, expansion = rans.boundary_layers(spec)
-    assert controls["layers"]["suboff"]["nSurfaceLayers"] == count and 20 <= count <= 40
+    assert controls["layers"]["suboff"]["nSurfaceLayers"] == count and 30 <= count <= 45
     assert controls["layers"]["suboff"]["expansionRatio"] == pytest.approx(1.2) == expansion
-    dom = rans.domain(spec)
-    surface_cell = dom.background / 2 ** dom.surface_levels[0]
-    last = rans.first_layer_thickness(spec) * expansion ** (count - 1)
-    assert last / surface_cell == pytest.approx(rans.RESOLVED_LAST_LAYER, rel=0.1)  # within half a growth step
+    reynolds = 3.05 * 4.3561 / (8.899e-4 / 997)  # thesis table 3.1's tow tank
+    delta = 0.16 * 4.3561 / reynolds ** (1 / 7)  # thesis (3.10): 66 mm
+    stack = rans.first_layer_thickness(spec) * (expansion**count - 1) / (expansion - 1)
+    assert stack == pytest.approx(delta, rel=0.1)  # within half a growth step
     assert controls["nRelaxedIter"] == 0
     quality = shm["meshQualityControls"]
     assert quality["minDeterminant"] == pytest.approx(0.001) and quality["minTwist"] == pytest.approx(0.02)
     relaxed = quality["relaxed"]
     assert relaxed["minDeterminant"] <= 0 and relaxed["minTwist"] < -1 and relaxed["minTetQuality"] < -1e29
-    assert "maxNonOrtho" not in relaxed and "minFaceWeight" not in relaxed  # the layers keep the rest
+    assert relaxed["maxNonOrtho"] == 75  # OpenFOAM's meshQualityDict.cfg
+    assert "minFaceWeight" not in relaxed and "maxInternalSkewness" not in relaxed  # the layers keep the rest
     # A thicker first cell needs fewer layers to reach the same outer cells.
     assert rans.boundary_layers(rans.suboff_case(0.0, "medium", "spalding", 10.0))[0] < count
     # y+ 30: the wall-function recipe, unchanged.

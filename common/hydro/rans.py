@@ -63,21 +63,23 @@ LAYER_EXPANSION = 1.25
 # "Turbulent Flows", table 7.1), the first layer is a hundredth (y+ 10) to a thousandth (y+ 1) of
 # the surface cell it grows from; 8 layers by 1.25 stop far short of the outer cells and
 # snappyHexMesh added none (docs/hydro/rans/README.md, "Resistance"). There the measured body's
-# layers grow by 1.2, as the thesis's prism layers (section 3.3.3.3), until the last one is about a
-# fifth of the body's surface cell: 30 layers for y+ 1 on the medium SUBOFF mesh (15.6 um to 3.1
-# mm, 18.5 mm in all; the last face weight 0.13 and volume ratio 0.05, inside meshQualityDict's
-# 0.05 and 0.01).
+# layers are the thesis's prism layers (section 3.3.3.3): growing by 1.2 until they span Prandtl's
+# turbulent boundary-layer thickness at the body's end, 0.16 L / Re_L^(1/7) (thesis (3.10)). For
+# SUBOFF at y+ 1: 37 layers, 15.6 um to 11 mm, 66 mm in all (a stack of 30 ending at a fifth of the
+# medium surface cell, 18.5 mm, gave 1.2 N less friction).
 LOG_LAYER_Y_PLUS = 30.0
 RESOLVED_EXPANSION = 1.2
-RESOLVED_LAST_LAYER = 0.2
+BOUNDARY_LAYER_COEFFICIENT = 0.16  # thesis (3.10)
 # Such thin cells fail three of meshQualityDict's checks by their shape alone: the cell determinant
 # (0.001; these cells: 3e-11 by `checkMesh -allGeometry`), the face-decomposition tet quality and,
 # on the tapering stern, the face twist. snappyHexMesh removed their layers for these checks
 # alone, so they are switched off (the "disable" values of OpenFOAM v1912's
 # etc/caseDicts/meshQualityDict) in the `relaxed` set, used from the first layer iteration
-# (nRelaxedIter 0): castellation and snapping keep every check, the layers keep the others
-# (non-orthogonality, skewness, face weights, volume ratios, pyramid volumes).
-RESOLVED_LAYER_QUALITY = {"minDeterminant": -1.0, "minTetQuality": -1e30, "minTwist": -2.0}
+# (nRelaxedIter 0), with the relaxed non-orthogonality of OpenFOAM's
+# etc/caseDicts/mesh/generation/meshQualityDict.cfg (75: shrinking the mesh by the 66 mm stack
+# skews a few hundred faces past 65). Castellation and snapping keep every check, the layers the
+# others (skewness, face weights, volume ratios, pyramid volumes).
+RESOLVED_LAYER_QUALITY = {"minDeterminant": -1.0, "minTetQuality": -1e30, "minTwist": -2.0, "maxNonOrtho": 75}
 WALL_FUNCTIONS = {"nutk": "nutkWallFunction", "spalding": "nutUSpaldingWallFunction"}
 # The submarine beside a UUV is not measured: its first cell sits at y+ 300, still inside the log
 # layer of its boundary layer (about 1 m thick at the stern at full scale, thesis (3.10)), so that
@@ -324,16 +326,21 @@ def resolves_sublayer(spec: CaseSpec) -> bool:
     return spec.y_plus < LOG_LAYER_Y_PLUS
 
 
-def boundary_layers(spec: CaseSpec, dom: Domain | None = None) -> tuple[int, float]:
+def boundary_layer_thickness(spec: CaseSpec) -> float:
+    """Prandtl's turbulent boundary-layer thickness [m] at the measured body's end (thesis (3.10))."""
+    reynolds = spec.speed * spec.body.length / spec.nu
+    return BOUNDARY_LAYER_COEFFICIENT * spec.body.length / reynolds ** (1.0 / 7.0)
+
+
+def boundary_layers(spec: CaseSpec) -> tuple[int, float]:
     """(layers, expansion ratio) on the measured body: LAYERS by LAYER_EXPANSION, or below the log
-    layer as many layers growing by RESOLVED_EXPANSION as reach RESOLVED_LAST_LAYER of its surface
-    cell. Other bodies always get LAYERS by LAYER_EXPANSION."""
+    layer as many layers growing by RESOLVED_EXPANSION as span `boundary_layer_thickness`. Other
+    bodies always get LAYERS by LAYER_EXPANSION."""
     if not resolves_sublayer(spec):
         return LAYERS, LAYER_EXPANSION
-    dom = dom or domain(spec)
-    surface_cell = dom.background / 2 ** dom.surface_levels[0]
-    growth = math.log(RESOLVED_LAST_LAYER * surface_cell / first_layer_thickness(spec))
-    return max(LAYERS, 1 + round(growth / math.log(RESOLVED_EXPANSION))), RESOLVED_EXPANSION
+    r = RESOLVED_EXPANSION
+    growth = 1.0 + boundary_layer_thickness(spec) * (r - 1.0) / first_layer_thickness(spec)  # r^n
+    return max(LAYERS, round(math.log(growth) / math.log(r))), r
 
 
 @dataclass(frozen=True)
@@ -449,7 +456,7 @@ def _snappy(spec: CaseSpec, dom: Domain) -> dict:
             shells.insert(0, [0.15 * near, level])
         regions[body.patch] = {"mode": "distance", "levels": shells}
         first = first_layer_thickness(spec, body)
-        count, expansion = boundary_layers(spec, dom) if body is spec.body else (LAYERS, LAYER_EXPANSION)
+        count, expansion = boundary_layers(spec) if body is spec.body else (LAYERS, LAYER_EXPANSION)
         layers[body.patch] = {
             "nSurfaceLayers": count,
             "expansionRatio": expansion,
@@ -510,7 +517,7 @@ def _snappy(spec: CaseSpec, dom: Domain) -> dict:
         "addLayersControls": {
             "relativeSizes": False,
             "layers": layers,
-            "expansionRatio": boundary_layers(spec, dom)[1],
+            "expansionRatio": boundary_layers(spec)[1],
             "firstLayerThickness": float(f"{first_layer_thickness(spec):.4g}"),
             "minThickness": float(f"{0.1 * first_layer_thickness(spec):.4g}"),
             "nGrow": 0,
