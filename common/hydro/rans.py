@@ -65,8 +65,8 @@ LAYER_EXPANSION = 1.25
 # snappyHexMesh added none (docs/hydro/rans/README.md, "Resistance"). There the measured body's
 # layers are the thesis's prism layers (section 3.3.3.3): growing by 1.2 until they span Prandtl's
 # turbulent boundary-layer thickness at the body's end, 0.16 L / Re_L^(1/7) (thesis (3.10)). For
-# SUBOFF at y+ 1: 37 layers, 15.6 um to 11 mm, 66 mm in all (a stack of 30 ending at a fifth of the
-# medium surface cell, 18.5 mm, gave 1.2 N less friction).
+# SUBOFF at y+ 1: 37 layers, 15.6 um to 11 mm, 66 mm in all, the same at every mesh level (a stack
+# of 30 ending at a fifth of the medium surface cell, 18.5 mm, gave a resistance 0.5 % higher).
 LOG_LAYER_Y_PLUS = 30.0
 RESOLVED_EXPANSION = 1.2
 BOUNDARY_LAYER_COEFFICIENT = 0.16  # thesis (3.10)
