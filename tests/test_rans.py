@@ -505,6 +505,23 @@ def test_sustained_inflow_turbulence_is_its_own_case(tmp_path):
     assert refused.returncode == 2 and "--sustain-inflow" in refused.stderr
 
 
+def test_wilcox_k_omega_is_its_own_suboff_case(tmp_path):
+    spec = rans.suboff_case(0.0, "medium", "spalding", 1.0, turbulence="komega")
+    assert spec.case_id == "suboff-psi0.00-medium-spalding-yp1-komega"
+    folder = rans.write_case(spec, tmp_path / "w")
+    assert _foam(folder / "constant/turbulenceProperties")["RAS"]["RASModel"] == "kOmega"
+    assert rans.load_spec(folder) == spec
+    default = rans.write_case(rans.suboff_case(0.0, "medium", "spalding", 1.0), tmp_path / "d")
+    assert _foam(default / "constant/turbulenceProperties")["RAS"]["RASModel"] == "kOmegaSST"
+    for bad in ({"turbulence": "kEpsilon"}, {"turbulence": "komega", "sustain_inflow": True}):
+        with pytest.raises(rans.CaseError, match="--turbulence|--sustain-inflow"):
+            rans.suboff_case(0.0, **bad)
+    refused = nearsub("cfd", "case", "--config", "0", "0.08", "3.5", "0", "20", "8", "--turbulence", "komega")
+    assert refused.returncode == 2 and "--turbulence" in refused.stderr and "Traceback" not in refused.stderr
+    unknown = nearsub("cfd", "case", "--turbulence", "kEpsilon", "-o", str(tmp_path / "x"))
+    assert unknown.returncode == 2 and "--turbulence 'kEpsilon'" in unknown.stderr and not (tmp_path / "x").exists()
+
+
 def _saved(folder: Path, spec: rans.CaseSpec, status: str, iterations: int) -> None:
     convergence = rans.Convergence(status, "", iterations, iterations // 5, {"X": 0.0, "Y": 0.0, "N": 0.0}, {})
     result = rans.Result(spec.case_id, spec.kind, spec.level, spec.wall_function, spec.y_plus, 1, 2, 1.0, 1.0,

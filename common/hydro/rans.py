@@ -81,6 +81,11 @@ BOUNDARY_LAYER_COEFFICIENT = 0.16  # thesis (3.10)
 # others (skewness, face weights, volume ratios, pyramid volumes).
 RESOLVED_LAYER_QUALITY = {"minDeterminant": -1.0, "minTetQuality": -1e30, "minTwist": -2.0, "maxNonOrtho": 75}
 WALL_FUNCTIONS = {"nutk": "nutkWallFunction", "spalding": "nutUSpaldingWallFunction"}
+# The turbulence model: k-omega SST (Menter 1994, AIAA J. 32(8) 1598-1605; OpenFOAM's kOmegaSST),
+# or Wilcox's k-omega (Wilcox 1998, "Turbulence Modeling for CFD"; OpenFOAM's kOmega), the thesis's
+# model (section 3.3.3.3), for a SUBOFF case. With the sublayer resolved (y+ 1, medium mesh) SST's
+# friction was 72.4 N and k-omega's 77.7 N, against ITTC-57's 77.8 N (docs/hydro/rans/README.md).
+TURBULENCE_MODELS = {"sst": "kOmegaSST", "komega": "kOmega"}
 # The submarine beside a UUV is not measured: its first cell sits at y+ 300, still inside the log
 # layer of its boundary layer (about 1 m thick at the stern at full scale, thesis (3.10)), so that
 # its 8 layers reach its surface cells (0.3-0.5 m) without cells a hundred times smaller beside them.
@@ -156,6 +161,7 @@ class CaseSpec:
     inputs: tuple[float, ...] | None = None
     iterations: int | None = None  # default: the level's
     sustain_inflow: bool = False  # SST's sustaining terms for the inflow turbulence (Spalart & Rumsey 2007)
+    turbulence: str = "sst"  # a key of TURBULENCE_MODELS
 
     @property
     def body(self) -> Body:
@@ -209,17 +215,23 @@ def suboff_case(
     y_plus: float = 50.0,
     iterations: int | None = None,
     sustain_inflow: bool = False,
+    turbulence: str = "sst",
 ) -> CaseSpec:
     """The model-scale SUBOFF bare hull alone at drift angle psi_deg in the tow-tank conditions of
     thesis tables 3.1/3.2 (3.05 m/s, fresh water, nu = 8.899e-4/997): the validation case."""
     _check_options(level, wall_function, y_plus)
     if not (math.isfinite(psi_deg) and 0.0 <= psi_deg <= 20.0):
         raise CaseError(f"--psi {psi_deg!r}: the validation covers drift angles 0 to 20 deg")
+    if turbulence not in TURBULENCE_MODELS:
+        raise CaseError(f"--turbulence {turbulence!r}: choose one of {', '.join(TURBULENCE_MODELS)}")
+    if sustain_inflow and turbulence != "sst":
+        raise CaseError(f"--sustain-inflow: SST's sustaining terms, not for --turbulence {turbulence}")
     hull = Body("suboff", "suboff-model", SUBOFF_MODEL_LENGTH, SUBOFF_MODEL_DIAMETER, psi=math.radians(psi_deg))
     return CaseSpec(
         case_id=f"suboff-psi{psi_deg:.2f}"
         + _case_suffix(level, wall_function, y_plus)
-        + ("-sust" if sustain_inflow else ""),
+        + ("-sust" if sustain_inflow else "")
+        + ("" if turbulence == "sst" else f"-{turbulence}"),
         kind="suboff",
         bodies=(hull,),
         speed=SUBOFF_TEST_SPEED,
@@ -231,6 +243,7 @@ def suboff_case(
         quarter=psi_deg == 0.0,
         iterations=iterations,
         sustain_inflow=sustain_inflow,
+        turbulence=turbulence,
     )
 
 
@@ -768,7 +781,7 @@ def write_case(spec: CaseSpec, folder, cores: int = 1) -> Path:
         {"numberOfSubdomains": cores, "method": "hierarchical", "coeffs": {"n": [cores, 1, 1]}},
     )
     _write(folder / "constant" / "transportProperties", {"transportModel": "Newtonian", "nu": spec.nu})
-    ras = {"RASModel": "kOmegaSST", "turbulence": True, "printCoeffs": True}
+    ras = {"RASModel": TURBULENCE_MODELS[spec.turbulence], "turbulence": True, "printCoeffs": True}
     if spec.sustain_inflow:
         k, omega = inflow_turbulence(spec)
         ras["kOmegaSSTCoeffs"] = {"decayControl": True, "kInf": k, "omegaInf": omega}
