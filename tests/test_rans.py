@@ -95,6 +95,44 @@ def test_drift_case_is_a_half_domain_with_the_chosen_wall_function(tmp_path):
     assert rans.first_layer_thickness(spec) == pytest.approx(rans.first_layer_thickness(rans.suboff_case(4.07)) * 0.6)
 
 
+def test_a_first_cell_below_the_log_layer_gets_the_thesis_prism_layers(tmp_path):
+    """Below y+ 30 the measured body's layers grow by 1.2 until they span Prandtl's boundary-layer
+    thickness (thesis section 3.3.3.3, (3.10)), and only the layer addition drops the checks that
+    thin cells fail by their shape; at y+ 30 and above the case is written as before."""
+    spec = rans.suboff_case(0.0, "medium", "spalding", 1.0)
+    shm = _foam(rans.write_case(spec, tmp_path / "r") / "system/snappyHexMeshDict")
+    controls = shm["addLayersControls"]
+    count, expansion = rans.boundary_layers(spec)
+    assert controls["layers"]["suboff"]["nSurfaceLayers"] == count and 30 <= count <= 45
+    assert controls["layers"]["suboff"]["expansionRatio"] == pytest.approx(1.2) == expansion
+    reynolds = 3.05 * 4.3561 / (8.899e-4 / 997)  # thesis table 3.1's tow tank
+    delta = 0.16 * 4.3561 / reynolds ** (1 / 7)  # thesis (3.10): 66 mm
+    stack = rans.first_layer_thickness(spec) * (expansion**count - 1) / (expansion - 1)
+    assert stack == pytest.approx(delta, rel=0.1)  # within half a growth step
+    assert controls["nRelaxedIter"] == 0
+    quality = shm["meshQualityControls"]
+    assert quality["minDeterminant"] == pytest.approx(0.001) and quality["minTwist"] == pytest.approx(0.02)
+    relaxed = quality["relaxed"]
+    assert relaxed["minDeterminant"] <= 0 and relaxed["minTwist"] < -1 and relaxed["minTetQuality"] < -1e29
+    assert relaxed["maxNonOrtho"] == 75  # OpenFOAM's meshQualityDict.cfg
+    assert "minFaceWeight" not in relaxed and "maxInternalSkewness" not in relaxed  # the layers keep the rest
+    # A thicker first cell needs fewer layers to reach the same outer cells.
+    assert rans.boundary_layers(rans.suboff_case(0.0, "medium", "spalding", 10.0))[0] < count
+    # y+ 30: the wall-function recipe, unchanged.
+    wall = _foam(
+        rans.write_case(rans.suboff_case(0.0, "medium", "spalding", 30.0), tmp_path / "w") / "system/snappyHexMeshDict"
+    )
+    assert wall["addLayersControls"]["layers"]["suboff"]["nSurfaceLayers"] == rans.LAYERS
+    assert wall["addLayersControls"]["expansionRatio"] == pytest.approx(rans.LAYER_EXPANSION)
+    assert "relaxed" not in wall["meshQualityControls"] and "nRelaxedIter" not in wall["addLayersControls"]
+    # In a two-body case only the measured UUV resolves its sublayer; the submarine keeps y+ 300.
+    two = rans.two_body_case([0.2, 0.08, 3.5, 2.0, 20.0, 8.0], "coarse", "spalding", 1.0)
+    layers = _foam(rans.write_case(two, tmp_path / "t") / "system/snappyHexMeshDict")["addLayersControls"]["layers"]
+    assert layers["uuv"]["nSurfaceLayers"] == rans.boundary_layers(two)[0] > rans.LAYERS
+    assert layers["submarine"]["nSurfaceLayers"] == rans.LAYERS
+    assert layers["submarine"]["expansionRatio"] == pytest.approx(rans.LAYER_EXPANSION)
+
+
 def test_mesh_levels_refine_by_a_constant_ratio():
     sizes = [rans.domain(rans.suboff_case(0.0, lv)).background for lv in ("coarse", "medium", "fine")]
     assert sizes[0] / sizes[1] == pytest.approx(math.sqrt(2)) and sizes[1] / sizes[2] == pytest.approx(math.sqrt(2))
@@ -329,6 +367,17 @@ def test_a_case_without_its_boundary_layers_is_refused(tmp_path):
     result = rans.read_result(spec, tmp_path, cells=1, cores=1, mesh_seconds=0.0, solve_seconds=0.0)
     assert result.convergence.status == "bad mesh" and not result.convergence.usable
     assert "0.0097 of 8 boundary layers" in result.convergence.reason
+    # A sublayer-resolving case is judged against its own layer count.
+    resolved = rans.suboff_case(0.0, "medium", "spalding", 1.0)
+    wanted = rans.boundary_layers(resolved)[0]
+    verdicts = {}
+    for added in (0.4 * wanted, 0.9 * wanted):
+        (tmp_path / "log.snappyHexMesh").write_text(summary.format("suboff", f"{added:.1f}"))
+        result = rans.read_result(resolved, tmp_path, cells=1, cores=1, mesh_seconds=0.0, solve_seconds=0.0)
+        verdicts[added] = result.convergence
+    low, high = verdicts.values()
+    assert low.status == "bad mesh" and f"of {wanted} boundary layers" in low.reason
+    assert high.status != "bad mesh"
 
 
 # --- two-body suite and the side-by-side comparison ------------------------------------------------
@@ -363,6 +412,10 @@ def test_two_body_cases_start_first_order_and_suboff_does_not():
     assert rans.two_body_case(rans_campaign.TWO_BODY_STATIONS[0].row, "medium").start_iterations == 50
     assert rans.suboff_case(2.08).start_iterations == 0
     assert rans.two_body_case(rans_campaign.TWO_BODY_STATIONS[0].row, "medium", iterations=40).start_iterations == 10
+    # A SUBOFF case resolving its sublayer starts first order, for longer than the two-body cases.
+    resolved = rans.suboff_case(0.0, "medium", "spalding", 1.0)
+    assert resolved.start_iterations == rans.RESOLVED_FIRST_ORDER_START > rans.FIRST_ORDER_START
+    assert rans.suboff_case(0.0, "medium", "spalding", 30.0).start_iterations == 0
 
 
 def test_force_history_joins_the_stages_of_a_case(tmp_path):
@@ -450,6 +503,23 @@ def test_sustained_inflow_turbulence_is_its_own_case(tmp_path):
         "cfd", "case", "--config", "0", "0.08", "3.5", "0", "20", "8", "--sustain-inflow", "-o", str(tmp_path / "x")
     )
     assert refused.returncode == 2 and "--sustain-inflow" in refused.stderr
+
+
+def test_wilcox_k_omega_is_its_own_suboff_case(tmp_path):
+    spec = rans.suboff_case(0.0, "medium", "spalding", 1.0, turbulence="komega")
+    assert spec.case_id == "suboff-psi0.00-medium-spalding-yp1-komega"
+    folder = rans.write_case(spec, tmp_path / "w")
+    assert _foam(folder / "constant/turbulenceProperties")["RAS"]["RASModel"] == "kOmega"
+    assert rans.load_spec(folder) == spec
+    default = rans.write_case(rans.suboff_case(0.0, "medium", "spalding", 1.0), tmp_path / "d")
+    assert _foam(default / "constant/turbulenceProperties")["RAS"]["RASModel"] == "kOmegaSST"
+    for bad in ({"turbulence": "kEpsilon"}, {"turbulence": "komega", "sustain_inflow": True}):
+        with pytest.raises(rans.CaseError, match="--turbulence|--sustain-inflow"):
+            rans.suboff_case(0.0, **bad)
+    refused = nearsub("cfd", "case", "--config", "0", "0.08", "3.5", "0", "20", "8", "--turbulence", "komega")
+    assert refused.returncode == 2 and "--turbulence" in refused.stderr and "Traceback" not in refused.stderr
+    unknown = nearsub("cfd", "case", "--turbulence", "kEpsilon", "-o", str(tmp_path / "x"))
+    assert unknown.returncode == 2 and "--turbulence 'kEpsilon'" in unknown.stderr and not (tmp_path / "x").exists()
 
 
 def _saved(folder: Path, spec: rans.CaseSpec, status: str, iterations: int) -> None:

@@ -59,7 +59,33 @@ INFLOW_VISCOSITY_RATIO = 10.0
 # section 3.3.3.3; 1.25 reaches the outer cells with 8 layers).
 LAYERS = 8
 LAYER_EXPANSION = 1.25
+# Below the log layer (a target y+ under 30: the buffer layer and the viscous sublayer, Pope 2000,
+# "Turbulent Flows", table 7.1), the first layer is a hundredth (y+ 10) to a thousandth (y+ 1) of
+# the surface cell it grows from; 8 layers by 1.25 stop far short of the outer cells and
+# snappyHexMesh added none (docs/hydro/rans/README.md, "Resistance"). There the measured body's
+# layers are the thesis's prism layers (section 3.3.3.3): growing by 1.2 until they span Prandtl's
+# turbulent boundary-layer thickness at the body's end, 0.16 L / Re_L^(1/7) (thesis (3.10)). For
+# SUBOFF at y+ 1: 37 layers, 15.6 um to 11 mm, 66 mm in all, the same at every mesh level (a stack
+# of 30 ending at a fifth of the medium surface cell, 18.5 mm, gave a resistance 0.5 % higher).
+LOG_LAYER_Y_PLUS = 30.0
+RESOLVED_EXPANSION = 1.2
+BOUNDARY_LAYER_COEFFICIENT = 0.16  # thesis (3.10)
+# Such thin cells fail three of meshQualityDict's checks by their shape alone: the cell determinant
+# (0.001; these cells: 3e-11 by `checkMesh -allGeometry`), the face-decomposition tet quality and,
+# on the tapering stern, the face twist. snappyHexMesh removed their layers for these checks
+# alone, so they are switched off (the "disable" values of OpenFOAM v1912's
+# etc/caseDicts/meshQualityDict) in the `relaxed` set, used from the first layer iteration
+# (nRelaxedIter 0), with the relaxed non-orthogonality of OpenFOAM's
+# etc/caseDicts/mesh/generation/meshQualityDict.cfg (75: shrinking the mesh by the 66 mm stack
+# skews a few hundred faces past 65). Castellation and snapping keep every check, the layers the
+# others (skewness, face weights, volume ratios, pyramid volumes).
+RESOLVED_LAYER_QUALITY = {"minDeterminant": -1.0, "minTetQuality": -1e30, "minTwist": -2.0, "maxNonOrtho": 75}
 WALL_FUNCTIONS = {"nutk": "nutkWallFunction", "spalding": "nutUSpaldingWallFunction"}
+# The turbulence model: k-omega SST (Menter 1994, AIAA J. 32(8) 1598-1605; OpenFOAM's kOmegaSST),
+# or Wilcox's k-omega (Wilcox 1998, "Turbulence Modeling for CFD"; OpenFOAM's kOmega), the thesis's
+# model (section 3.3.3.3), for a SUBOFF case. With the sublayer resolved (y+ 1, medium mesh) SST's
+# friction was 72.4 N and k-omega's 77.7 N, against ITTC-57's 77.8 N (docs/hydro/rans/README.md).
+TURBULENCE_MODELS = {"sst": "kOmegaSST", "komega": "kOmega"}
 # The submarine beside a UUV is not measured: its first cell sits at y+ 300, still inside the log
 # layer of its boundary layer (about 1 m thick at the stern at full scale, thesis (3.10)), so that
 # its 8 layers reach its surface cells (0.3-0.5 m) without cells a hundred times smaller beside them.
@@ -80,6 +106,10 @@ DIVERGED_COEFFICIENT = 0.1  # |X'|, |Y'| or |N'| above this is no flow round a h
 # blew up in the layer cells at the submarine's bow stagnation point within 10 iterations, under
 # every relaxation tried (docs/hydro/rans/README.md, "The two-body divergence").
 FIRST_ORDER_START = 50
+# A case resolving its sublayer starts so too, for longer: on the medium SUBOFF mesh at y+ 1,
+# linearUpwind from a uniform start blew up at iteration 49 in the layer cells 3 cm behind the bow
+# (|U| 700 m/s at iteration 40); after 100 upwind iterations it ran on.
+RESOLVED_FIRST_ORDER_START = 100
 # The symmetry planes are OpenFOAM's `symmetry` patches, which take each face's own normal:
 # snappyHexMesh's layers moved points of the z = 0 plane on the fine two-body mesh (1.09 M cells)
 # off it, and simpleFoam refused the `symmetryPlane` type there ("not planar"). On a plane both
@@ -131,6 +161,7 @@ class CaseSpec:
     inputs: tuple[float, ...] | None = None
     iterations: int | None = None  # default: the level's
     sustain_inflow: bool = False  # SST's sustaining terms for the inflow turbulence (Spalart & Rumsey 2007)
+    turbulence: str = "sst"  # a key of TURBULENCE_MODELS
 
     @property
     def body(self) -> Body:
@@ -146,8 +177,11 @@ class CaseSpec:
 
     @property
     def start_iterations(self) -> int:
-        """Iterations solved with first-order upwind for U before the case's own schemes (not for
-        SUBOFF: its cases are stable without, and their validation was run so)."""
+        """Iterations solved with first-order upwind for U before the case's own schemes: a case
+        resolving its sublayer RESOLVED_FIRST_ORDER_START, a SUBOFF case with wall functions none
+        (stable without, and their validation was run so), the others FIRST_ORDER_START."""
+        if resolves_sublayer(self):
+            return min(RESOLVED_FIRST_ORDER_START, self.end_iteration // 4)
         return 0 if self.kind == "suboff" else min(FIRST_ORDER_START, self.end_iteration // 4)
 
     def describe(self) -> dict:
@@ -181,17 +215,23 @@ def suboff_case(
     y_plus: float = 50.0,
     iterations: int | None = None,
     sustain_inflow: bool = False,
+    turbulence: str = "sst",
 ) -> CaseSpec:
     """The model-scale SUBOFF bare hull alone at drift angle psi_deg in the tow-tank conditions of
     thesis tables 3.1/3.2 (3.05 m/s, fresh water, nu = 8.899e-4/997): the validation case."""
     _check_options(level, wall_function, y_plus)
     if not (math.isfinite(psi_deg) and 0.0 <= psi_deg <= 20.0):
         raise CaseError(f"--psi {psi_deg!r}: the validation covers drift angles 0 to 20 deg")
+    if turbulence not in TURBULENCE_MODELS:
+        raise CaseError(f"--turbulence {turbulence!r}: choose one of {', '.join(TURBULENCE_MODELS)}")
+    if sustain_inflow and turbulence != "sst":
+        raise CaseError(f"--sustain-inflow: SST's sustaining terms, not for --turbulence {turbulence}")
     hull = Body("suboff", "suboff-model", SUBOFF_MODEL_LENGTH, SUBOFF_MODEL_DIAMETER, psi=math.radians(psi_deg))
     return CaseSpec(
         case_id=f"suboff-psi{psi_deg:.2f}"
         + _case_suffix(level, wall_function, y_plus)
-        + ("-sust" if sustain_inflow else ""),
+        + ("-sust" if sustain_inflow else "")
+        + ("" if turbulence == "sst" else f"-{turbulence}"),
         kind="suboff",
         bodies=(hull,),
         speed=SUBOFF_TEST_SPEED,
@@ -203,6 +243,7 @@ def suboff_case(
         quarter=psi_deg == 0.0,
         iterations=iterations,
         sustain_inflow=sustain_inflow,
+        turbulence=turbulence,
     )
 
 
@@ -291,6 +332,28 @@ def first_layer_thickness(spec: CaseSpec, body: Body | None = None) -> float:
     cf = float(ittc57(spec.speed * body.length / spec.nu))
     u_tau = spec.speed * math.sqrt(0.5 * cf)
     return 2.0 * y_plus * spec.nu / u_tau
+
+
+def resolves_sublayer(spec: CaseSpec) -> bool:
+    """The measured body's first cell sits below the log layer (LOG_LAYER_Y_PLUS)."""
+    return spec.y_plus < LOG_LAYER_Y_PLUS
+
+
+def boundary_layer_thickness(spec: CaseSpec) -> float:
+    """Prandtl's turbulent boundary-layer thickness [m] at the measured body's end (thesis (3.10))."""
+    reynolds = spec.speed * spec.body.length / spec.nu
+    return BOUNDARY_LAYER_COEFFICIENT * spec.body.length / reynolds ** (1.0 / 7.0)
+
+
+def boundary_layers(spec: CaseSpec) -> tuple[int, float]:
+    """(layers, expansion ratio) on the measured body: LAYERS by LAYER_EXPANSION, or below the log
+    layer as many layers growing by RESOLVED_EXPANSION as span `boundary_layer_thickness`. Other
+    bodies always get LAYERS by LAYER_EXPANSION."""
+    if not resolves_sublayer(spec):
+        return LAYERS, LAYER_EXPANSION
+    r = RESOLVED_EXPANSION
+    growth = 1.0 + boundary_layer_thickness(spec) * (r - 1.0) / first_layer_thickness(spec)  # r^n
+    return max(LAYERS, round(math.log(growth) / math.log(r))), r
 
 
 @dataclass(frozen=True)
@@ -406,8 +469,10 @@ def _snappy(spec: CaseSpec, dom: Domain) -> dict:
             shells.insert(0, [0.15 * near, level])
         regions[body.patch] = {"mode": "distance", "levels": shells}
         first = first_layer_thickness(spec, body)
+        count, expansion = boundary_layers(spec) if body is spec.body else (LAYERS, LAYER_EXPANSION)
         layers[body.patch] = {
-            "nSurfaceLayers": LAYERS,
+            "nSurfaceLayers": count,
+            "expansionRatio": expansion,
             "firstLayerThickness": float(f"{first:.4g}"),
             "minThickness": float(f"{0.1 * first:.4g}"),
         }
@@ -429,6 +494,11 @@ def _snappy(spec: CaseSpec, dom: Domain) -> dict:
     regions["wake"] = {"mode": "inside", "levels": [[1e15, max(level - 2, 0)]]}
     regions["around"] = {"mode": "inside", "levels": [[1e15, max(level - 3, 0)]]}
     inside = dom.lo + (dom.hi - dom.lo) * np.array([0.0123, 0.9071, 0.9137])  # a far corner, in the fluid
+    quality = dict(MESH_QUALITY)
+    relaxed_layers = {}
+    if resolves_sublayer(spec):
+        quality["relaxed"] = dict(RESOLVED_LAYER_QUALITY)
+        relaxed_layers = {"nRelaxedIter": 0}
     return {
         "castellatedMesh": True,
         "snap": True,
@@ -460,7 +530,7 @@ def _snappy(spec: CaseSpec, dom: Domain) -> dict:
         "addLayersControls": {
             "relativeSizes": False,
             "layers": layers,
-            "expansionRatio": LAYER_EXPANSION,
+            "expansionRatio": boundary_layers(spec)[1],
             "firstLayerThickness": float(f"{first_layer_thickness(spec):.4g}"),
             "minThickness": float(f"{0.1 * first_layer_thickness(spec):.4g}"),
             "nGrow": 0,
@@ -475,25 +545,29 @@ def _snappy(spec: CaseSpec, dom: Domain) -> dict:
             "minMedialAxisAngle": 90,
             "nBufferCellsNoExtrude": 0,
             "nLayerIter": 50,
+            **relaxed_layers,
         },
-        "meshQualityControls": {  # the values of OpenFOAM's etc/caseDicts/meshQualityDict
-            "maxNonOrtho": 65,
-            "maxBoundarySkewness": 20,
-            "maxInternalSkewness": 4,
-            "maxConcave": 80,
-            "minVol": 1e-13,
-            "minTetQuality": 1e-15,
-            "minArea": -1,
-            "minTwist": 0.02,
-            "minDeterminant": 0.001,
-            "minFaceWeight": 0.05,
-            "minVolRatio": 0.01,
-            "minTriangleTwist": -1,
-            "nSmoothScale": 4,
-            "errorReduction": 0.75,
-        },
+        "meshQualityControls": quality,
         "mergeTolerance": 1e-6,
     }
+
+
+MESH_QUALITY = {  # the values of OpenFOAM's etc/caseDicts/meshQualityDict
+    "maxNonOrtho": 65,
+    "maxBoundarySkewness": 20,
+    "maxInternalSkewness": 4,
+    "maxConcave": 80,
+    "minVol": 1e-13,
+    "minTetQuality": 1e-15,
+    "minArea": -1,
+    "minTwist": 0.02,
+    "minDeterminant": 0.001,
+    "minFaceWeight": 0.05,
+    "minVolRatio": 0.01,
+    "minTriangleTwist": -1,
+    "nSmoothScale": 4,
+    "errorReduction": 0.75,
+}
 
 
 def _control(spec: CaseSpec, end: int | None = None, restart: bool = False) -> dict:
@@ -707,7 +781,7 @@ def write_case(spec: CaseSpec, folder, cores: int = 1) -> Path:
         {"numberOfSubdomains": cores, "method": "hierarchical", "coeffs": {"n": [cores, 1, 1]}},
     )
     _write(folder / "constant" / "transportProperties", {"transportModel": "Newtonian", "nu": spec.nu})
-    ras = {"RASModel": "kOmegaSST", "turbulence": True, "printCoeffs": True}
+    ras = {"RASModel": TURBULENCE_MODELS[spec.turbulence], "turbulence": True, "printCoeffs": True}
     if spec.sustain_inflow:
         k, omega = inflow_turbulence(spec)
         ras["kOmegaSSTCoeffs"] = {"decayControl": True, "kInf": k, "omegaInf": omega}
@@ -1170,9 +1244,10 @@ def read_result(
     scale = coefficient_scale(spec, spec.body)
     convergence, mean = verdict(measured / scale, residuals, failure, spec.quarter)
     layers = layers_added(folder / "log.snappyHexMesh", spec.body.patch)
-    if convergence.status != "diverged" and layers is not None and layers < MIN_LAYER_SHARE * LAYERS:
+    wanted = boundary_layers(spec)[0]
+    if convergence.status != "diverged" and layers is not None and layers < MIN_LAYER_SHARE * wanted:
         convergence.status = "bad mesh"
-        convergence.reason = f"snappyHexMesh added {layers:.2g} of {LAYERS} boundary layers on {spec.body.patch}"
+        convergence.reason = f"snappyHexMesh added {layers:.2g} of {wanted} boundary layers on {spec.body.patch}"
     forces = {spec.body.patch: _named(mean * scale)}
     forces |= {patch: _named(h[-spread_window(len(h)) :].mean(axis=0)) for patch, h in histories.items() if len(h)}
     return Result(

@@ -124,6 +124,7 @@ def suite(name: str) -> list[rans.CaseSpec]:
             rans.suboff_case(0.0, "medium", "nutk", 30.0),
             rans.suboff_case(0.0, "medium", "nutk", 100.0),
             rans.suboff_case(0.0, "medium", "spalding", 10.0),
+            rans.suboff_case(0.0, "medium", "spalding", 1.0),  # the sublayer resolved (thesis section 3.3.3.3)
             rans.suboff_case(0.0, "coarse"),
             rans.suboff_case(0.0, "fine"),
             *(rans.suboff_case(psi, "medium") for psi in DRIFT_ANGLES[1:]),
