@@ -5,6 +5,6 @@ cd "$(dirname "$0")/.."
 python3 -m venv .venv
 .venv/bin/python -m pip install --quiet --upgrade pip
 .venv/bin/python -m pip install --quiet -e .
-# numba compiles the LF's kernels once into its cache here, not in a mission's first processes.
-.venv/bin/python -c 'from nearsub.common.hydro.low_fidelity import compile_kernels; compile_kernels()'
+# numba compiles the LF's and the helm's kernels once into its cache here, not in a mission's first processes.
+.venv/bin/python -m nearsub.tools.support.kernels
 exec .venv/bin/nearsub launch "${1:-missions/alpha.toml}" "${@:2}"

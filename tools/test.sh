@@ -25,8 +25,8 @@ fi
 python3 -m venv .venv
 .venv/bin/python -m pip install --quiet --upgrade pip
 .venv/bin/python -m pip install --quiet -e '.[dev]'
-# numba compiles the LF's kernels once into its cache here, not in a mission's first processes.
-.venv/bin/python -c 'from nearsub.common.hydro.low_fidelity import compile_kernels; compile_kernels()'
+# numba compiles the LF's and the helm's kernels once into its cache here, not in a mission's first processes.
+.venv/bin/python -m nearsub.tools.support.kernels
 # The default run on two workers: most tests wait on processes and clocks, so two at once halve its
 # wall time on 2 cores. A marked suite (-m reliability, slow, soak, cfd) loads the machine on purpose
 # or runs long alone: one process. An -n given here wins either way.

@@ -32,7 +32,7 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from nearsub.common.autonomy import behaviours, control, ivp, logic
+from nearsub.common.autonomy import behaviours, ivp, logic
 from nearsub.common.autonomy.behaviours import Coordinate, Leg
 from nearsub.common.physics import dynamics, proximity
 from nearsub.common.physics.hull import uuv_body_outline
@@ -325,37 +325,43 @@ def _outline(length: float, diameter: float) -> tuple[np.ndarray, np.ndarray]:
     return uuv_body_outline(length, diameter, AVOID_OUTLINE_POINTS)
 
 
+def _prediction_kernel():
+    """The compiled prediction (`prediction_kernel`), imported on first use: helms without hull
+    avoidance do not pay numba's import."""
+    from nearsub.common.autonomy import prediction_kernel
+
+    return prediction_kernel
+
+
 def predicted_clearance(s: Situation, psi_c: np.ndarray, u_c: np.ndarray, horizon: float) -> np.ndarray:
     """Least clearance [m] of the UUV's outline from the hull over `horizon`, for each commanded
     (psi_c, u_c): (5.10) with the vehicle's own coefficients and PID (pMarinePID, from rest), the
-    interaction forces held at their value now, Euler steps of AVOID_DT. A prediction that
-    diverges counts as a collision."""
+    interaction forces held at their value now, Euler steps of AVOID_DT, checked every AVOID_CHECK
+    steps and at the last (`prediction_kernel.flown_poses`). A prediction that diverges counts as
+    a collision."""
+    kernel = _prediction_kernel()
     v = s.vehicle
-    x = np.repeat(s.state[None, :], len(psi_c), axis=0)
-    memory = control.PidState.zeros((len(psi_c),))
-    env = dynamics.Environment(s.u_sub)
-    held = None
+    steps = int(math.ceil(horizon / AVOID_DT - 1e-9))
+    checks = steps // AVOID_CHECK + (steps % AVOID_CHECK != 0)
+    forces, weight, mode = np.zeros(3), 0.0, kernel.MODE_CODES[None]
     if s.interaction is not None:
         f = s.interaction
-        forces = np.broadcast_to(f.forces, x.shape[:-1] + (3,))
-        held = dynamics.Interaction(forces, np.broadcast_to(f.weight, x.shape[:-1]), f.mode)
-    low, high = np.array([-v.max_thrust, -v.max_rudder]), np.array([v.max_thrust, v.max_rudder])
+        # One vehicle's forces and weight, as (3,) and () or as the sim's one-row (1, 3) and (1,).
+        forces, weight = np.ravel(f.forces).astype(float), float(np.ravel(f.weight)[0])
+        mode = kernel.MODE_CODES[f.mode]
+    poses = np.empty((len(psi_c), checks, 4))
+    kernel.flown_poses(
+        np.asarray(s.state, dtype=float), np.asarray(psi_c, dtype=float), np.asarray(u_c, dtype=float),
+        kernel.vehicle_row(v), forces, weight, mode, float(s.u_sub), AVOID_DT, steps, AVOID_CHECK, poses,
+    )  # fmt: skip
     bx, by = _outline(v.length, v.diameter)
-    least = np.full(len(psi_c), np.inf)
+    x, y, psi, finite = poses[..., 0, None], poses[..., 1, None], poses[..., 2, None], poses[..., 3] > 0.0
     with np.errstate(all="ignore"):
-        steps = int(math.ceil(horizon / AVOID_DT - 1e-9))
-        for k in range(1, steps + 1):
-            memory, out = control.pid_step(memory, u_c, psi_c, x, v, v.pid, AVOID_DT)
-            command = np.clip(np.stack([out.thrust, out.rudder], axis=-1), low, high)
-            x = dynamics.step(x, command, v, env, AVOID_DT, "euler", 0.0, held)
-            if k % AVOID_CHECK and k != steps:
-                continue
-            c, sn = np.cos(x[:, dynamics.PSI, None]), np.sin(x[:, dynamics.PSI, None])
-            px = x[:, dynamics.X, None] + bx * c - by * sn
-            py = x[:, dynamics.Y, None] + bx * sn + by * c
-            gap = proximity.hull_signed_distance(np.nan_to_num(px, nan=0.0), np.nan_to_num(py, nan=0.0)).min(axis=-1)
-            least = np.minimum(least, np.where(np.isfinite(x).all(axis=-1), gap, -np.inf))
-    return least
+        c, sn = np.cos(psi), np.sin(psi)
+        px = x + bx * c - by * sn
+        py = y + bx * sn + by * c
+        gap = proximity.hull_signed_distance(np.nan_to_num(px, nan=0.0), np.nan_to_num(py, nan=0.0)).min(axis=-1)
+    return np.where(finite, gap, -np.inf).min(axis=-1, initial=np.inf)
 
 
 def hull_avoidance(spec: HullAvoidanceSpec, s: Situation, memory: dict) -> Result:

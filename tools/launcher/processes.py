@@ -51,16 +51,16 @@ class Child:
 
 # What the fork server loads before it forks the apps (common/runtime/forkserver.py): what every
 # lock-stepped app, the logger and the clock import at start-up; near a submarine also the
-# surrogate server's GP stack and the sim's interaction, the LF's compiled kernels (from numba's
-# cache) and its submarine field table (from nearsub's cache), which the sim and the server
-# would otherwise each load.
+# surrogate server's GP stack and the sim's interaction, the LF's and the helm's compiled kernels
+# (from numba's cache) and the LF's submarine field table (from nearsub's cache), which the sim,
+# the helms and the server would otherwise each load.
 APP_PRELOAD = ("nearsub.apps.shell", "nearsub.apps.logger", "nearsub.apps.clock", "nearsub.common.mission.cores")
 SURROGATE_PRELOAD = (
     "nearsub.apps.surrogate",
     "nearsub.apps.services",
     "nearsub.common.surrogate.model",
     "nearsub.common.surrogate.interaction",
-    "nearsub.common.hydro.low_fidelity:compile_kernels",
+    "nearsub.tools.support.kernels:compile_kernels",
     "nearsub.common.hydro.low_fidelity:submarine_field",
 )
 

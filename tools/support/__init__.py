@@ -11,4 +11,5 @@
 - schedulers: the `--scheduler ADDRESS` check of the commands that run Dask tasks.
 - topics: the topic a command is given (a key expression, or a short key such as `state`).
 - log_input: the mission logs a command is given (checked paths, `--topic`, `--vehicle`, a log's mission).
+- kernels: every compiled kernel of a mission's processes, into numba's cache once per install.
 """
