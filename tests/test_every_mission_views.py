@@ -65,8 +65,11 @@ def test_the_live_map_draws_every_vehicle(run):
     assert sorted(scene["starts"]) == sorted(names)
     assert len(scene["legs"]) == sum(len(m.apps.helm.legs) for m in mission.members())
     assert scene["force_reference"] > 0
-    if mission.fleet and mission.environment.submarine:  # each vehicle's own band, by name
-        assert all(f"{name}: " in scene["band"]["note"] for name in names)
+    if mission.fleet and mission.environment.submarine:  # each vehicle type's band, named after its vehicles
+        by_type: dict[str, list[str]] = {}
+        for member in mission.members():
+            by_type.setdefault(member.vehicle_model.name, []).append(member.vehicle_name)
+        assert all(f"{', '.join(same)}: " in scene["band"]["note"] for same in by_type.values())
     model = SceneModel.for_mission(mission)
     for record in read_log(path).records:
         feed_payload(model, record.topic, record.data)

@@ -184,3 +184,33 @@ def test_launch_two_departs_in_order_clear_of_the_hull_and_of_each_other():
     for v, point in ((auv1, (8.0, 6.5)), (auv2, (-14.0, 7.0))):
         holding = v.times < v.phase_times["depart"]
         assert np.max(np.hypot(v.track[holding, 0] - point[0], v.track[holding, 1] - point[1])) < 0.2
+
+
+def test_launch_four_departs_in_its_plan_clear_of_the_hull_and_of_each_other():
+    """missions/launch_four.toml (docs/scenarios/launch_four.md), in-process: four UUVs, launch_two's
+    pair and a second one forward and aft of it."""
+    from nearsub.common.analysis.fleet import fleet_figures
+
+    mission = load_mission(ROOT / "missions" / "launch_four.toml")
+    result = run_mission(mission)
+    figures = fleet_figures(mission, result)
+    assert result.outcome == "completed", result.reason
+    assert [v.name for v in figures.vehicles] == ["auv1", "auv2", "auv3", "auv4"]
+    assert all(v.completed_at is not None for v in figures.vehicles)
+    auv1, auv2, auv3, auv4 = figures.vehicles
+    # The plan: the forward pair first, the aft pair once both of it have reached their departure points.
+    departs = [v.phase_times["depart"] for v in (auv1, auv3, auv2, auv4)]
+    assert departs == sorted(departs)
+    assert max(auv1.phase_times["clear"], auv3.phase_times["clear"]) < auv2.phase_times["depart"]
+    kinds = {e.kind for _, leaf, e in result.messages if leaf == "events"}
+    assert not kinds & {"collision", "close_call", "error"}, kinds
+    # Clear of the hull (a close call is one diameter: 0.19 m and 0.42 m) and of each other.
+    assert all(v.closest_hull > 1.0 for v in figures.vehicles), [v.closest_hull for v in figures.vehicles]
+    assert len(figures.closest_pair) == 6
+    assert all(gap > 5.0 for gap, _ in figures.closest_pair.values()), figures.closest_pair
+    # Each stayed within its station_keep's tolerance until it departed.
+    for v in figures.vehicles:
+        hold = next(s for s in mission.member(v.name).apps.helm.behaviour_specs() if s.name == "hold")
+        holding = v.times < v.phase_times["depart"]
+        off = np.hypot(v.track[holding, 0] - hold.point[0], v.track[holding, 1] - hold.point[1])
+        assert np.max(off) < hold.tolerance, (v.name, np.max(off))

@@ -86,7 +86,8 @@ def draw(mission, figures, output: Path) -> None:
     plan.set_title(f"{mission.name}: U_sub = {mission.environment.u_sub:g} m/s; {figures.outcome}")
     plan.legend(loc="upper right", fontsize=8)
     plan.set_xlim(-60, 60)
-    plan.set_ylim(-12, 45)
+    top = max(float(v.track[:, 1].max()) for v in figures.vehicles)
+    plan.set_ylim(-12, max(45.0, top + 5.0))  # room above the farthest departure point and its label
     clear.set_xlabel("t [s]")
     clear.set_ylabel("clearance from hull [m]")
     clear.set_yscale("log")
