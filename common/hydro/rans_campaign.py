@@ -401,10 +401,16 @@ def report_rows(found: list[rans.Result]) -> list[list[str]]:
                 f"{c['X']:.4e}",
                 f"{c['Y']:.4e}",
                 f"{c['N']:.4e}",
-                f"{r.y_plus.get(r.case_id.startswith('suboff') and 'suboff' or 'uuv', {}).get('mean', math.nan):.0f}",
+                y_plus_text(r.y_plus.get(r.case_id.startswith('suboff') and 'suboff' or 'uuv', {}).get('mean', math.nan)),
             ]
         )
     return rows
+
+
+def y_plus_text(value: float) -> str:
+    """A mean y+ as the tables print it: whole numbers from 10 up, two significant digits below
+    (a resolved sublayer's 0.94 is not "1")."""
+    return f"{value:.0f}" if not value < 10.0 else f"{value:.2g}"
 
 
 REPORT_COLUMNS = ["case", "verdict", "cells", "wall min", "cores", "iterations", "X'", "Y'", "N'", "mean y+"]

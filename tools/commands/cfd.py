@@ -126,7 +126,7 @@ def validate_command(args) -> int:
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for r in table["resistance"]:
         print(
-            f"| {r['case']} | {r['level']} | {r['wall_function']} | {r['y_plus_target']:g} | {r['y_plus_mean']:.0f} | "
+            f"| {r['case']} | {r['level']} | {r['wall_function']} | {r['y_plus_target']:g} | {rans_campaign.y_plus_text(r['y_plus_mean'])} | "
             f"{r['cells']:,} | {r['minutes']:.1f} | {r['X_N']:.1f} | {r['Xp']:.4e} | {r['error']:+.1%} | "
             f"{r['status']}{', meets' if r['meets'] else ''} |"
         )
