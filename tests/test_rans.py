@@ -505,7 +505,7 @@ def test_sustained_inflow_turbulence_is_its_own_case(tmp_path):
     assert refused.returncode == 2 and "--sustain-inflow" in refused.stderr
 
 
-def test_wilcox_k_omega_is_its_own_suboff_case(tmp_path):
+def test_wilcox_k_omega_is_its_own_case(tmp_path):
     spec = rans.suboff_case(0.0, "medium", "spalding", 1.0, turbulence="komega")
     assert spec.case_id == "suboff-psi0.00-medium-spalding-yp1-komega"
     folder = rans.write_case(spec, tmp_path / "w")
@@ -516,8 +516,13 @@ def test_wilcox_k_omega_is_its_own_suboff_case(tmp_path):
     for bad in ({"turbulence": "kEpsilon"}, {"turbulence": "komega", "sustain_inflow": True}):
         with pytest.raises(rans.CaseError, match="--turbulence|--sustain-inflow"):
             rans.suboff_case(0.0, **bad)
-    refused = nearsub("cfd", "case", "--config", "0", "0.08", "3.5", "0", "20", "8", "--turbulence", "komega")
-    assert refused.returncode == 2 and "--turbulence" in refused.stderr and "Traceback" not in refused.stderr
+    two_body = rans.two_body_case([0, 0.08, 3.5, 0, 20, 8], "medium", turbulence="komega")
+    assert two_body.case_id == "tb-0_0.08_3.5_0_20_8-medium-komega"
+    assert two_body.case_id != rans.two_body_case([0, 0.08, 3.5, 0, 20, 8]).case_id  # never compared as the SST station
+    built = rans.write_case(two_body, tmp_path / "t")
+    assert _foam(built / "constant/turbulenceProperties")["RAS"]["RASModel"] == "kOmega"
+    refused = nearsub("cfd", "case", "--config", "0", "0.08", "3.5", "0", "20", "8", "--sustain-inflow")
+    assert refused.returncode == 2 and "--sustain-inflow" in refused.stderr and "Traceback" not in refused.stderr
     unknown = nearsub("cfd", "case", "--turbulence", "kEpsilon", "-o", str(tmp_path / "x"))
     assert unknown.returncode == 2 and "--turbulence 'kEpsilon'" in unknown.stderr and not (tmp_path / "x").exists()
 

@@ -83,7 +83,7 @@ RESOLVED_LAYER_QUALITY = {"minDeterminant": -1.0, "minTetQuality": -1e30, "minTw
 WALL_FUNCTIONS = {"nutk": "nutkWallFunction", "spalding": "nutUSpaldingWallFunction"}
 # The turbulence model: k-omega SST (Menter 1994, AIAA J. 32(8) 1598-1605; OpenFOAM's kOmegaSST),
 # or Wilcox's k-omega (Wilcox 1998, "Turbulence Modeling for CFD"; OpenFOAM's kOmega), the thesis's
-# model (section 3.3.3.3), for a SUBOFF case. With the sublayer resolved (y+ 1, medium mesh) SST's
+# model (section 3.3.3.3), for any case (`--turbulence komega`). With the sublayer resolved (y+ 1, medium mesh) SST's
 # friction was 72.4 N and k-omega's 77.7 N, against ITTC-57's 77.8 N (docs/hydro/rans/README.md).
 TURBULENCE_MODELS = {"sst": "kOmegaSST", "komega": "kOmega"}
 # The submarine beside a UUV is not measured: its first cell sits at y+ 300, still inside the log
@@ -199,13 +199,20 @@ def _check_options(level: str, wall_function: str, y_plus: float) -> None:
         raise CaseError(f"--y-plus {y_plus!r}: wall functions need a first-cell y+ of about 1 to 300")
 
 
-def _case_suffix(level: str, wall_function: str, y_plus: float) -> str:
+def _case_suffix(level: str, wall_function: str, y_plus: float, turbulence: str = "sst") -> str:
     suffix = f"-{level}"
     if wall_function != "nutk":
         suffix += f"-{wall_function}"
     if y_plus != 50.0:
         suffix += f"-yp{y_plus:g}"
+    if turbulence != "sst":
+        suffix += f"-{turbulence}"
     return suffix
+
+
+def _check_turbulence(turbulence: str) -> None:
+    if turbulence not in TURBULENCE_MODELS:
+        raise CaseError(f"--turbulence {turbulence!r}: choose one of {', '.join(TURBULENCE_MODELS)}")
 
 
 def suboff_case(
@@ -222,16 +229,13 @@ def suboff_case(
     _check_options(level, wall_function, y_plus)
     if not (math.isfinite(psi_deg) and 0.0 <= psi_deg <= 20.0):
         raise CaseError(f"--psi {psi_deg!r}: the validation covers drift angles 0 to 20 deg")
-    if turbulence not in TURBULENCE_MODELS:
-        raise CaseError(f"--turbulence {turbulence!r}: choose one of {', '.join(TURBULENCE_MODELS)}")
+    _check_turbulence(turbulence)
     if sustain_inflow and turbulence != "sst":
         raise CaseError(f"--sustain-inflow: SST's sustaining terms, not for --turbulence {turbulence}")
     hull = Body("suboff", "suboff-model", SUBOFF_MODEL_LENGTH, SUBOFF_MODEL_DIAMETER, psi=math.radians(psi_deg))
     return CaseSpec(
-        case_id=f"suboff-psi{psi_deg:.2f}"
-        + _case_suffix(level, wall_function, y_plus)
-        + ("-sust" if sustain_inflow else "")
-        + ("" if turbulence == "sst" else f"-{turbulence}"),
+        case_id=f"suboff-psi{psi_deg:.2f}" + _case_suffix(level, wall_function, y_plus, turbulence)
+        + ("-sust" if sustain_inflow else ""),
         kind="suboff",
         bodies=(hull,),
         speed=SUBOFF_TEST_SPEED,
@@ -263,11 +267,17 @@ def _configuration(row, level: str, wall_function: str, y_plus: float) -> tuple[
 
 
 def two_body_case(
-    row, level: str = "medium", wall_function: str = "nutk", y_plus: float = 50.0, iterations: int | None = None
+    row,
+    level: str = "medium",
+    wall_function: str = "nutk",
+    y_plus: float = 50.0,
+    iterations: int | None = None,
+    turbulence: str = "sst",
 ) -> CaseSpec:
     """The full-scale submarine and the Explorer UUV at a configuration row [R_long, R_lat, u_kn,
     psi_deg, d_ratio, ld_ratio] (thesis table 4.2), in sea water (docs/hydro/README.md)."""
     row, (x, y, speed, psi, diameter, length) = _configuration(row, level, wall_function, y_plus)
+    _check_turbulence(turbulence)
     if y <= 0:
         raise CaseError(f"R_lat {row[1]:g}: the UUV sits on the +y side of the submarine (R_lat > 0)")
     clearance = float(closest_distance(x, y, psi, length, diameter))
@@ -282,7 +292,7 @@ def two_body_case(
     sub = Body("submarine", "suboff-full", L_SUB, D_SUB)
     name = "tb-" + "_".join(f"{v:g}" for v in row)
     return CaseSpec(
-        case_id=name + _case_suffix(level, wall_function, y_plus),
+        case_id=name + _case_suffix(level, wall_function, y_plus, turbulence),
         kind="two-body",
         bodies=(uuv, sub),
         speed=speed,
@@ -293,6 +303,7 @@ def two_body_case(
         y_plus=y_plus,
         inputs=tuple(row.tolist()),
         iterations=iterations,
+        turbulence=turbulence,
     )
 
 

@@ -31,10 +31,11 @@ def _specs(args):
     if getattr(args, "suite", None):
         return rans_campaign.suite(args.suite)
     if args.config is not None:
-        for name, chosen in (("--sustain-inflow", args.sustain_inflow), ("--turbulence", args.turbulence != "sst")):
-            if chosen:
-                raise InputError(f"{name}: only for a SUBOFF case (--psi)")
-        return [rans.two_body_case(args.config, args.level, args.wall_function, args.y_plus, args.iterations)]
+        if args.sustain_inflow:
+            raise InputError("--sustain-inflow: only for a SUBOFF case (--psi)")
+        return [
+            rans.two_body_case(args.config, args.level, args.wall_function, args.y_plus, args.iterations, args.turbulence)
+        ]
     return [
         rans.suboff_case(
             args.psi, args.level, args.wall_function, args.y_plus, args.iterations, args.sustain_inflow, args.turbulence
@@ -505,7 +506,7 @@ def _case_arguments(p, suite: bool = False) -> None:
     p.add_argument(
         "--turbulence",
         default="sst",
-        help="SUBOFF: the turbulence model, sst (k-omega SST, default) or komega (Wilcox's k-omega, the thesis's)",
+        help="the turbulence model, sst (k-omega SST, default) or komega (Wilcox's k-omega, the thesis's)",
     )
     p.add_argument("--cores", type=integer(minimum=1, maximum=1024), default=1, help="MPI ranks per case (default 1)")
 
