@@ -287,23 +287,36 @@ def results(folders: Iterable[Path]) -> list[rans.Result]:
 # --- validation tables ---------------------------------------------------------------------------
 
 
+# The schemes' formal order (linearUpwind for U): an observed order above it comes from medium
+# and fine meshes that agree by chance, not from convergence, so the GCI does not credit it
+# (nearsub's choice, conservative: a smaller order only widens the GCI).
+FORMAL_ORDER = 2.0
+
+
 def grid_convergence(fine: float, medium: float, coarse: float, ratio: float) -> dict[str, float]:
     """Grid convergence index of the fine solution from three meshes with a constant refinement
     ratio (Celik et al. 2008, J. Fluids Eng. 130, 078001, eqs. 1-7; Roache 1998, safety factor 1.25):
-    observed order p, Richardson extrapolation, relative error and GCI_fine. For oscillatory
-    convergence (or differences of zero) p is undefined and p, the extrapolation and GCI are NaN."""
+    observed order p, Richardson extrapolation, relative error and GCI_fine, the last two with the
+    order capped at FORMAL_ORDER. The convergence ratio R = e21/e32 of the fine and the coarse
+    change (Stern et al. 2001, J. Fluids Eng. 123, 793-802) decides whether there is one: only for
+    monotone convergence, 0 < R < 1; for oscillation (R < 0), a change that grows with refinement
+    (R >= 1: not in the asymptotic range) or differences of zero, p, the extrapolation and GCI
+    are NaN and "ratio" says which."""
     e21, e32 = medium - fine, coarse - medium
     out = {
         "p": math.nan,
         "extrapolated": math.nan,
         "error_fine": abs(e21 / fine) if fine else math.nan,
         "gci_fine": math.nan,
+        "ratio": e21 / e32 if e32 else math.nan,
     }
-    if e21 == 0 or e32 == 0 or e32 / e21 <= 0:
-        return out  # oscillatory or converged to round-off: Celik's p is undefined
+    if e21 == 0 or e32 == 0 or not 0.0 < e21 / e32 < 1.0:
+        return out
     p = abs(math.log(abs(e32 / e21))) / math.log(ratio)
-    extrapolated = (ratio**p * fine - medium) / (ratio**p - 1.0)
-    out |= {"p": p, "extrapolated": extrapolated, "gci_fine": 1.25 * abs(e21 / fine) / (ratio**p - 1.0)}
+    credited = min(p, FORMAL_ORDER)
+    extrapolated = (ratio**credited * fine - medium) / (ratio**credited - 1.0)
+    gci = 1.25 * abs(e21 / fine) / (ratio**credited - 1.0)
+    out |= {"p": p, "extrapolated": extrapolated, "gci_fine": gci}
     return out
 
 

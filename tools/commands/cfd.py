@@ -134,7 +134,8 @@ def validate_command(args) -> int:
     if table["gci"]:
         g = table["gci"]
         print(
-            f"\nGCI (coarse/medium/fine, ratio sqrt 2; Celik et al. 2008): observed order {g['p']:.2f}, "
+            f"\nGCI (coarse/medium/fine, ratio sqrt 2; Celik et al. 2008; the order credited at most "
+            f"{rans_campaign.FORMAL_ORDER:g}): observed order {g['p']:.2f}, "
             f"extrapolated X' {g['extrapolated']:.4e}, GCI_fine {g['gci_fine']:.2%}"
         )
     target = f"target GCI_fine <= {rans_campaign.GCI_TARGET:.0%}"
@@ -142,8 +143,14 @@ def validate_command(args) -> int:
     for name, gci in table["two_body_gci"].items():
         print(f"\nTwo-body GCI at '{name}' {list(stations[name].row)} ({target})")
         for output, g in gci.items():
+            if g["p"] != g["p"]:  # NaN: no monotone convergence
+                how = "oscillates" if g["ratio"] < 0 else "the change grows with refinement"
+                print(f"  {output}': no GCI: convergence ratio {g['ratio']:.2f}, {how} (not in the asymptotic range)")
+                continue
             print(
-                f"  {output}': observed order {g['p']:.2f}, extrapolated {g['extrapolated']:.4e}, "
+                f"  {output}': observed order {g['p']:.2f}"
+                f"{f' (GCI with {rans_campaign.FORMAL_ORDER:g})' if g['p'] > rans_campaign.FORMAL_ORDER else ''}, "
+                f"convergence ratio {g['ratio']:.2f}, extrapolated {g['extrapolated']:.4e}, "
                 f"GCI_fine {g['gci_fine']:.2%}{' meets' if g['meets'] else ''}"
             )
     if not table["two_body_gci"]:
