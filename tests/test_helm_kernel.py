@@ -21,7 +21,9 @@ def numpy_poses(s: helm.Situation, psi_c, u_c, steps: int) -> np.ndarray:
     held = None
     if s.interaction is not None:
         f = s.interaction
-        held = dynamics.Interaction(np.broadcast_to(f.forces, x.shape[:1] + (3,)), np.broadcast_to(f.weight, x.shape[:1]), f.mode)
+        held = dynamics.Interaction(
+            np.broadcast_to(f.forces, x.shape[:1] + (3,)), np.broadcast_to(f.weight, x.shape[:1]), f.mode
+        )
     poses = []
     with np.errstate(all="ignore"):
         for k in range(1, steps + 1):
@@ -29,7 +31,11 @@ def numpy_poses(s: helm.Situation, psi_c, u_c, steps: int) -> np.ndarray:
             command = np.stack([out.thrust, out.rudder], axis=-1)
             x = dynamics.step(x, command, v, dynamics.Environment(s.u_sub), helm.AVOID_DT, "euler", 0.0, held)
             if k % helm.AVOID_CHECK == 0 or k == steps:
-                poses.append(np.column_stack([x[:, dynamics.X], x[:, dynamics.Y], x[:, dynamics.PSI], np.isfinite(x).all(axis=1)]))
+                poses.append(
+                    np.column_stack(
+                        [x[:, dynamics.X], x[:, dynamics.Y], x[:, dynamics.PSI], np.isfinite(x).all(axis=1)]
+                    )
+                )
     return np.stack(poses, axis=1)
 
 
@@ -37,7 +43,9 @@ def kernel_poses(s: helm.Situation, psi_c, u_c, steps: int) -> np.ndarray:
     checks = math.ceil(steps / helm.AVOID_CHECK)
     poses = np.empty((len(psi_c), checks, 4))
     f = s.interaction
-    forces, weight, mode = (np.zeros(3), 0.0, None) if f is None else (np.asarray(f.forces, float), float(f.weight), f.mode)
+    forces, weight, mode = (
+        (np.zeros(3), 0.0, None) if f is None else (np.asarray(f.forces, float), float(f.weight), f.mode)
+    )
     prediction_kernel.flown_poses(
         s.state, psi_c, u_c, prediction_kernel.vehicle_row(s.vehicle), forces, weight,
         prediction_kernel.MODE_CODES[mode], s.u_sub, helm.AVOID_DT, steps, helm.AVOID_CHECK, poses,
@@ -54,14 +62,28 @@ def test_the_compiled_prediction_flies_the_numpy_dynamics_and_pid(name, mode):
     vehicle = LIBRARY[name]
     rng = np.random.default_rng(sum(map(ord, name + str(mode))))
     for _ in range(3):
-        state = np.array([rng.uniform(0.3, 2.0), rng.uniform(-0.3, 0.3), rng.uniform(-0.3, 0.3), rng.uniform(-40, 40), rng.uniform(5.5, 12), rng.uniform(-3, 3)])
+        state = np.array(
+            [
+                rng.uniform(0.3, 2.0),
+                rng.uniform(-0.3, 0.3),
+                rng.uniform(-0.3, 0.3),
+                rng.uniform(-40, 40),
+                rng.uniform(5.5, 12),
+                rng.uniform(-3, 3),
+            ]
+        )
         interaction = None
         if mode is not None:
             scale = vehicle.mass * 0.05
-            interaction = dynamics.Interaction(rng.normal(0, scale, 3) * [1, 1, vehicle.length], np.array(rng.uniform(0, 1)), mode)
+            interaction = dynamics.Interaction(
+                rng.normal(0, scale, 3) * [1, 1, vehicle.length], np.array(rng.uniform(0, 1)), mode
+            )
         s = helm.Situation(state, 0.0, {}, vehicle, 1.5, interaction=interaction)
         headings = dynamics.wrap_angle(state[dynamics.PSI] + helm.AVOID_OFFSETS)
-        psi_c, u_c = (a.ravel() for a in np.meshgrid(headings, helm.AVOID_SPEED_FRACTIONS * helm.top_speed(vehicle), indexing="ij"))
+        psi_c, u_c = (
+            a.ravel()
+            for a in np.meshgrid(headings, helm.AVOID_SPEED_FRACTIONS * helm.top_speed(vehicle), indexing="ij")
+        )
         expected = numpy_poses(s, psi_c, u_c, 31)
         got = kernel_poses(s, psi_c, u_c, 31)
         np.testing.assert_array_equal(got[..., 3], expected[..., 3])
@@ -84,4 +106,7 @@ def test_predicted_clearance_reads_the_poses_outline_and_counts_divergence_as_co
     np.testing.assert_allclose(got, expected, rtol=0, atol=1e-9)
     assert got[1] < got[0]  # turning in towards the hull comes closer
     blown = dynamics.Interaction(np.array([[0.0, 1e300, 1e300]]), np.array([1.0]), "increment")  # the sim's one row
-    assert np.all(helm.predicted_clearance(helm.Situation(s.state, 0.0, {}, vehicle, 1.5, interaction=blown), psi_c, u_c, 3.0) == -np.inf)
+    assert np.all(
+        helm.predicted_clearance(helm.Situation(s.state, 0.0, {}, vehicle, 1.5, interaction=blown), psi_c, u_c, 3.0)
+        == -np.inf
+    )

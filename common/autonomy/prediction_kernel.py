@@ -30,7 +30,11 @@ COEFFICIENTS = (
 def vehicle_row(vehicle) -> np.ndarray:
     """The vehicle's coefficients (COEFFICIENTS) and its PID gains (heading kp, kd, ki, integral
     limit, then the same for speed) as one float array."""
-    gains = [getattr(loop, name) for loop in (vehicle.pid.heading, vehicle.pid.speed) for name in ("kp", "kd", "ki", "integral_limit")]
+    gains = [
+        getattr(loop, name)
+        for loop in (vehicle.pid.heading, vehicle.pid.speed)
+        for name in ("kp", "kd", "ki", "integral_limit")
+    ]
     return np.array([getattr(vehicle, name) for name in COEFFICIENTS] + gains, dtype=float)
 
 

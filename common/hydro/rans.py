@@ -234,7 +234,8 @@ def suboff_case(
         raise CaseError(f"--sustain-inflow: SST's sustaining terms, not for --turbulence {turbulence}")
     hull = Body("suboff", "suboff-model", SUBOFF_MODEL_LENGTH, SUBOFF_MODEL_DIAMETER, psi=math.radians(psi_deg))
     return CaseSpec(
-        case_id=f"suboff-psi{psi_deg:.2f}" + _case_suffix(level, wall_function, y_plus, turbulence)
+        case_id=f"suboff-psi{psi_deg:.2f}"
+        + _case_suffix(level, wall_function, y_plus, turbulence)
         + ("-sust" if sustain_inflow else ""),
         kind="suboff",
         bodies=(hull,),

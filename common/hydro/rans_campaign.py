@@ -414,7 +414,9 @@ def report_rows(found: list[rans.Result]) -> list[list[str]]:
                 f"{c['X']:.4e}",
                 f"{c['Y']:.4e}",
                 f"{c['N']:.4e}",
-                y_plus_text(r.y_plus.get(r.case_id.startswith('suboff') and 'suboff' or 'uuv', {}).get('mean', math.nan)),
+                y_plus_text(
+                    r.y_plus.get(r.case_id.startswith("suboff") and "suboff" or "uuv", {}).get("mean", math.nan)
+                ),
             ]
         )
     return rows

@@ -34,7 +34,9 @@ def _specs(args):
         if args.sustain_inflow:
             raise InputError("--sustain-inflow: only for a SUBOFF case (--psi)")
         return [
-            rans.two_body_case(args.config, args.level, args.wall_function, args.y_plus, args.iterations, args.turbulence)
+            rans.two_body_case(
+                args.config, args.level, args.wall_function, args.y_plus, args.iterations, args.turbulence
+            )
         ]
     return [
         rans.suboff_case(
@@ -127,7 +129,8 @@ def validate_command(args) -> int:
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for r in table["resistance"]:
         print(
-            f"| {r['case']} | {r['level']} | {r['wall_function']} | {r['y_plus_target']:g} | {rans_campaign.y_plus_text(r['y_plus_mean'])} | "
+            f"| {r['case']} | {r['level']} | {r['wall_function']} | {r['y_plus_target']:g} | "
+            f"{rans_campaign.y_plus_text(r['y_plus_mean'])} | "
             f"{r['cells']:,} | {r['minutes']:.1f} | {r['X_N']:.1f} | {r['Xp']:.4e} | {r['error']:+.1%} | "
             f"{r['status']}{', meets' if r['meets'] else ''} |"
         )
