@@ -487,7 +487,8 @@ def lf_increment_terms(inputs, *, n_strips: int = N_STRIPS, n_frusta: int = N_FR
 def compile_kernels() -> None:
     """Evaluate every path of the LF, and the event geometry the LF's cut-off reads, once, so numba
     compiles their kernels into its on-disk cache now (seconds, once per install) and not in the
-    first processes of a mission (tools/run.sh and tools/test.sh call it after installing)."""
+    first processes of a mission (`tools/support/kernels.py`, which tools/run.sh and tools/test.sh
+    run after installing, calls it with the helm's kernel)."""
     from nearsub.common.physics import proximity
 
     row = np.array([[0.0, 0.08, 3.0, 1.0, 8.0, 7.0]])  # any valid row: R_long, R_lat, kn, deg, ratios
