@@ -4,6 +4,7 @@
 - model: the loaded surrogate, its predictions and the query messages of the surrogate server.
 - modelfile: one versioned file per trained surrogate.
 - interaction: the interaction forces the sim and the helm apply at a vehicle's state.
+- interaction_kernel: the compiled domain arithmetic of each row (inputs, constraints, weights, x_c, flags, forces).
 - free_stream: a model's free-stream table (the UUV alone), for the interaction increment.
 - training: the training designs (sobol, residual-us, nmmf), HF runs and the final fit of the shipped surrogate.
 - warping: input warpings applied before the unit-cube scaling (log clearance, log D_sub/D_uuv).

@@ -1,12 +1,12 @@
 """The surrogate's domain: its six inputs, their bounds (thesis table 4.2), the constraints
 (4.4)-(4.7), and the conversions between a dimensional state and inputs, and between the
 non-dimensional coefficients X', Y', N' and forces (thesis section 5.2), mirrored on the -y side
-(thesis section 4.2.1). Pure numpy.
+(thesis section 4.2.1). The row arithmetic is compiled (`interaction_kernel`), shared with the
+sim's and the batch engine's interaction.
 """
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
@@ -48,6 +48,15 @@ CONSTRAINTS = {
     "R_lat": "centre-to-centre: y_dist between the centres of buoyancy over L_sub (docs/design.md)",
 }
 
+
+def _kernel():
+    """The compiled row arithmetic (`interaction_kernel`), imported on first use: a process that
+    only reads the domain's names and bounds does not pay numba's import."""
+    from nearsub.common.surrogate import interaction_kernel
+
+    return interaction_kernel
+
+
 KNOT = 1852.0 / 3600.0  # international knot [m/s]; thesis 4.2.3: 2-5 kn ~ 1.03-2.57 m/s
 RHO_SEA = 1025.0  # sea water [kg/m^3] (docs/design.md, "Frames, units and signs")
 
@@ -74,7 +83,7 @@ def in_domain(X: Any, bounds: Any = BOUNDS) -> np.ndarray:
 # (4.4) is the corrected form of docs/design.md, "Thesis errata" 3 (no speed term): 8.575 = L_sub/D_sub,
 # 0.5048 = 0.5 + 0.05 m/D_sub (clearance c >= 0.05 m, thesis (4.3)), 9.425e-3 = 0.27 sin(2 deg)
 # ((1 - CB) L_uuv sin psi_max over D_sub).
-_CONSTRAINT_COEFFICIENTS = np.array(
+CONSTRAINT_COEFFICIENTS = np.array(
     [
         # R_lat  1/d_ratio  ld/d_ratio  ld_ratio  1
         [8.575, -0.5, -9.425e-3, 0.0, -0.5048],  # (4.4), docs/design.md, "Thesis errata" 3
@@ -91,14 +100,10 @@ def constraint_values(X: Any) -> np.ndarray:
     With R_lat centre-to-centre (docs/design.md, "Thesis errata" 7) the low corner R_lat = 0.059 is infeasible
     everywhere in the domain: (4.4) needs R_lat >= 0.5048 / 8.575 = 0.0589 plus the UUV's share.
     """
-    X = _as_inputs(X)
-    features = np.empty((len(X), 4))  # filled column by column: column_stack's values at less cost
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inv_d = np.divide(1.0, X[:, 4], out=features[:, 1])  # (D_sub/D_uuv)^-1
-        features[:, 0] = X[:, 1]
-        np.multiply(inv_d, X[:, 5], out=features[:, 2])
-        features[:, 3] = X[:, 5]
-        return features @ _CONSTRAINT_COEFFICIENTS[:, :4].T + _CONSTRAINT_COEFFICIENTS[:, 4]
+    X = np.ascontiguousarray(_as_inputs(X))
+    values = np.empty((len(X), 4))
+    _kernel().constraint_rows(X, CONSTRAINT_COEFFICIENTS, values)
+    return values
 
 
 def constraints_ok(X: Any) -> np.ndarray:
@@ -150,16 +155,9 @@ def to_inputs(
     changes sign, so
     that + always means bow away from the submarine; `to_forces` flips Y' and N' back.
     """
-    x, y, u, psi, length, diameter = _flat_broadcast(x, y, u, psi, uuv_length, uuv_diameter)
-    mirror = np.where(y < 0.0, -1.0, 1.0)
-    psi_wrapped = np.remainder(psi + math.pi, 2.0 * math.pi) - math.pi  # heading in [-pi, pi)
-    inputs = np.empty((len(x), 6))  # filled column by column: column_stack's values at less cost
-    np.divide(x, l_sub, out=inputs[:, 0])  # R_long (3.3), docs/design.md, "Thesis errata" 2
-    np.divide(np.abs(y), l_sub, out=inputs[:, 1])  # R_lat (3.4), centre-to-centre (errata 7)
-    np.divide(u, KNOT, out=inputs[:, 2])
-    np.multiply(mirror, np.degrees(psi_wrapped), out=inputs[:, 3])
-    np.divide(d_sub, diameter, out=inputs[:, 4])
-    np.divide(length, diameter, out=inputs[:, 5])
+    columns = [np.ascontiguousarray(a) for a in _flat_broadcast(x, y, u, psi, uuv_length, uuv_diameter)]
+    inputs, mirror = np.empty((len(columns[0]), 6)), np.empty(len(columns[0]))
+    _kernel().state_inputs(*columns, float(d_sub), float(l_sub), KNOT, inputs, mirror)
     return inputs, mirror
 
 
@@ -177,11 +175,13 @@ def to_forces(coeffs: Any, mirror: Any, u: Any, uuv_length: Any, rho: float = RH
     """Coefficients (n, 3) [X', Y', N'] -> dimensional [X_s N, Y_s N, N_s N m] (n, 3), with Y and N
     flipped on the -y side (mirror = -1), undoing the mirroring of `to_inputs`."""
     coeffs = np.atleast_2d(np.asarray(coeffs, dtype=float))
-    mirror = np.asarray(mirror, dtype=float).ravel()
-    signs = np.empty((len(mirror), 3))  # [1, mirror, mirror], filled column by column
-    signs[:, 0] = 1.0
-    signs[:, 1] = signs[:, 2] = mirror
-    return coeffs * _force_scales(u, uuv_length, rho) * signs
+    rows = _flat_broadcast(mirror, u, uuv_length)
+    n = max(len(coeffs), len(rows[0]))
+    coeffs = np.ascontiguousarray(np.broadcast_to(coeffs, (n, 3)))[None]
+    mirror, u, length = (np.ascontiguousarray(np.broadcast_to(a, (n,))) for a in rows)
+    forces = np.empty((1, n, 3))
+    _kernel().force_rows(coeffs, mirror, u, length, float(rho), forces)
+    return forces[0]
 
 
 def to_coefficients(forces: Any, u: Any, uuv_length: Any, rho: float = RHO_SEA) -> np.ndarray:

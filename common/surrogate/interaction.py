@@ -43,6 +43,7 @@ from nearsub.common.physics.hull import R_SUB
 from nearsub.common.physics.vehicles import Vehicle
 from nearsub.common.surrogate import domain
 from nearsub.common.surrogate import free_stream as fs
+from nearsub.common.surrogate import interaction_kernel as kernel
 from nearsub.common.surrogate import query as sg
 from nearsub.common.surrogate import viscous as vc
 from nearsub.common.surrogate.query import ServiceError
@@ -59,6 +60,7 @@ CONSTRAINT_BAND = np.array([0.005, 0.005, 0.1, 0.1])
 GEOMETRY = slice(4, 6)  # D_sub/D_uuv and L/D_uuv: fixed for a vehicle
 # Their trained range (table 4.2), which `interaction_at` clips them to (as np.clip: neither bound is 0).
 _GEOMETRY_LOWER, _GEOMETRY_UPPER = domain.BOUNDS[GEOMETRY, 0].copy(), domain.BOUNDS[GEOMETRY, 1].copy()
+_UNCLIPPED = (np.full(2, -np.inf), np.full(2, np.inf))
 HEADING = 3  # psi_deg: the discrepancy weight of the LF-in-the-loop increment ignores it
 LATERAL = 1  # constraint (4.5), the outer lateral edge of the trained window
 # The discrepancy weight of the LF-in-the-loop increment across (4.5): 1 up to the edge, falling
@@ -96,80 +98,48 @@ class ForceModel(Protocol):
     def discrepancy(self, inputs: np.ndarray, return_std: bool = True) -> tuple[np.ndarray, np.ndarray | None]: ...
 
 
-def smoothstep(x: np.ndarray) -> np.ndarray:
-    """0 below 0, 1 above 1, x^2 (3 - 2x) between: continuous with a continuous slope."""
-    x = np.minimum(np.maximum(x, 0.0), 1.0)  # np.clip's bits (x * x drops a zero's sign) at less cost
-    return x * x * (3.0 - 2.0 * x)
+# Table 4.2's bounds and the ramps' widths inside them, as the kernels read them.
+_LOWER, _UPPER = np.ascontiguousarray(domain.BOUNDS[:, 0]), np.ascontiguousarray(domain.BOUNDS[:, 1])
+_RAMP = BLEND_FRACTION * (_UPPER - _LOWER)
+LATERAL_SLOPE = 8.575  # (4.5) falls by 8.575 (= L_sub / D_sub) per unit of R_lat
 
 
-def _ramps(bounds: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Lower and upper bounds (6,) and the ramps' widths inside them."""
-    lower, upper = np.ascontiguousarray(bounds[:, 0]), np.ascontiguousarray(bounds[:, 1])
-    return lower, upper, BLEND_FRACTION * (upper - lower)
+def _rows(inputs: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(np.atleast_2d(np.asarray(inputs, dtype=float)))
 
 
-_RAMPS = _ramps(domain.BOUNDS)  # table 4.2's, which every step of a mission asks about
+def blend_weight(inputs: np.ndarray, heading: bool = True) -> np.ndarray:
+    """(n,) weight of the surrogate's forces at inputs (n, 6): 1 well inside table 4.2's bounds
+    and the constraints (4.4)-(4.7), 0 outside, smoothstep across a ramp BLEND_FRACTION of each
+    state input's range (position, speed and, with `heading`, the heading) or CONSTRAINT_BAND of
+    each constraint inside them. The hull ratios are constants of a vehicle, so they switch the
+    surrogate on or off for a whole mission (see `interaction_at`). (4.4)-(4.7) hold no heading term
+    (docs/design.md, "Thesis errata": (4.4) has 0.27 sin(2 deg) as a constant), so without
+    `heading` it does not depend on psi at all."""
+    X = _rows(inputs)
+    out = np.empty(len(X))
+    kernel.weight_rows(X, domain.CONSTRAINT_COEFFICIENTS, _LOWER, _UPPER, _RAMP, CONSTRAINT_BAND, heading, 0.0, out)
+    return out
 
 
-Known = tuple[np.ndarray, np.ndarray]  # input rows (n, 6) and their `domain.constraint_values`
-
-
-def _constraint_values(X: np.ndarray, known: Known | None = None) -> np.ndarray:
-    """`domain.constraint_values` of rows X (n, 6), or the values `known` has for the same numbers
-    (a row's values depend on its numbers alone): a step asks about its inputs up to three times."""
-    if known is not None and X.shape == known[0].shape and np.array_equal(X, known[0]):
-        return known[1]
-    return domain.constraint_values(X)
-
-
-def _margins(
-    inputs: np.ndarray, bounds: np.ndarray, heading: bool, known: Known | None = None
-) -> tuple[np.ndarray, np.ndarray]:
-    """Ramp coordinates (1 and above: in full, 0 and below: off) of inputs (n, 6): (n, 6) for the
-    bounds, (n, 4) for the constraints (4.4)-(4.7)."""
-    inputs = np.atleast_2d(inputs)
-    lower, upper, ramp = _RAMPS if bounds is domain.BOUNDS else _ramps(bounds)
-    inside = np.minimum(inputs - lower, upper - inputs) / ramp
-    inside[:, GEOMETRY] = np.where(inside[:, GEOMETRY] >= 0, np.inf, -np.inf)
-    if not heading:
-        inside[:, HEADING] = np.inf
-    return inside, _constraint_values(inputs, known) / CONSTRAINT_BAND
-
-
-def _weight(inside: np.ndarray, feasible: np.ndarray) -> np.ndarray:
-    margin = np.minimum(inside.min(axis=1), feasible.min(axis=1))
-    return smoothstep(np.where(np.isfinite(margin), margin, 0.0))
-
-
-def blend_weight(
-    inputs: np.ndarray, bounds: np.ndarray = domain.BOUNDS, heading: bool = True, known: Known | None = None
-) -> np.ndarray:
-    """(n,) weight of the surrogate's forces at inputs (n, 6). The ramp runs inside the bounds of
-    the state inputs (position, speed and, with `heading`, the heading) and the constraints; the
-    hull ratios are constants of a vehicle, so they switch the surrogate on or off for a whole
-    mission (see `interaction_at`). (4.4)-(4.7) hold no heading term (docs/design.md, "Thesis
-    errata": (4.4) has 0.27 sin(2 deg) as a constant), so without `heading` it does not depend on
-    psi at all. `known`: constraint values already computed (`_constraint_values`)."""
-    return _weight(*_margins(inputs, bounds, heading, known))
-
-
-def discrepancy_weight(inputs: np.ndarray, known: Known | None = None) -> np.ndarray:
+def discrepancy_weight(inputs: np.ndarray) -> np.ndarray:
     """(n,) weight w of delta in the LF-in-the-loop increment: `blend_weight` without its heading
     ramp, and across (4.5) the outward ramp of DELTA_TAPER instead of the inward one."""
-    inside, feasible = _margins(inputs, domain.BOUNDS, heading=False, known=known)
-    # (4.5) is in units of D_sub (8.575 R_lat = y_dist / D_sub), so one D_uuv is 1 / (D_sub/D_uuv).
-    taper = DELTA_TAPER / np.atleast_2d(inputs)[:, 4]
-    feasible[:, LATERAL] = 1.0 + feasible[:, LATERAL] * CONSTRAINT_BAND[LATERAL] / taper
-    return _weight(inside, feasible)
+    X = _rows(inputs)
+    out = np.empty(len(X))
+    kernel.weight_rows(
+        X, domain.CONSTRAINT_COEFFICIENTS, _LOWER, _UPPER, _RAMP, CONSTRAINT_BAND, False, DELTA_TAPER, out
+    )
+    return out
 
 
-def discrepancy_inputs(inputs: np.ndarray, known: Known | None = None) -> np.ndarray:
+def discrepancy_inputs(inputs: np.ndarray) -> np.ndarray:
     """x_c: inputs (n, 6) clamped into table 4.2's box and then, beyond (4.5), R_lat onto its edge
     (where `discrepancy_weight` tapers delta off), so delta is asked only where it was trained."""
-    clamped = np.minimum(np.maximum(inputs, _RAMPS[0]), _RAMPS[1])  # np.clip: no bound is 0
-    beyond = np.minimum(_constraint_values(clamped, known)[:, LATERAL], 0.0)
-    clamped[:, 1] += beyond / 8.575  # (4.5) falls by 8.575 (= L_sub / D_sub) per unit of R_lat
-    return clamped
+    X = _rows(inputs)
+    out = np.empty_like(X)
+    kernel.clamped_rows(X, domain.CONSTRAINT_COEFFICIENTS, _LOWER, _UPPER, LATERAL_SLOPE, out)
+    return out
 
 
 def prepare(mode: str) -> None:
@@ -181,12 +151,15 @@ def prepare(mode: str) -> None:
 
 def lf_reach_weight(x: np.ndarray, y: np.ndarray, clearance: np.ndarray | None = None) -> np.ndarray:
     """(n,) weight of the LF increment at CB positions x, y [m] (submarine frame): 1 up to LF_FULL
-    of clearance from the hull, 0 beyond LF_CUT, smooth between. Independent of the heading.
-    `clearance`: `proximity.hull_signed_distance(x, y)`, if already known."""
+    of clearance from the hull, 0 beyond LF_CUT, smooth between (smoothstep), 0 for a non-finite
+    state. Independent of the heading. `clearance`: `proximity.hull_signed_distance(x, y)`, if
+    already known."""
     if clearance is None:
         clearance = proximity.hull_signed_distance(x, y)
-    weight = 1.0 - smoothstep((clearance - LF_FULL) / (LF_CUT - LF_FULL))
-    return np.where(np.isfinite(weight), weight, 0.0)  # a non-finite state: no interaction
+    clearance = np.ascontiguousarray(np.ravel(np.asarray(clearance, dtype=float)))
+    out = np.empty(len(clearance))
+    kernel.reach_rows(clearance, LF_FULL, LF_CUT, out)
+    return out
 
 
 FLAG_NAMES = domain.INPUT_NAMES + domain.CONSTRAINT_NAMES  # columns of InteractionAt.outside_mask
@@ -229,12 +202,13 @@ class InteractionAt:
         return [name for name, out in zip(FLAG_NAMES, self.outside_mask[row], strict=True) if out]
 
 
-def outside_mask(raw: np.ndarray, known: Known | None = None) -> np.ndarray:
+def outside_mask(raw: np.ndarray) -> np.ndarray:
     """(n, 10) True where a raw input lies outside table 4.2's bounds (non-finite included) or a
-    constraint (4.4)-(4.7) fails, columns FLAG_NAMES. `known`: as in `blend_weight`."""
-    with np.errstate(invalid="ignore"):
-        beyond = ~((raw >= domain.BOUNDS[:, 0]) & (raw <= domain.BOUNDS[:, 1]))
-        return np.hstack([beyond, ~(_constraint_values(raw, known) >= 0.0)])
+    constraint (4.4)-(4.7) fails, columns FLAG_NAMES."""
+    X = _rows(raw)
+    out = np.empty((len(X), len(FLAG_NAMES)), dtype=bool)
+    kernel.flag_rows(X, domain.CONSTRAINT_COEFFICIENTS, _LOWER, _UPPER, out)
+    return out
 
 
 HULL_SHAPE_CONSTRAINTS = [2, 3]  # (4.6) and (4.7): functions of the hull ratios alone
@@ -326,6 +300,36 @@ def viscous_correction(model: ForceModel) -> vc.ViscousCorrection | None:
     return found
 
 
+@dataclass(frozen=True)
+class DomainRows:
+    """What the domain says of rows of raw inputs (n, 6), in one pass of the kernel
+    (`interaction_kernel.interaction_rows`): `inputs`, the rows with the hull ratios clipped to
+    their trained range, and for those, with the LF in the loop, the discrepancy weight and x_c
+    (`discrepancy_weight`, `discrepancy_inputs`; `weight` NaN), otherwise the blend weight
+    (`blend_weight`; `delta_weight` and `clamped` NaN); `flags`, the raw rows' `outside_mask`."""
+
+    inputs: np.ndarray
+    weight: np.ndarray
+    delta_weight: np.ndarray
+    clamped: np.ndarray
+    flags: np.ndarray
+
+    @classmethod
+    def of(cls, raw: np.ndarray, lf_in_loop: bool, clip: bool = True) -> DomainRows:
+        """The rows' terms; without `clip` the hull ratios are taken as they are."""
+        raw = _rows(raw)
+        lower, upper = (_GEOMETRY_LOWER, _GEOMETRY_UPPER) if clip else _UNCLIPPED
+        n = len(raw)
+        inputs, clamped = np.empty_like(raw), np.empty_like(raw)
+        weight, delta_weight = np.empty(n), np.empty(n)
+        flags = np.empty((n, len(FLAG_NAMES)), dtype=bool)
+        kernel.interaction_rows(
+            raw, domain.CONSTRAINT_COEFFICIENTS, _LOWER, _UPPER, _RAMP, CONSTRAINT_BAND, lower, upper, LATERAL_SLOPE,
+            DELTA_TAPER, lf_in_loop, inputs, weight, delta_weight, clamped, flags,
+        )  # fmt: skip
+        return cls(inputs, weight, delta_weight, clamped, flags)
+
+
 def interaction_at(
     model: ForceModel,
     state: np.ndarray,
@@ -362,22 +366,21 @@ def interaction_at(
     state = np.atleast_2d(state)
     u, x, y, psi = state[:, U], state[:, X], state[:, Y], state[:, PSI]
     raw, mirror = domain.to_inputs(x, y, u, psi, vehicle.length, vehicle.diameter)
-    inputs = raw.copy()
-    inputs[:, GEOMETRY] = np.minimum(np.maximum(raw[:, GEOMETRY], _GEOMETRY_LOWER), _GEOMETRY_UPPER)
-    n = len(inputs)
-    known = (inputs, domain.constraint_values(inputs))  # for the weights, x_c and the flags
+    lf_in_loop = mode == "increment" and getattr(model, "kind", None) == "lf_in_loop"
+    rows = DomainRows.of(raw, lf_in_loop)
+    inputs, n = rows.inputs, len(raw)
     table = None
     if mode == "increment":
         table = free_stream if free_stream is not None else increment_table(model)
-    if mode == "increment" and getattr(model, "kind", None) == "lf_in_loop":
+    if lf_in_loop:
         correction = viscous_correction(model) if viscous else None
         coefficients, weight, model_mean, spread, lf, delta_free, delta_weight, held, rans = lf_in_loop_increment(
-            model, inputs, x, y, vehicle, table, with_std, weighted_only, delta, known, correction
+            model, inputs, x, y, vehicle, table, with_std, weighted_only, delta, rows, correction
         )
     elif delta is not None:
         raise ValueError(f'a sampled delta needs the "increment" mode and a model of kind "lf_in_loop", got {mode!r}')
     else:
-        weight = blend_weight(inputs, known=known)
+        weight = rows.weight
         asked = weight > 0.0 if weighted_only else np.ones(n, dtype=bool)
         model_mean, spread = np.zeros((n, 3)), np.full((n, 3), np.nan)
         free = np.zeros((n, 3))
@@ -390,15 +393,16 @@ def interaction_at(
                 spread[asked] = prediction.std
         coefficients = model_mean - free
         lf, delta_free = np.full((n, 3), np.nan), np.full((n, 3), np.nan)
-        delta_weight, held = np.full(n, np.nan), np.zeros(n, dtype=bool)
+        delta_weight, held = rows.delta_weight, np.zeros(n, dtype=bool)
         rans = np.zeros((n, 3))
     # One conversion for the six (n, 3) arrays (element-wise, so each gets its own bits).
-    parts = np.concatenate([coefficients, model_mean, spread, lf, delta_free, rans])
-    converted = domain.to_forces(parts, np.concatenate((mirror,) * 6), np.concatenate((u,) * 6), vehicle.length, rho)
-    forces, model_forces, spread_forces, lf_forces, free_forces, rans_forces = converted.reshape(6, n, 3)
+    parts = np.ascontiguousarray(np.stack([coefficients, model_mean, spread, lf, delta_free, rans]))
+    converted = np.empty_like(parts)
+    kernel.force_rows(parts, mirror, np.ascontiguousarray(u), np.full(n, float(vehicle.length)), float(rho), converted)
+    forces, model_forces, spread_forces, lf_forces, free_forces, rans_forces = converted
     safe = np.where(np.isfinite(forces), forces, 0.0)  # weight is 0 wherever they are not finite
     interaction = Interaction(safe[0], weight[0], mode) if single else Interaction(safe, weight, mode)
-    flags = outside_mask(raw, known)
+    flags = rows.flags
     return InteractionAt(
         interaction=interaction,
         forces=forces,
@@ -439,7 +443,7 @@ def lf_in_loop_increment(
     with_std: bool = True,
     weighted_only: bool = False,
     delta: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
-    known: Known | None = None,
+    rows: DomainRows | None = None,
     viscous: vc.ViscousCorrection | None = None,
 ):
     """The increment [LF(x) - LF_free(x)] + w(x) [delta(x_c) - (HF_free(x_c) - LF_free(x_c))] in
@@ -457,7 +461,7 @@ def lf_in_loop_increment(
     same model's lone UUV at the same hull, speed and heading, so the increment tends to zero away
     from the submarine. Without `weighted_only` delta is asked about every state (the sim
     publishes it); with it only where both weights are above zero (a sweep). `delta`: as in
-    `interaction_at`; `known`: as in `blend_weight`."""
+    `interaction_at`; `rows`: the inputs' `DomainRows` with the LF in the loop, if already known."""
     if vehicle.length > LF_MAX_LENGTH:
         raise ValueError(
             f"vehicle {vehicle.name}: {vehicle.length:g} m long, longer than the {LF_MAX_LENGTH:.2f} m the LF's "
@@ -466,13 +470,15 @@ def lf_in_loop_increment(
     n = len(inputs)
     clearance = proximity.hull_signed_distance(x, y)  # the LF's reach and the viscous correction's input
     reach = lf_reach_weight(x, y, clearance)
-    delta_weight = discrepancy_weight(inputs, known)
+    if rows is None:
+        rows = DomainRows.of(inputs, lf_in_loop=True, clip=False)
+    delta_weight = rows.delta_weight
     near = reach > 0.0
     asked = near & (delta_weight > 0.0) if weighted_only else np.ones(n, dtype=bool)
     # Every row (the sim's one vehicle, a batch near the hull) needs no masked copies.
     every_asked, every_near = n > 0 and bool(asked.all()), n > 0 and bool(near.all())
     if any_asked := every_asked or asked.any():
-        clamped = discrepancy_inputs(inputs if every_asked else inputs[asked], known)
+        clamped = rows.clamped if every_asked else rows.clamped[asked]
         if delta is None:  # asked first, answered after the LF below (`discrepancy_later`)
             answer = discrepancy_later(model, clamped, with_std)
     if every_near:
