@@ -109,15 +109,27 @@ class ViscousCorrection:
 
     def blend(self, inputs: np.ndarray, increment: np.ndarray, clearance: np.ndarray | None = None) -> np.ndarray:
         """The change (n, 3) that takes the product's `increment` (n, 3) at configuration rows
-        (n, 6), mirrored as the surrogate's inputs are, towards RANS, times `reach`. Each row's value
-        has the same bits whatever the batch (`MultiOutputGP.predict_rows`). `clearance`: as in
-        `features`."""
+        (n, 6), mirrored as the surrogate's inputs are, towards RANS, times `reach` (zero
+        beyond it, where the GPs are not asked). Each row's value has the same bits whatever the
+        batch (`MultiOutputGP.predict_rows`). `clearance`: as in `features`."""
         inputs = np.atleast_2d(inputs)
+        weight = reach(inputs)
+        active = weight > 0.0  # the GPs are asked only where the correction reaches
+        if not active.any():
+            return np.zeros((len(inputs), 3))
+        every = bool(active.all())
+        if not every:
+            inputs, increment, weight = inputs[active], np.atleast_2d(increment)[active], weight[active]
+            clearance = None if clearance is None else np.ravel(clearance)[active]
         mean, std = self.gp.predict_rows(features(inputs, clearance), return_std=True)
         takeover, residual = self._takeover, self._residual
         share = np.where(takeover, np.maximum(1.0 - std * std / self._prior, 0.0), 1.0)
         change = np.where(takeover, share * (mean / SCALE - increment), np.where(residual, mean / SCALE, 0.0))
-        return reach(inputs)[:, None] * change
+        if every:
+            return weight[:, None] * change
+        out = np.zeros((len(active), 3))
+        out[active] = weight[:, None] * change
+        return out
 
 
 # "none": RANS does not improve on the increment there. In order of preference on a tie.
