@@ -173,12 +173,13 @@ class InteractionAt:
     those forces before the weight, `applied` = weight x forces, the surrogate's share of the
     (5.11)/(5.20) right-hand side (in "increment" mode exactly what is added to (5.11); in
     "replace"/"thesis" the (5.10) terms it stands for enter with 1 - weight). `model` and `std` are
-    the model's raw answer and its std: the discrepancy delta(x_c) in the LF-in-the-loop
-    increment, the prediction otherwise; `lf` the LF increment LF(x) - LF_free(x) (NaN when the
-    mode does not use it); `delta_free` the free-stream part of delta, HF_free(x_c) - LF_free(x_c),
-    which the increment leaves out (NaN likewise); `delta_weight` the weight of delta (NaN
-    likewise), `viscous` the viscous correction's change (zero without one), so forces = lf +
-    delta_weight (model - delta_free) + viscous. All in N and N m,
+    the model's raw answer and its std: the discrepancy delta(x_c) in the LF-in-the-loop increment
+    (NaN where its weight is zero: not asked), the prediction otherwise; `lf` the LF increment
+    LF(x) - LF_free(x) (NaN when the mode does not use it); `delta_free` the free-stream part of
+    delta, HF_free(x_c) - LF_free(x_c), which the increment leaves out (NaN likewise, and where
+    delta is not asked); `delta_weight` the weight of delta (NaN likewise), `viscous` the viscous
+    correction's change (zero without one), so forces = lf + delta_weight (model - delta_free) +
+    viscous, the middle term zero where delta_weight is. All in N and N m,
     frame convention. `outside_mask` (n, 10) says which inputs (table 4.2) and constraints
     (4.4)-(4.7) the state is outside of (`outside`), `lf_held` where the LF held its field at the
     table's inner edge (the UUV within 1 cm of the submarine's widest radius, `low_fidelity`)."""
@@ -349,10 +350,12 @@ def interaction_at(
     The hull ratios are clipped to the trained range (`geometry_outside` says when, and the sim
     reports it once): they are constants of the vehicle, so clipping them moves the whole mission
     to the nearest trained hull instead of switching the interaction off everywhere. Without
-    `with_std` the std is NaN (sweeps do not need it; the mean is the same either way). With
+    `with_std` the std is NaN (sweeps do not need it; the mean is the same either way). In
+    "replace", "thesis" and the increment of a model without the LF in the loop, with
     `weighted_only` the model is asked only about the states whose weight is above zero, and the
     others get zero forces: the dynamics multiply them by that zero weight, so the motion is the
-    same (to the sign of a zero), and a sweep where most UUVs are outside the domain is cheap.
+    same (to the sign of a zero), and a sweep where most UUVs are outside the domain is cheap. The
+    LF-in-the-loop increment always asks about delta only where its weight is above zero.
 
     "increment" with a model of kind "lf_in_loop": `lf_in_loop_increment`, with the HF free stream
     from `free_stream` or the table made for the model (`increment_table`). "increment" with another
@@ -375,7 +378,7 @@ def interaction_at(
     if lf_in_loop:
         correction = viscous_correction(model) if viscous else None
         coefficients, weight, model_mean, spread, lf, delta_free, delta_weight, held, rans = lf_in_loop_increment(
-            model, inputs, x, y, vehicle, table, with_std, weighted_only, delta, rows, correction
+            model, inputs, x, y, vehicle, table, with_std, delta, rows, correction
         )
     elif delta is not None:
         raise ValueError(f'a sampled delta needs the "increment" mode and a model of kind "lf_in_loop", got {mode!r}')
@@ -441,7 +444,6 @@ def lf_in_loop_increment(
     vehicle: Vehicle,
     free_stream: fs.FreeStreamTable,
     with_std: bool = True,
-    weighted_only: bool = False,
     delta: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
     rows: DomainRows | None = None,
     viscous: vc.ViscousCorrection | None = None,
@@ -459,8 +461,9 @@ def lf_in_loop_increment(
     (`low_fidelity.lf_free_stream`) at x_c. x_c and w: `discrepancy_inputs`, `discrepancy_weight`;
     w ignores the heading, so the LF alone carries it beyond +/-2 deg, continuously. LF_free is the
     same model's lone UUV at the same hull, speed and heading, so the increment tends to zero away
-    from the submarine. Without `weighted_only` delta is asked about every state (the sim
-    publishes it); with it only where both weights are above zero (a sweep). `delta`: as in
+    from the submarine. delta is asked only where both weights are above zero: elsewhere it
+    would be multiplied by zero, and its mean, std and free-stream part are NaN (not asked). A UUV
+    beyond (4.5) or outside table 4.2's speeds costs the surrogate server nothing. `delta`: as in
     `interaction_at`; `rows`: the inputs' `DomainRows` with the LF in the loop, if already known."""
     if vehicle.length > LF_MAX_LENGTH:
         raise ValueError(
@@ -474,8 +477,8 @@ def lf_in_loop_increment(
         rows = DomainRows.of(inputs, lf_in_loop=True, clip=False)
     delta_weight = rows.delta_weight
     near = reach > 0.0
-    asked = near & (delta_weight > 0.0) if weighted_only else np.ones(n, dtype=bool)
-    # Every row (the sim's one vehicle, a batch near the hull) needs no masked copies.
+    asked = near & (delta_weight > 0.0)  # delta is asked only where it counts
+    # Every row (the sim's one vehicle in the trained window, a batch near the hull) needs no masked copies.
     every_asked, every_near = n > 0 and bool(asked.all()), n > 0 and bool(near.all())
     if any_asked := every_asked or asked.any():
         clamped = rows.clamped if every_asked else rows.clamped[asked]
@@ -504,7 +507,7 @@ def lf_in_loop_increment(
         mean, free = asked_mean, asked_free
         spread = std if with_std and np.shape(std) == (n, 3) else np.full((n, 3), np.nan)
     else:
-        mean, spread, free = np.zeros((n, 3)), np.full((n, 3), np.nan), np.zeros((n, 3))
+        mean, spread, free = np.full((n, 3), np.nan), np.full((n, 3), np.nan), np.full((n, 3), np.nan)
         if any_asked:
             free[asked], mean[asked] = asked_free, asked_mean
             if with_std:
