@@ -224,7 +224,9 @@ def hull_signed_distance(px, py):
     if the distance is in its trusted range; points inside or within 1 cm of the hull, and the
     rare ones beyond every grid, get the exact polyline distance.
     """
-    px, py = np.broadcast_arrays(np.asarray(px, dtype=float), np.asarray(py, dtype=float))
+    px, py = np.asarray(px, dtype=float), np.asarray(py, dtype=float)
+    if px.shape != py.shape:
+        px, py = np.broadcast_arrays(px, py)
     x, y = np.ascontiguousarray(px).ravel(), np.ascontiguousarray(py).ravel()
     dist = np.empty(x.size)
     _kernel().signed_distances(x, y, *_kernel_grids(), dist)
