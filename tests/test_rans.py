@@ -590,6 +590,15 @@ def test_the_two_body_gci_needs_all_three_meshes_converged_and_judges_each_outpu
     assert gci["X"]["meets"] and not gci["Y"]["meets"] and not gci["N"]["meets"]
     assert np.isnan(gci["N"]["gci_fine"])
     assert rans_campaign.two_body_gci(dict([*list(found.items())[:2], result("fine", 0, 0, 0, usable=False)])) is None
+    # A fourth, finer mesh: the three finest make a second triplet, judged on the xfine mesh.
+    finer = rans_campaign.GRID_TRIPLETS[1]
+    assert rans_campaign.two_body_gci(found, triplet=finer) is None
+    found.update([result("xfine", -0.945, -0.040, 0.032)])
+    gci = rans_campaign.two_body_gci(found, triplet=finer)
+    assert gci["X"]["ratio"] == pytest.approx(0.5) and gci["X"]["meets"]
+    assert gci["Y"]["ratio"] == pytest.approx(0.5) and not gci["Y"]["meets"]  # 20 % of Y' on the finest mesh
+    # N': order 3.2, credited 2: GCI 1.25 x 0.001 / 0.032 / (2 - 1)
+    assert gci["N"]["ratio"] == pytest.approx(1 / 3) and gci["N"]["gci_fine"] == pytest.approx(0.0391, abs=1e-4)
 
 
 def test_the_held_out_summary_counts_each_held_out_station_once_on_its_medium_mesh():

@@ -138,8 +138,11 @@ MESH_LEVELS = {
     "coarse": MeshLevel("coarse", 1.0, 600),
     "medium": MeshLevel("medium", math.sqrt(2.0), 800),
     "fine": MeshLevel("fine", 2.0, 1000),
+    # A fourth level for a grid study whose coarse/medium/fine changes are not yet in the asymptotic
+    # range: the GCI of the medium/fine/xfine triplet (`rans_campaign.two_body_gci`).
+    "xfine": MeshLevel("xfine", 2.0 * math.sqrt(2.0), 1200),
 }
-SURFACE_CELLS_PER_DIAMETER = 24  # at the coarse level (medium 34, fine 48) on the measured body
+SURFACE_CELLS_PER_DIAMETER = 24  # at the coarse level (medium 34, fine 48, xfine 68) on the measured body
 
 
 @dataclass(frozen=True)

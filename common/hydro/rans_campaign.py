@@ -359,15 +359,27 @@ def validation_rows(found: list[rans.Result]) -> dict:
         cases = [r for r in found if r.kind == "suboff" and r.case_id.startswith(f"suboff-psi{psi:.2f}-")]
         for r in sorted(cases, key=lambda r: r.case_id):
             drift.append(_drift_row(r, psi, efd))
-    gcis = {s.name: found for s in TWO_BODY_STATIONS if (found := two_body_gci(by_id, s)) is not None}
+    gcis = [
+        {"station": s.name, "levels": "/".join(reversed(triplet)), "outputs": found}
+        for s in TWO_BODY_STATIONS
+        for triplet in GRID_TRIPLETS
+        if (found := two_body_gci(by_id, s, triplet)) is not None
+    ]
     return {"resistance": resistance, "gci": gci, "drift": drift, "two_body_gci": gcis}
 
 
-def two_body_gci(by_id: dict[str, rans.Result], station: Station = GRID_STATION) -> dict[str, dict] | None:
-    """The grid convergence of X', Y', N' at a station (default the grid study's), once its
-    coarse, medium and fine cases have converged (None before): per output `grid_convergence` and
-    whether GCI_fine meets GCI_TARGET."""
-    levels = [by_id.get(rans.two_body_case(station.row, lv).case_id) for lv in ("fine", "medium", "coarse")]
+# The grid study's triplets, finest first: the three standard meshes, and where a fourth, finer one
+# has run (the "xfine" level) the three finest.
+GRID_TRIPLETS = (("fine", "medium", "coarse"), ("xfine", "fine", "medium"))
+
+
+def two_body_gci(
+    by_id: dict[str, rans.Result], station: Station = GRID_STATION, triplet: tuple[str, str, str] = GRID_TRIPLETS[0]
+) -> dict[str, dict] | None:
+    """The grid convergence of X', Y', N' at a station (default the grid study's) on a triplet of
+    mesh levels, finest first (default fine, medium, coarse), once its three cases have converged
+    (None before): per output `grid_convergence` and whether the finest mesh's GCI meets GCI_TARGET."""
+    levels = [by_id.get(rans.two_body_case(station.row, lv).case_id) for lv in triplet]
     if not all(r is not None and r.convergence.usable for r in levels):
         return None
     out = {}

@@ -143,9 +143,10 @@ def validate_command(args) -> int:
         )
     target = f"target GCI_fine <= {rans_campaign.GCI_TARGET:.0%}"
     stations = {s.name: s for s in rans_campaign.TWO_BODY_STATIONS}
-    for name, gci in table["two_body_gci"].items():
-        print(f"\nTwo-body GCI at '{name}' {list(stations[name].row)} ({target})")
-        for output, g in gci.items():
+    for study in table["two_body_gci"]:
+        name = study["station"]
+        print(f"\nTwo-body GCI at '{name}' {list(stations[name].row)}, meshes {study['levels']} ({target})")
+        for output, g in study["outputs"].items():
             if g["p"] != g["p"]:  # NaN: no monotone convergence
                 how = "oscillates" if g["ratio"] < 0 else "the change grows with refinement"
                 print(f"  {output}': no GCI: convergence ratio {g['ratio']:.2f}, {how} (not in the asymptotic range)")
