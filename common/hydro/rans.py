@@ -585,6 +585,12 @@ MESH_QUALITY = {  # the values of OpenFOAM's etc/caseDicts/meshQualityDict
 }
 
 
+# The solver writes its fields every CHECKPOINT_ITERATIONS, or every fifth of a shorter run
+# (keeping only the latest), so a run stopped by an interruption goes on from there when the case
+# is run again (`run_case`). A write costs a second or two on a fine two-body mesh (about 100 MB).
+CHECKPOINT_ITERATIONS = 100
+
+
 def _control(spec: CaseSpec, end: int | None = None, restart: bool = False) -> dict:
     """controlDict: run to `end` (default the case's last iteration), from the latest time with
     `restart` (the second stage after a first-order start)."""
@@ -611,7 +617,7 @@ def _control(spec: CaseSpec, end: int | None = None, restart: bool = False) -> d
         "endTime": n,
         "deltaT": 1,
         "writeControl": "timeStep",
-        "writeInterval": n,
+        "writeInterval": min(CHECKPOINT_ITERATIONS, max(1, n // 5)),
         "purgeWrite": 1,
         "writeFormat": "binary",
         "writePrecision": 8,
@@ -949,14 +955,32 @@ def mesh_case(folder, cores: int = 1) -> int:
     return cells
 
 
-def solve(spec: CaseSpec, folder, cores: int = 1) -> None:
+def solve(spec: CaseSpec, folder, cores: int = 1, resume: bool = False) -> None:
     """simpleFoam on a meshed case: first spec.start_iterations with first-order upwind for U
-    (their log kept as log.simpleFoam.start), then on from there with the case's own schemes."""
+    (their log kept as log.simpleFoam.start), then on from there with the case's own schemes. With
+    `resume` (an interrupted run wrote fields after its start) on from the latest of them, the log
+    of the interrupted run kept as log.simpleFoam.<its latest write>."""
     from foamlib import FoamCase
 
+    openfoam_environment()
     folder = Path(folder)
     case = FoamCase(folder)
     system = folder / "system"
+    if resume:
+        _write(system / "fvSchemes", _foam_entries(FV_SCHEMES))
+        _write(system / "controlDict", _control(spec, restart=True))
+        latest = _latest_time(folder)
+        log = folder / "log.simpleFoam"
+        if log.is_file():
+            shutil.move(log, folder / f"log.simpleFoam.{latest:g}")
+        # A stage that started at the latest write holds only rows the resumed run redoes, and
+        # OpenFOAM would write beside its files instead of over them.
+        for stage in (folder / "postProcessing").glob("*/*"):
+            if re.fullmatch(r"\d+(\.\d+)?", stage.name) and float(stage.name) == latest:
+                shutil.rmtree(stage)
+        _run(case, ["simpleFoam"], cores, cores > 1)
+        return
+    shutil.rmtree(folder / "postProcessing", ignore_errors=True)  # a run interrupted before its first write
     if spec.start_iterations:
         _write(system / "fvSchemes", _foam_entries(FIRST_ORDER_SCHEMES))
         _write(system / "controlDict", _control(spec, end=spec.start_iterations))
@@ -1028,11 +1052,49 @@ def cell_count(folder) -> int:
     return total
 
 
+MESHED = "meshed.json"  # a case folder's mesh is complete: its cells, meshing time, solver start
+
+
+def _meshed(spec: CaseSpec, folder: Path, cores: int) -> dict | None:
+    """What meshed.json says of a folder meshed for this case on as many cores and not yet solved
+    to the end (an interrupted run), or None: then the case is written and meshed afresh."""
+    try:
+        meshed = json.loads((folder / MESHED).read_text())
+    except (OSError, ValueError):
+        return None
+    same = meshed.get("spec") == spec.case_id and meshed.get("cores") == cores and isinstance(meshed.get("cells"), int)
+    return meshed if same else None
+
+
+def _latest_time(folder: Path) -> float:
+    """The latest time the solver wrote in a case folder (its first processor's, run in
+    parallel); 0 when it wrote none."""
+    base = folder / "processor0" if (folder / "processor0").is_dir() else folder
+    times = [float(p.name) for p in base.glob("*") if p.is_dir() and re.fullmatch(r"\d+(\.\d+)?", p.name)]
+    return max(times, default=0.0)
+
+
+def _interrupted_seconds(folder: Path, meshed: dict) -> float:
+    """Solver time an interrupted run already spent on the fields it wrote: from its start to its
+    latest write (the work after that is redone, so not counted), plus what runs before it spent."""
+    started = meshed.get("solve_started")
+    if started is None:
+        return 0.0
+    base = folder / "processor0" if (folder / "processor0").is_dir() else folder
+    latest = _latest_time(folder)
+    written = [p.stat().st_mtime for p in base.glob("*") if p.is_dir() and p.name not in ("0", "constant")]
+    kept = max(written, default=started) - started if latest > 0 else 0.0
+    return float(meshed.get("solved_before", 0.0)) + max(kept, 0.0)
+
+
 def run_case(spec: CaseSpec, folder, cores: int = 1) -> Result:
     """Write, mesh and solve one case; the Result (convergence verdict included) is also saved as
     result.json in the folder. A solver that stops with an error gives a diverged Result, not an
     exception; a case that cannot be meshed raises CaseError. A case stopped early
-    (`stopped_early`) is continued, at once or, from a folder that holds one, when run again."""
+    (`stopped_early`) is continued, at once or, from a folder that holds one, when run again. A run
+    interrupted (the folder meshed, no result.json) goes on from the fields it last wrote
+    (CHECKPOINT_ITERATIONS), the mesh kept; before its first-order start was written, the solve
+    starts over on the same mesh."""
 
     missing = openfoam_missing()
     if missing:
@@ -1041,23 +1103,27 @@ def run_case(spec: CaseSpec, folder, cores: int = 1) -> Result:
     previous = saved_result(folder)
     if previous is not None and stopped_early(spec, previous):
         return continue_case(spec, folder, cores, previous)
-    write_case(spec, folder, cores)
-    start = time.monotonic()
-    cells = mesh_case(folder, cores)
-    meshed = time.monotonic()
-    failure = None
+    meshed = _meshed(spec, folder, cores) if previous is None else None
+    if meshed is None:
+        write_case(spec, folder, cores)
+        start = time.monotonic()
+        cells = mesh_case(folder, cores)
+        meshed = {"spec": spec.case_id, "cells": cells, "cores": cores, "mesh_seconds": time.monotonic() - start}
+        (folder / MESHED).write_text(json.dumps(meshed) + "\n")
+    begun, failure = time.monotonic(), None
+    earlier = _interrupted_seconds(folder, meshed)
+    (folder / MESHED).write_text(json.dumps(meshed | {"solve_started": time.time(), "solved_before": earlier}) + "\n")
     try:
-        solve(spec, folder, cores)
+        solve(spec, folder, cores, resume=_latest_time(folder) >= max(spec.start_iterations, 1))
     except CaseError as exc:
         failure = str(exc)
-    solved = time.monotonic()
     result = read_result(
         spec,
         folder,
-        cells=cells,
+        cells=meshed["cells"],
         cores=cores,
-        mesh_seconds=meshed - start,
-        solve_seconds=solved - meshed,
+        mesh_seconds=meshed["mesh_seconds"],
+        solve_seconds=earlier + time.monotonic() - begun,
         failure=failure,
     )
     (folder / "result.json").write_text(json.dumps(result.to_json(), indent=1) + "\n")
@@ -1091,14 +1157,20 @@ def force_history(folder, patch: str) -> tuple[np.ndarray, np.ndarray, np.ndarra
     starts = _time_folders(base)
     if not starts:
         raise CaseError(f"no forces written for patch {patch} under {base}")
-    # A case solved in stages (a first-order start) has one folder per stage, named by its start.
-    force, moment = (_stacked([read_table(start / name) for start in starts]) for name in ("force.dat", "moment.dat"))
+    # A case solved in stages (a first-order start, a resumed run) has one folder per stage, named
+    # by its start; an interrupted stage's rows after the next one's start were redone by it.
+    force, moment = (
+        _stacked([read_table(start / name) for start in starts], starts) for name in ("force.dat", "moment.dat")
+    )
     n = min(len(force), len(moment))
     return force[:n, 0], force[:n, 1:4], moment[:n, 1:4]
 
 
-def _stacked(tables: list[np.ndarray]) -> np.ndarray:
-    """The rows of several tables of one width, in order (empty ones skipped)."""
+def _stacked(tables: list[np.ndarray], starts: list[Path]) -> np.ndarray:
+    """The rows of several tables of one width (time first), in order, each up to the start of
+    the next (its folder's name); empty ones skipped."""
+    ends = [float(p.name) for p in starts[1:]] + [math.inf]
+    tables = [t[t[:, 0] <= end] for t, end in zip(tables, ends, strict=True) if t.size]
     tables = [t for t in tables if t.size]
     return np.concatenate(tables) if tables else np.zeros((0, 10))
 
