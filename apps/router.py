@@ -15,7 +15,7 @@ import argparse
 import json
 import os
 import signal
-import threading
+import time
 from pathlib import Path
 
 from nearsub.apps.entry import AppError, run_app
@@ -39,11 +39,13 @@ def serve(
     credentials: str | None = None,
 ) -> int:
     """Route until SIGINT/SIGTERM; `with_parent` also stops when the launcher process dies."""
-    stop = threading.Event()
+    # A list, not a threading.Event: a handler that runs while the main thread is inside the
+    # Event's set or wait (a second signal of the stop ladder) would deadlock on its lock.
+    stop: list[int] = []
     if with_parent:
         prepare_process()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    signal.signal(signal.SIGTERM, lambda signum, _: stop.append(signum))
+    signal.signal(signal.SIGINT, lambda signum, _: stop.append(signum))
     config = make_config("router", connect=connect, listen=listen, admin_space=True, credentials=credentials)
     with Bus(config) as bus:
         endpoints = bus.locators() or list(listen)
@@ -51,8 +53,8 @@ def serve(
             write_ready(ready_file, endpoints)
         admits = f"sessions with the credentials in {credentials}" if credentials else "any session (no credentials)"
         print(f"router listening on {', '.join(endpoints)}, admitting {admits}", flush=True)
-        while not stop.wait(0.5):
-            pass
+        while not stop:
+            time.sleep(0.2)
     return 0
 
 

@@ -141,3 +141,26 @@ def test_a_scheduler_nobody_listens_on_is_one_line_naming_it():
             with processes.task_client(scheduler=address):
                 pass
     assert isinstance(caught.value, LookupError) and len(str(caught.value).splitlines()) == 1
+
+
+def test_a_router_leaves_on_signals_that_arrive_back_to_back(tmp_path):
+    """The stop ladder's SIGINT and SIGTERM, and a user's repeated Ctrl-C, may land while the
+    router's handler of the one before is still running: it must leave, not deadlock in its own
+    handler (a router of a killed test's player outlived it that way)."""
+    ready = tmp_path / "router.json"
+    process = processes.spawn_app(
+        "router", ["--listen", "tcp/127.0.0.1:0", "--ready-file", str(ready)], subprocess.DEVNULL
+    )
+    try:
+        deadline = time.monotonic() + 60.0
+        while not ready.exists() and process.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert ready.exists(), "the router did not start"
+        for _ in range(200):
+            for signum in (signal.SIGINT, signal.SIGTERM):
+                if process.poll() is None:
+                    process.send_signal(signum)
+        process.wait(timeout=10.0)
+    finally:
+        processes.stop([process], wait=2.0)
+    assert process.returncode == 0
