@@ -61,8 +61,6 @@ GEOMETRY = slice(4, 6)  # D_sub/D_uuv and L/D_uuv: fixed for a vehicle
 # Their trained range (table 4.2), which `interaction_at` clips them to (as np.clip: neither bound is 0).
 _GEOMETRY_LOWER, _GEOMETRY_UPPER = domain.BOUNDS[GEOMETRY, 0].copy(), domain.BOUNDS[GEOMETRY, 1].copy()
 _UNCLIPPED = (np.full(2, -np.inf), np.full(2, np.inf))
-HEADING = 3  # psi_deg: the discrepancy weight of the LF-in-the-loop increment ignores it
-LATERAL = 1  # constraint (4.5), the outer lateral edge of the trained window
 # The discrepancy weight of the LF-in-the-loop increment across (4.5): 1 up to the edge, falling
 # (smoothstep) to 0 one UUV diameter of clearance beyond it, with delta held at its value on the
 # edge meanwhile. A ramp inside the 0.26-0.7 m window (CONSTRAINT_BAND, about 5 cm) would take
