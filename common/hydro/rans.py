@@ -1111,10 +1111,11 @@ def run_case(spec: CaseSpec, folder, cores: int = 1) -> Result:
         meshed = {"spec": spec.case_id, "cells": cells, "cores": cores, "mesh_seconds": time.monotonic() - start}
         (folder / MESHED).write_text(json.dumps(meshed) + "\n")
     begun, failure = time.monotonic(), None
-    earlier = _interrupted_seconds(folder, meshed)
+    resume = _latest_time(folder) >= max(spec.start_iterations, 1)
+    earlier = _interrupted_seconds(folder, meshed) if resume else 0.0  # else every iteration is redone
     (folder / MESHED).write_text(json.dumps(meshed | {"solve_started": time.time(), "solved_before": earlier}) + "\n")
     try:
-        solve(spec, folder, cores, resume=_latest_time(folder) >= max(spec.start_iterations, 1))
+        solve(spec, folder, cores, resume=resume)
     except CaseError as exc:
         failure = str(exc)
     result = read_result(
