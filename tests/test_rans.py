@@ -179,6 +179,12 @@ def test_the_uuv_alone_is_the_station_s_uuv_without_the_submarine(tmp_path):
     suite = rans_campaign.suite("uuv-alone")
     assert {rans_campaign.free_stream_key(s.inputs) for s in suite} == needed and len(suite) == len(needed)
     assert [s.quarter for s in suite] == sorted((s.quarter for s in suite), reverse=True)  # cheap ones first
+    # A suite takes --turbulence (its own case ids), or refuses it where its cases name their model.
+    komega = rans_campaign.suite("uuv-alone", "komega")
+    assert [s.case_id for s in komega] == [s.case_id + "-komega" for s in suite]
+    assert {s.turbulence for s in komega} == {"komega"}
+    with pytest.raises(rans.CaseError, match="--turbulence komega: the smoke suite"):
+        rans_campaign.suite("smoke", "komega")
 
 
 # --- forces, nondimensionalisation, verdict ------------------------------------------------------

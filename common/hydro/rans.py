@@ -312,15 +312,21 @@ def two_body_case(
 
 
 def uuv_alone_case(
-    row, level: str = "medium", wall_function: str = "nutk", y_plus: float = 50.0, iterations: int | None = None
+    row,
+    level: str = "medium",
+    wall_function: str = "nutk",
+    y_plus: float = 50.0,
+    iterations: int | None = None,
+    turbulence: str = "sst",
 ) -> CaseSpec:
     """The Explorer UUV of a two-body configuration row alone, at the row's speed, heading and hull
     (u_kn, psi_deg, d_ratio, ld_ratio; R_long and R_lat are ignored), with the same water, mesh
     level and wall treatment: its forces are the free-stream part of the two-body case's, so that
     the two give the interaction alone (`rans_comparison`). A quarter domain at zero heading."""
     row, (_, _, speed, psi, diameter, length) = _configuration(row, level, wall_function, y_plus)
+    _check_turbulence(turbulence)
     return CaseSpec(
-        case_id="uuv-" + "_".join(f"{v:g}" for v in row[2:]) + _case_suffix(level, wall_function, y_plus),
+        case_id="uuv-" + "_".join(f"{v:g}" for v in row[2:]) + _case_suffix(level, wall_function, y_plus, turbulence),
         kind="uuv-alone",
         bodies=(Body("uuv", "explorer", length, diameter, 0.0, 0.0, psi),),
         speed=speed,
@@ -332,6 +338,7 @@ def uuv_alone_case(
         quarter=psi == 0.0,
         inputs=tuple(row[2:].tolist()),
         iterations=iterations,
+        turbulence=turbulence,
     )
 
 

@@ -113,8 +113,11 @@ def station_of(inputs) -> Station | None:
     return next((s for s in TWO_BODY_STATIONS if tuple(round(v, 6) for v in s.row) == key), None)
 
 
-def suite(name: str) -> list[rans.CaseSpec]:
-    """A named, ordered set of cases (the order a runner takes them in)."""
+def suite(name: str, turbulence: str = "sst") -> list[rans.CaseSpec]:
+    """A named, ordered set of cases (the order a runner takes them in). `turbulence` applies to
+    the two-body and UUV-alone suites; the SUBOFF validation and the smoke case name their own."""
+    if turbulence != "sst" and name in ("suboff-validation", "smoke"):
+        raise rans.CaseError(f"--turbulence {turbulence}: the {name} suite's cases name their own model")
     if name == "suboff-validation":
         return [
             rans.suboff_case(0.0, "medium"),
@@ -132,11 +135,12 @@ def suite(name: str) -> list[rans.CaseSpec]:
             *(rans.suboff_case(psi, "medium") for psi in MORE_DRIFT_ANGLES),
         ]
     if name == "two-body":
-        return [rans.two_body_case(s.row, "medium") for s in TWO_BODY_STATIONS]
+        return [rans.two_body_case(s.row, "medium", turbulence=turbulence) for s in TWO_BODY_STATIONS]
     if name == "uuv-alone":
-        return [rans.uuv_alone_case(row, "medium") for row in free_stream_rows()]
+        return [rans.uuv_alone_case(row, "medium", turbulence=turbulence) for row in free_stream_rows()]
     if name == "two-body-grid":
-        return [rans.two_body_case(GRID_STATION.row, level) for level in ("coarse", "medium", "fine")]
+        levels = ("coarse", "medium", "fine")
+        return [rans.two_body_case(GRID_STATION.row, level, turbulence=turbulence) for level in levels]
     if name == "smoke":
         return [rans.suboff_case(0.0, "smoke")]
     raise rans.CaseError(f"--suite {name!r}: choose one of {', '.join(SUITES)}")

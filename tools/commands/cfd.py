@@ -29,7 +29,7 @@ def _specs(args):
     from nearsub.common.hydro import rans, rans_campaign
 
     if getattr(args, "suite", None):
-        return rans_campaign.suite(args.suite)
+        return rans_campaign.suite(args.suite, args.turbulence)
     if args.config is not None:
         if args.sustain_inflow:
             raise InputError("--sustain-inflow: only for a SUBOFF case (--psi)")
