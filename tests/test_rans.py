@@ -564,6 +564,30 @@ def test_wilcox_k_omega_is_its_own_case(tmp_path):
     assert unknown.returncode == 2 and "--turbulence 'kEpsilon'" in unknown.stderr and not (tmp_path / "x").exists()
 
 
+def test_the_inflow_turbulence_is_a_case_option(tmp_path):
+    spec = rans.with_inflow(rans.suboff_case(0.0, "medium", "spalding", 1.0, turbulence="komega"), 0.001, 1.0)
+    assert spec.case_id == "suboff-psi0.00-medium-spalding-yp1-komega-tu0.1-vr1"
+    folder = rans.write_case(spec, tmp_path / "i")
+    k, omega = 1.5 * (0.001 * spec.speed) ** 2, 1.5 * (0.001 * spec.speed) ** 2 / (1.0 * spec.nu)
+    assert rans.inflow_turbulence(spec) == pytest.approx((k, omega), rel=1e-12)
+    assert _foam(folder / "0.orig/k")["internalField"] == pytest.approx(k)
+    assert _foam(folder / "0.orig/omega")["boundaryField"]["inlet"]["value"] == pytest.approx(omega)
+    assert rans.load_spec(folder) == spec
+    default = rans.suboff_case(0.0)
+    assert rans.with_inflow(default, rans.INFLOW_INTENSITY, rans.INFLOW_VISCOSITY_RATIO) is default
+    for intensity, ratio, field in ((0.5, 10.0, "--inflow-intensity"), (0.01, 0.0, "--inflow-viscosity-ratio")):
+        with pytest.raises(rans.CaseError, match=field):
+            rans.with_inflow(default, intensity, ratio)
+    made = nearsub(
+        "cfd", "case", "--inflow-intensity", "0.1", "--inflow-viscosity-ratio", "1", "-o", str(tmp_path / "c")
+    )
+    assert made.returncode == 0, made.stderr
+    assert json.loads((tmp_path / "c" / "case.json").read_text())["inflow_intensity"] == pytest.approx(0.001)
+    refused = nearsub("cfd", "case", "--inflow-intensity", "50", "-o", str(tmp_path / "x"))
+    assert refused.returncode == 2 and "--inflow-intensity 50" in refused.stderr and "Traceback" not in refused.stderr
+    assert not (tmp_path / "x").exists()
+
+
 def _saved(folder: Path, spec: rans.CaseSpec, status: str, iterations: int) -> None:
     convergence = rans.Convergence(status, "", iterations, iterations // 5, {"X": 0.0, "Y": 0.0, "N": 0.0}, {})
     result = rans.Result(spec.case_id, spec.kind, spec.level, spec.wall_function, spec.y_plus, 1, 2, 1.0, 1.0,

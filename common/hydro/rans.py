@@ -25,7 +25,7 @@ import re
 import shutil
 import subprocess
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -48,9 +48,11 @@ TABLE_3_1_EFD_XPRIME = -9.95e-4
 TABLE_3_1_CFD_X = -85.6  # [N]
 
 # Inflow turbulence: 1 % intensity and an eddy-viscosity ratio of 10, common towing-tank RANS
-# settings (nearsub's choice; their effect on the forces is not studied here).
+# settings (nearsub's choice; `with_inflow` varies them, docs/hydro/rans/README.md "Inflow turbulence").
 INFLOW_INTENSITY = 0.01
 INFLOW_VISCOSITY_RATIO = 10.0
+INFLOW_INTENSITY_RANGE = (1e-4, 0.2)  # 0.01 % (a quiet towing tank) to 20 %
+INFLOW_VISCOSITY_RATIO_RANGE = (0.1, 1000.0)
 # With `sustain_inflow`, k-omega SST's sustaining terms keep the inflow's k and omega from decaying
 # on their way to the body (Spalart & Rumsey 2007, AIAA J. 45(10) 2544-2553; kOmegaSST's
 # `decayControl` in OpenFOAM v1912): the bow then sees the inflow's 1 %, not about 0.2 %.
@@ -165,6 +167,8 @@ class CaseSpec:
     iterations: int | None = None  # default: the level's
     sustain_inflow: bool = False  # SST's sustaining terms for the inflow turbulence (Spalart & Rumsey 2007)
     turbulence: str = "sst"  # a key of TURBULENCE_MODELS
+    inflow_intensity: float = INFLOW_INTENSITY  # turbulence intensity at the inlet, a fraction
+    inflow_viscosity_ratio: float = INFLOW_VISCOSITY_RATIO  # nu_t / nu at the inlet
 
     @property
     def body(self) -> Body:
@@ -411,8 +415,27 @@ def domain(spec: CaseSpec) -> Domain:
 
 
 def inflow_turbulence(spec: CaseSpec) -> tuple[float, float]:
-    k = 1.5 * (INFLOW_INTENSITY * spec.speed) ** 2
-    return k, k / (INFLOW_VISCOSITY_RATIO * spec.nu)
+    """k and omega at the inlet from the case's intensity I and eddy-viscosity ratio:
+    k = 1.5 (I U)^2, omega = k / (ratio nu)."""
+    k = 1.5 * (spec.inflow_intensity * spec.speed) ** 2
+    return k, k / (spec.inflow_viscosity_ratio * spec.nu)
+
+
+def with_inflow(spec: CaseSpec, intensity: float, viscosity_ratio: float) -> CaseSpec:
+    """The same case with another inflow turbulence (intensity a fraction, nu_t/nu); a case id
+    that names it (`-tu<percent>-vr<ratio>`) unless it is the default."""
+    for name, value, (low, high), scale in (
+        ("--inflow-intensity", intensity, INFLOW_INTENSITY_RANGE, 100.0),
+        ("--inflow-viscosity-ratio", viscosity_ratio, INFLOW_VISCOSITY_RATIO_RANGE, 1.0),
+    ):
+        if not (math.isfinite(value) and low <= value <= high):
+            raise CaseError(f"{name} {value * scale!r}: choose {low * scale:g} to {high * scale:g}")
+    if intensity == spec.inflow_intensity and viscosity_ratio == spec.inflow_viscosity_ratio:
+        return spec
+    suffix = f"-tu{100.0 * intensity:g}-vr{viscosity_ratio:g}"
+    return replace(
+        spec, case_id=spec.case_id + suffix, inflow_intensity=intensity, inflow_viscosity_ratio=viscosity_ratio
+    )
 
 
 # --- writing the case --------------------------------------------------------------------------

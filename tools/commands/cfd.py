@@ -29,20 +29,30 @@ def _specs(args):
     from nearsub.common.hydro import rans, rans_campaign
 
     if getattr(args, "suite", None):
-        return rans_campaign.suite(args.suite, args.turbulence)
-    if args.config is not None:
+        specs = rans_campaign.suite(args.suite, args.turbulence)
+    elif args.config is not None:
         if args.sustain_inflow:
             raise InputError("--sustain-inflow: only for a SUBOFF case (--psi)")
-        return [
+        specs = [
             rans.two_body_case(
                 args.config, args.level, args.wall_function, args.y_plus, args.iterations, args.turbulence
             )
         ]
-    return [
-        rans.suboff_case(
-            args.psi, args.level, args.wall_function, args.y_plus, args.iterations, args.sustain_inflow, args.turbulence
-        )
-    ]
+    else:
+        specs = [
+            rans.suboff_case(
+                args.psi,
+                args.level,
+                args.wall_function,
+                args.y_plus,
+                args.iterations,
+                args.sustain_inflow,
+                args.turbulence,
+            )
+        ]
+    intensity = rans.INFLOW_INTENSITY if args.inflow_intensity is None else args.inflow_intensity / 100.0
+    ratio = rans.INFLOW_VISCOSITY_RATIO if args.inflow_viscosity_ratio is None else args.inflow_viscosity_ratio
+    return [rans.with_inflow(spec, intensity, ratio) for spec in specs]
 
 
 def case_command(args) -> int:
@@ -518,6 +528,17 @@ def _case_arguments(p, suite: bool = False) -> None:
         "--turbulence",
         default="sst",
         help="the turbulence model, sst (k-omega SST, default) or komega (Wilcox's k-omega, the thesis's)",
+    )
+    p.add_argument(
+        "--inflow-intensity",
+        type=number(),
+        metavar="PERCENT",
+        help="turbulence intensity at the inlet [%%] (default 1)",
+    )
+    p.add_argument(
+        "--inflow-viscosity-ratio",
+        type=number(),
+        help="eddy-viscosity ratio nu_t/nu at the inlet (default 10)",
     )
     p.add_argument("--cores", type=integer(minimum=1, maximum=1024), default=1, help="MPI ranks per case (default 1)")
 
