@@ -588,6 +588,23 @@ def test_the_inflow_turbulence_is_a_case_option(tmp_path):
     assert not (tmp_path / "x").exists()
 
 
+def test_a_result_without_its_model_and_inflow_takes_them_from_its_case(tmp_path):
+    """Results written before the turbulence model and the inflow were recorded in result.json
+    show them all the same in the tables: `results` reads them from the case's case.json."""
+    spec = rans.with_inflow(rans.suboff_case(0.0, "medium", "spalding", 1.0, turbulence="komega"), 0.01, 100.0)
+    _saved(tmp_path / spec.case_id, spec, "converged", 300)
+    saved = json.loads((tmp_path / spec.case_id / "result.json").read_text())
+    for key in ("turbulence", "inflow_intensity", "inflow_viscosity_ratio"):
+        del saved[key]
+    saved["forces"] = {"suboff": {"X": -88.0, "Y": 0.0, "N": 0.0}}
+    (tmp_path / spec.case_id / "result.json").write_text(json.dumps(saved))
+    (tmp_path / spec.case_id / "case.json").write_text(json.dumps(spec.describe()))
+    [found] = rans_campaign.results([tmp_path])
+    assert (found.turbulence, found.inflow_intensity, found.inflow_viscosity_ratio) == ("komega", 0.01, 100.0)
+    [row] = rans_campaign.validation_rows([found])["resistance"]
+    assert row["turbulence"] == "komega" and row["inflow"] == (0.01, 100.0)
+
+
 def _saved(folder: Path, spec: rans.CaseSpec, status: str, iterations: int) -> None:
     convergence = rans.Convergence(status, "", iterations, iterations // 5, {"X": 0.0, "Y": 0.0, "N": 0.0}, {})
     result = rans.Result(spec.case_id, spec.kind, spec.level, spec.wall_function, spec.y_plus, 1, 2, 1.0, 1.0,

@@ -906,6 +906,11 @@ class Result:
     y_plus: dict[str, dict[str, float]] = field(default_factory=dict)
     inputs: tuple[float, ...] | None = None
     openfoam: str = ""
+    # the case's turbulence model and inflow (results written before these were recorded: `results`
+    # reads them from the case's case.json)
+    turbulence: str = "sst"
+    inflow_intensity: float = INFLOW_INTENSITY
+    inflow_viscosity_ratio: float = INFLOW_VISCOSITY_RATIO
 
     @property
     def wall_seconds(self) -> float:
@@ -1384,4 +1389,7 @@ def read_result(
         y_plus=read_y_plus(folder),
         inputs=spec.inputs,
         openfoam=openfoam_version(),
+        turbulence=spec.turbulence,
+        inflow_intensity=spec.inflow_intensity,
+        inflow_viscosity_ratio=spec.inflow_viscosity_ratio,
     )
