@@ -588,6 +588,41 @@ def test_the_inflow_turbulence_is_a_case_option(tmp_path):
     assert not (tmp_path / "x").exists()
 
 
+def test_a_result_without_its_model_and_inflow_takes_them_from_its_case(tmp_path):
+    """Results written before the turbulence model and the inflow were recorded in result.json
+    show them all the same in the tables: `results` reads them from the case's case.json."""
+    spec = rans.with_inflow(rans.suboff_case(0.0, "medium", "spalding", 1.0, turbulence="komega"), 0.01, 100.0)
+    _saved(tmp_path / spec.case_id, spec, "converged", 300)
+    saved = json.loads((tmp_path / spec.case_id / "result.json").read_text())
+    for key in ("turbulence", "inflow_intensity", "inflow_viscosity_ratio"):
+        del saved[key]
+    saved["forces"] = {"suboff": {"X": -88.0, "Y": 0.0, "N": 0.0}}
+    (tmp_path / spec.case_id / "result.json").write_text(json.dumps(saved))
+    (tmp_path / spec.case_id / "case.json").write_text(json.dumps(spec.describe()))
+    [found] = rans_campaign.results([tmp_path])
+    assert (found.turbulence, found.inflow_intensity, found.inflow_viscosity_ratio) == ("komega", 0.01, 100.0)
+    [row] = rans_campaign.validation_rows([found])["resistance"]
+    assert row["turbulence"] == "komega" and row["inflow"] == (0.01, 100.0)
+
+
+def test_the_finer_meshes_smooth_the_shrinking_for_their_layer_stack():
+    """The wall-function stack keeps its thickness while the cells shrink: past two surface cells
+    (the fine and xfine two-body meshes) snappyHexMesh smooths the displacement that makes room for
+    it; the coarse and medium meshes, and the sublayer recipe, are made as before."""
+    row = [-0.39, 0.0671, 3.4, 0, 19.55, 10]
+    smoothing = {}
+    for level in ("coarse", "medium", "fine", "xfine"):
+        spec = rans.two_body_case(row, level)
+        dom = rans.domain(spec)
+        stack = rans.first_layer_thickness(spec) * (1.25**8 - 1.0) / 0.25
+        assert rans.layer_stack_cells(spec, dom) == pytest.approx(stack * 2 ** dom.surface_levels[0] / dom.background)
+        smoothing[level] = rans._snappy(spec, dom)["addLayersControls"].get("nSmoothDisplacement")
+    assert smoothing == {"coarse": None, "medium": None, "fine": 90, "xfine": 90}
+    resolved = rans.suboff_case(0.0, "fine", "spalding", 1.0)
+    controls = rans._snappy(resolved, rans.domain(resolved))["addLayersControls"]
+    assert "nSmoothDisplacement" not in controls and controls["nRelaxedIter"] == 0
+
+
 def _saved(folder: Path, spec: rans.CaseSpec, status: str, iterations: int) -> None:
     convergence = rans.Convergence(status, "", iterations, iterations // 5, {"X": 0.0, "Y": 0.0, "N": 0.0}, {})
     result = rans.Result(spec.case_id, spec.kind, spec.level, spec.wall_function, spec.y_plus, 1, 2, 1.0, 1.0,

@@ -82,6 +82,17 @@ BOUNDARY_LAYER_COEFFICIENT = 0.16  # thesis (3.10)
 # skews a few hundred faces past 65). Castellation and snapping keep every check, the layers the
 # others (skewness, face weights, volume ratios, pyramid volumes).
 RESOLVED_LAYER_QUALITY = {"minDeterminant": -1.0, "minTetQuality": -1e30, "minTwist": -2.0, "maxNonOrtho": 75}
+# The wall-function layers keep their thickness (their first cell is set by y+) while the mesh
+# refines, so on the finer meshes the stack spans several surface cells (the UUV's 34 mm: 1.7 medium
+# cells, 2.4 fine, 3.3 xfine) and shrinking the mesh away from the hull to make room for it
+# inverted cells at the UUV's tail shoulder (the fine stern station: 6 negative volumes, 38
+# illegal faces, simpleFoam's first pressure solve failed). Smoothing the shrinking displacement
+# (snappyHexMesh's `nSmoothDisplacement`, 90 iterations as OpenFOAM's annotated
+# snappyHexMeshDict suggests) gave that mesh no illegal face. It is used where the measured body's
+# wall-function stack is thicker than SMOOTHED_STACK_CELLS of its surface cells; the meshes below
+# that (every coarse and medium two-body case) are made as before.
+SMOOTHED_STACK_CELLS = 2.0
+SHRINK_SMOOTHING_ITERATIONS = 90
 WALL_FUNCTIONS = {"nutk": "nutkWallFunction", "spalding": "nutUSpaldingWallFunction"}
 # The turbulence model: k-omega SST (Menter 1994, AIAA J. 32(8) 1598-1605; OpenFOAM's kOmegaSST),
 # or Wilcox's k-omega (Wilcox 1998, "Turbulence Modeling for CFD"; OpenFOAM's kOmega), the thesis's
@@ -382,6 +393,13 @@ def boundary_layers(spec: CaseSpec) -> tuple[int, float]:
     return max(LAYERS, round(math.log(growth) / math.log(r))), r
 
 
+def layer_stack_cells(spec: CaseSpec, dom: Domain) -> float:
+    """The measured body's boundary-layer stack, in its surface cells."""
+    count, expansion = boundary_layers(spec)
+    stack = first_layer_thickness(spec) * (expansion**count - 1.0) / (expansion - 1.0)
+    return stack / (dom.background / 2 ** dom.surface_levels[0])
+
+
 @dataclass(frozen=True)
 class Domain:
     lo: np.ndarray
@@ -540,10 +558,12 @@ def _snappy(spec: CaseSpec, dom: Domain) -> dict:
     regions["around"] = {"mode": "inside", "levels": [[1e15, max(level - 3, 0)]]}
     inside = dom.lo + (dom.hi - dom.lo) * np.array([0.0123, 0.9071, 0.9137])  # a far corner, in the fluid
     quality = dict(MESH_QUALITY)
-    relaxed_layers = {}
+    layer_options = {}
     if resolves_sublayer(spec):
         quality["relaxed"] = dict(RESOLVED_LAYER_QUALITY)
-        relaxed_layers = {"nRelaxedIter": 0}
+        layer_options = {"nRelaxedIter": 0}
+    elif layer_stack_cells(spec, dom) > SMOOTHED_STACK_CELLS:
+        layer_options = {"nSmoothDisplacement": SHRINK_SMOOTHING_ITERATIONS}
     return {
         "castellatedMesh": True,
         "snap": True,
@@ -590,7 +610,7 @@ def _snappy(spec: CaseSpec, dom: Domain) -> dict:
             "minMedialAxisAngle": 90,
             "nBufferCellsNoExtrude": 0,
             "nLayerIter": 50,
-            **relaxed_layers,
+            **layer_options,
         },
         "meshQualityControls": quality,
         "mergeTolerance": 1e-6,
@@ -906,6 +926,11 @@ class Result:
     y_plus: dict[str, dict[str, float]] = field(default_factory=dict)
     inputs: tuple[float, ...] | None = None
     openfoam: str = ""
+    # the case's turbulence model and inflow (results written before these were recorded: `results`
+    # reads them from the case's case.json)
+    turbulence: str = "sst"
+    inflow_intensity: float = INFLOW_INTENSITY
+    inflow_viscosity_ratio: float = INFLOW_VISCOSITY_RATIO
 
     @property
     def wall_seconds(self) -> float:
@@ -1384,4 +1409,7 @@ def read_result(
         y_plus=read_y_plus(folder),
         inputs=spec.inputs,
         openfoam=openfoam_version(),
+        turbulence=spec.turbulence,
+        inflow_intensity=spec.inflow_intensity,
+        inflow_viscosity_ratio=spec.inflow_viscosity_ratio,
     )

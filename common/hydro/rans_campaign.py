@@ -281,7 +281,15 @@ def results(folders: Iterable[Path]) -> list[rans.Result]:
     for base in folders:
         for path in sorted(Path(base).glob("*/result.json")):
             try:
-                result = rans.Result.from_json(json.loads(path.read_text()))
+                data = json.loads(path.read_text())
+                if "turbulence" not in data and (path.parent / "case.json").is_file():
+                    spec = rans.load_spec(path.parent)
+                    data |= {
+                        "turbulence": spec.turbulence,
+                        "inflow_intensity": spec.inflow_intensity,
+                        "inflow_viscosity_ratio": spec.inflow_viscosity_ratio,
+                    }
+                result = rans.Result.from_json(data)
             except (ValueError, KeyError, TypeError):
                 continue
             seen.setdefault(result.case_id, result)
@@ -343,6 +351,8 @@ def validation_rows(found: list[rans.Result]) -> dict:
                     "case": r.case_id,
                     "level": r.level,
                     "wall_function": r.wall_function,
+                    "turbulence": r.turbulence,
+                    "inflow": (r.inflow_intensity, r.inflow_viscosity_ratio),
                     "y_plus_target": r.y_plus_target,
                     "y_plus_mean": r.y_plus.get("suboff", {}).get("mean", math.nan),
                     "cells": r.cells,

@@ -135,11 +135,16 @@ def validate_command(args) -> int:
         f"SUBOFF resistance at 3.05 m/s against thesis table 3.1 (EFD X = {rans.TABLE_3_1_EFD_X} N, "
         f"X' = {rans.TABLE_3_1_EFD_XPRIME:.3g}); target |error| <= {rans_campaign.RESISTANCE_TARGET:.0%}"
     )
-    print("| case | mesh | wall function | y+ target | mean y+ | cells | min | X [N] | X' | vs EFD | verdict |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    print(
+        "| case | mesh | model | inflow I, nu_t/nu | wall function | y+ target | mean y+ | cells | min | X [N] | X' "
+        "| vs EFD | verdict |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in table["resistance"]:
+        intensity, ratio = r["inflow"]
         print(
-            f"| {r['case']} | {r['level']} | {r['wall_function']} | {r['y_plus_target']:g} | "
+            f"| {r['case']} | {r['level']} | {r['turbulence']} | {100 * intensity:g} %, {ratio:g} | "
+            f"{r['wall_function']} | {r['y_plus_target']:g} | "
             f"{rans_campaign.y_plus_text(r['y_plus_mean'])} | "
             f"{r['cells']:,} | {r['minutes']:.1f} | {r['X_N']:.1f} | {r['Xp']:.4e} | {r['error']:+.1%} | "
             f"{r['status']}{', meets' if r['meets'] else ''} |"
