@@ -309,20 +309,8 @@ def two_body_case(
         )
     uuv = Body("uuv", "explorer", length, diameter, x, y, psi)
     sub = Body("submarine", "suboff-full", L_SUB, D_SUB)
-    name = "tb-" + "_".join(f"{v:g}" for v in row)
-    return CaseSpec(
-        case_id=name + _case_suffix(level, wall_function, y_plus, turbulence),
-        kind="two-body",
-        bodies=(uuv, sub),
-        speed=speed,
-        rho=SEA_WATER_RHO,
-        nu=NU,
-        level=level,
-        wall_function=wall_function,
-        y_plus=y_plus,
-        inputs=tuple(row.tolist()),
-        iterations=iterations,
-        turbulence=turbulence,
+    return _sea_water_case(
+        "two-body", "tb-", row, (uuv, sub), speed, False, level, wall_function, y_plus, iterations, turbulence
     )
 
 
@@ -340,18 +328,38 @@ def uuv_alone_case(
     the two give the interaction alone (`rans_comparison`). A quarter domain at zero heading."""
     row, (_, _, speed, psi, diameter, length) = _configuration(row, level, wall_function, y_plus)
     _check_turbulence(turbulence)
+    uuv = Body("uuv", "explorer", length, diameter, 0.0, 0.0, psi)
+    return _sea_water_case(
+        "uuv-alone", "uuv-", row[2:], (uuv,), speed, psi == 0.0, level, wall_function, y_plus, iterations, turbulence
+    )
+
+
+def _sea_water_case(
+    kind: str,
+    prefix: str,
+    values: np.ndarray,
+    bodies: tuple[Body, ...],
+    speed: float,
+    quarter: bool,
+    level: str,
+    wall_function: str,
+    y_plus: float,
+    iterations: int | None,
+    turbulence: str,
+) -> CaseSpec:
+    """A case in the two-body cases' sea water, named by its configuration values and treatment."""
     return CaseSpec(
-        case_id="uuv-" + "_".join(f"{v:g}" for v in row[2:]) + _case_suffix(level, wall_function, y_plus, turbulence),
-        kind="uuv-alone",
-        bodies=(Body("uuv", "explorer", length, diameter, 0.0, 0.0, psi),),
+        case_id=prefix + "_".join(f"{v:g}" for v in values) + _case_suffix(level, wall_function, y_plus, turbulence),
+        kind=kind,
+        bodies=bodies,
         speed=speed,
         rho=SEA_WATER_RHO,
         nu=NU,
         level=level,
         wall_function=wall_function,
         y_plus=y_plus,
-        quarter=psi == 0.0,
-        inputs=tuple(row[2:].tolist()),
+        quarter=quarter,
+        inputs=tuple(values.tolist()),
         iterations=iterations,
         turbulence=turbulence,
     )
