@@ -623,6 +623,19 @@ def test_the_finer_meshes_smooth_the_shrinking_for_their_layer_stack():
     assert "nSmoothDisplacement" not in controls and controls["nRelaxedIter"] == 0
 
 
+def test_a_diverged_case_shows_no_resistance(tmp_path):
+    """The last numbers of a case that blew up (1e30 N) are no answer: the table leaves them blank."""
+    spec = rans.suboff_case(0.0, "medium", "spalding", 1.0)
+    _saved(tmp_path / spec.case_id, spec, "diverged", 96)
+    saved = json.loads((tmp_path / spec.case_id / "result.json").read_text())
+    saved["forces"] = {"suboff": {"X": 5.9e33, "Y": 0.0, "N": 0.0}}
+    saved["coefficients"]["X"] = 6.7e28
+    (tmp_path / spec.case_id / "result.json").write_text(json.dumps(saved))
+    out = nearsub("cfd", "validate", "--from", str(tmp_path))
+    [row] = [line for line in out.stdout.splitlines() if line.startswith(f"| {spec.case_id} |")]
+    assert row.endswith("|  |  |  | diverged |") and "e+" not in row and "5900" not in row
+
+
 def _saved(folder: Path, spec: rans.CaseSpec, status: str, iterations: int) -> None:
     convergence = rans.Convergence(status, "", iterations, iterations // 5, {"X": 0.0, "Y": 0.0, "N": 0.0}, {})
     result = rans.Result(spec.case_id, spec.kind, spec.level, spec.wall_function, spec.y_plus, 1, 2, 1.0, 1.0,

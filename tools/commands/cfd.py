@@ -142,11 +142,20 @@ def validate_command(args) -> int:
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in table["resistance"]:
         intensity, ratio = r["inflow"]
+        y_plus, x, xp, error = (
+            ("", "", "", "")  # a diverged case's last numbers are no answer: left blank
+            if r["status"] == "diverged"
+            else (
+                rans_campaign.y_plus_text(r["y_plus_mean"]),
+                f"{r['X_N']:.1f}",
+                f"{r['Xp']:.4e}",
+                f"{r['error']:+.1%}",
+            )
+        )
+        numbers = f" {y_plus} | {r['cells']:,} | {r['minutes']:.1f} | {x} | {xp} | {error} | "
         print(
             f"| {r['case']} | {r['level']} | {r['turbulence']} | {100 * intensity:g} %, {ratio:g} | "
-            f"{r['wall_function']} | {r['y_plus_target']:g} | "
-            f"{rans_campaign.y_plus_text(r['y_plus_mean'])} | "
-            f"{r['cells']:,} | {r['minutes']:.1f} | {r['X_N']:.1f} | {r['Xp']:.4e} | {r['error']:+.1%} | "
+            f"{r['wall_function']} | {r['y_plus_target']:g} |{numbers}"
             f"{r['status']}{', meets' if r['meets'] else ''} |"
         )
     if table["gci"]:
