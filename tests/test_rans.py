@@ -243,7 +243,9 @@ def test_grid_convergence_index_of_a_second_order_sequence():
     g = rans_campaign.grid_convergence(*f, ratio=r)
     assert g["p"] == pytest.approx(2.0) and g["extrapolated"] == pytest.approx(exact)
     assert g["gci_fine"] == pytest.approx(1.25 * abs((f[1] - f[0]) / f[0]) / (r**2 - 1))
-    assert math.isnan(rans_campaign.grid_convergence(1.0, 2.0, 1.5, r)["p"])  # oscillatory
+    oscillating = rans_campaign.grid_convergence(1.0, 2.0, 1.5, r)
+    assert math.isnan(oscillating["p"]) and oscillating["oscillation_fine"] == pytest.approx(0.5)  # (2 - 1) / 2 / 1
+    assert math.isnan(g["oscillation_fine"])
     growing = rans_campaign.grid_convergence(1.0, 1.5, 1.8, r)  # fine change 0.5 > coarse change 0.3
     assert math.isnan(growing["gci_fine"]) and growing["ratio"] == pytest.approx(0.5 / 0.3)
     # Medium and fine agreeing by chance give an observed order of 6: the GCI credits only 2.

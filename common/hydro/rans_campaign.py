@@ -313,14 +313,22 @@ def grid_convergence(fine: float, medium: float, coarse: float, ratio: float) ->
     change (Stern et al. 2001, J. Fluids Eng. 123, 793-802) decides whether there is one: only for
     monotone convergence, 0 < R < 1; for oscillation (R < 0), a change that grows with refinement
     (R >= 1: not in the asymptotic range) or differences of zero, p, the extrapolation and GCI
-    are NaN and "ratio" says which."""
+    are NaN and "ratio" says which. For oscillation "oscillation_fine" is Stern et al.'s
+    uncertainty instead, half the range of the three solutions (their eq. 18), relative to the fine
+    one (NaN otherwise): an estimate, not a GCI."""
     e21, e32 = medium - fine, coarse - medium
+    oscillates = e32 != 0 and e21 / e32 < 0
     out = {
         "p": math.nan,
         "extrapolated": math.nan,
         "error_fine": abs(e21 / fine) if fine else math.nan,
         "gci_fine": math.nan,
         "ratio": e21 / e32 if e32 else math.nan,
+        "oscillation_fine": (
+            0.5 * (max(fine, medium, coarse) - min(fine, medium, coarse)) / abs(fine)
+            if oscillates and fine
+            else math.nan
+        ),
     }
     if e21 == 0 or e32 == 0 or not 0.0 < e21 / e32 < 1.0:
         return out

@@ -13,6 +13,7 @@ The logic is in common/hydro/rans*.py; this module parses and prints.
 from __future__ import annotations
 
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -173,7 +174,12 @@ def validate_command(args) -> int:
         for output, g in study["outputs"].items():
             if g["p"] != g["p"]:  # NaN: no monotone convergence
                 how = "oscillates" if g["ratio"] < 0 else "the change grows with refinement"
-                print(f"  {output}': no GCI: convergence ratio {g['ratio']:.2f}, {how} (not in the asymptotic range)")
+                bound = g.get("oscillation_fine", math.nan)
+                half_range = f"; half the oscillation's range {bound:.2%} of the fine value" if bound == bound else ""
+                print(
+                    f"  {output}': no GCI: convergence ratio {g['ratio']:.2f}, {how} (not in the asymptotic range)"
+                    f"{half_range}"
+                )
                 continue
             print(
                 f"  {output}': observed order {g['p']:.2f}"
