@@ -714,3 +714,33 @@ def test_the_held_out_summary_counts_each_held_out_station_once_on_its_medium_me
     summary = rans_comparison.comparison_summary(rows, ["panel HF"])["panel HF"]
     assert summary["mae_held_out"] == pytest.approx([0.2] * 3)  # the coarse mesh of a station is left out
     assert summary["mae"] == pytest.approx([1.6] * 3)  # every row
+
+
+def test_a_studys_variant_never_stands_in_for_a_station_or_its_uuv_alone(tmp_path):
+    """The k-omega and inflow variants share their station's inputs: the comparison, the
+    interaction alone and the viscous correction take only the suites' setup (SST, the default
+    inflow), whatever order the folders are read in."""
+    from nearsub.common.analysis import rans_comparison
+
+    row = [-0.39, 0.0671, 3.4, 0, 19.55, 10]
+    specs = {
+        "station": rans.two_body_case(row),
+        "station-komega": rans.two_body_case(row, turbulence="komega"),
+        "station-inflow": rans.with_inflow(rans.two_body_case(row), 0.01, 100.0),
+        "alone": rans.uuv_alone_case(row),
+        "alone-komega": rans.uuv_alone_case(row, turbulence="komega"),
+        "alone-inflow": rans.with_inflow(rans.uuv_alone_case(row), 0.001, 10.0),
+    }
+    for name, spec in specs.items():
+        _saved(tmp_path / name, spec, "converged", 300)
+        saved = json.loads((tmp_path / name / "result.json").read_text())
+        saved |= {
+            "inputs": list(spec.inputs),
+            "turbulence": spec.turbulence,
+            "inflow_intensity": spec.inflow_intensity,
+            "inflow_viscosity_ratio": spec.inflow_viscosity_ratio,
+        }
+        (tmp_path / name / "result.json").write_text(json.dumps(saved))
+    found = rans_campaign.results([tmp_path])
+    assert [r.case_id for r in rans_comparison.two_body_converged(found)] == [specs["station"].case_id]
+    assert [r.case_id for r in rans_comparison.uuv_alone(found).values()] == [specs["alone"].case_id]

@@ -22,9 +22,26 @@ FIDELITIES = ("panel HF", "LF", "model", "flown")
 SCALED = "panel HF x rho"
 
 
+def standard_setup(r: rans.Result) -> bool:
+    """Solved as the two-body and UUV-alone suites are (SST, the default wall function, y+ and
+    inflow): the comparison, the interaction alone and the viscous correction take only these, so a
+    study's variant of a station (k-omega, another inflow: its own case id) never stands in for it
+    or for its UUV alone."""
+    return (
+        r.turbulence == "sst"
+        and r.wall_function == "nutk"
+        and r.y_plus_target == 50.0
+        and r.inflow_intensity == rans.INFLOW_INTENSITY
+        and r.inflow_viscosity_ratio == rans.INFLOW_VISCOSITY_RATIO
+    )
+
+
 def two_body_converged(found: Iterable[rans.Result]) -> list[rans.Result]:
-    """The converged two-body results (the only ones compared), by R_long then the case id."""
-    kept = [r for r in found if r.kind == "two-body" and r.convergence.usable and r.inputs is not None]
+    """The converged two-body results of the standard setup (the only ones compared), by R_long
+    then the case id."""
+    kept = [
+        r for r in found if r.kind == "two-body" and r.convergence.usable and r.inputs is not None and standard_setup(r)
+    ]
     return sorted(kept, key=lambda r: (r.inputs[0], r.case_id))
 
 
@@ -120,13 +137,17 @@ INTERACTION_FIDELITIES = ("panel HF", "LF", "flown")
 
 
 def uuv_alone(found: Iterable[rans.Result]) -> dict[tuple[float, ...], rans.Result]:
-    """The converged UUV-alone results by (u_kn, psi_deg, d_ratio, ld_ratio)."""
+    """The converged UUV-alone results of the standard setup by (u_kn, psi_deg, d_ratio, ld_ratio)."""
     from nearsub.common.hydro.rans_campaign import free_stream_key
 
     return {
         free_stream_key(r.inputs): r
         for r in found
-        if r.kind == "uuv-alone" and r.convergence.usable and r.inputs is not None and r.level == "medium"
+        if r.kind == "uuv-alone"
+        and r.convergence.usable
+        and r.inputs is not None
+        and r.level == "medium"
+        and standard_setup(r)
     }
 
 
