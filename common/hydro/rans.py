@@ -51,8 +51,8 @@ TABLE_3_1_CFD_X = -85.6  # [N]
 # settings (nearsub's choice; `with_inflow` varies them, docs/hydro/rans/README.md "Inflow turbulence").
 INFLOW_INTENSITY = 0.01
 INFLOW_VISCOSITY_RATIO = 10.0
-INFLOW_INTENSITY_RANGE = (1e-4, 0.2)  # 0.01 % (a quiet towing tank) to 20 %
-INFLOW_VISCOSITY_RATIO_RANGE = (0.1, 1000.0)
+INFLOW_INTENSITY_RANGE = (1e-4, 0.2)  # accepted inputs (nearsub's bounds): 0.01 % to 20 %
+INFLOW_VISCOSITY_RATIO_RANGE = (0.1, 1000.0)  # accepted inputs (nearsub's bounds)
 # With `sustain_inflow`, k-omega SST's sustaining terms keep the inflow's k and omega from decaying
 # on their way to the body (Spalart & Rumsey 2007, AIAA J. 45(10) 2544-2553; kOmegaSST's
 # `decayControl` in OpenFOAM v1912): the bow then sees the inflow's 1 %, not about 0.2 %.
